@@ -1,0 +1,67 @@
+"""The e-puck simulator: a pure-JAX 2D ray-cast world (installed as ``jaxais.envs``).
+
+This package never imports the rest of jaxais: physics sits at the bottom of the stack.
+"""
+
+from .compile import compiler_options, jit
+from .geometry import Scene, cast_rays, disc_gaps, min_gap
+from .params import (
+    CAMERA_COLUMNS,
+    CAMERA_ROWS,
+    GOAL,
+    MARKER,
+    MATERIAL_NAMES,
+    MATERIALS,
+    N_IR,
+    NONE,
+    WALL,
+    SimParams,
+    default_params,
+)
+from .sim import (
+    Observation,
+    State,
+    StepNoise,
+    build_scene,
+    observe,
+    reset,
+    sample_step_noise,
+    step,
+    step_with_noise,
+)
+from .world import BUILTIN_WORLDS, Capacity, World, WorldError, load_world, world_path
+
+__all__ = [
+    "BUILTIN_WORLDS",
+    "CAMERA_COLUMNS",
+    "CAMERA_ROWS",
+    "GOAL",
+    "MARKER",
+    "MATERIALS",
+    "MATERIAL_NAMES",
+    "N_IR",
+    "NONE",
+    "WALL",
+    "Capacity",
+    "Observation",
+    "Scene",
+    "SimParams",
+    "State",
+    "StepNoise",
+    "World",
+    "WorldError",
+    "build_scene",
+    "cast_rays",
+    "compiler_options",
+    "default_params",
+    "disc_gaps",
+    "jit",
+    "load_world",
+    "min_gap",
+    "observe",
+    "reset",
+    "sample_step_noise",
+    "step",
+    "step_with_noise",
+    "world_path",
+]

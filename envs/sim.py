@@ -1,0 +1,406 @@
+"""The e-puck world as pure functions: ``reset``, ``observe`` and ``step`` for one robot.
+
+A robot's ``State`` carries everything that varies between runs of one world: its pose, the
+wandering e-pucks, and the goal and box positions drawn at reset. The random draws of a step are
+made in :func:`sample_step_noise` and applied by the deterministic :func:`step_with_noise`, so the
+NumPy reference (``reference.py``) can replay exactly the same step.
+
+Batch with ``jax.vmap(step, in_axes=(0, 0, 0, None, None))``: the world and the parameters are
+shared, keys, states and wheel speeds carry the batch axis.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from .geometry import Scene, cast_rays, kind_gaps, min_gap, resolve_disc
+from .params import CAMERA_COLUMNS, CAMERA_ROWS, GOAL, MARKER, N_IR, WALL, SimParams
+from .struct import pytree_dataclass
+from .world import World
+
+ROBOT_HEIGHT = 0.05
+"""Height of an e-puck body as the camera sees it, m [ours]."""
+WANDER_SPEED = 300.0
+"""Cruise wheel speed of a wandering e-puck, speed units [ours]."""
+WANDER_TURN_PROB = 0.02
+"""Chance per iteration that a cruising wanderer starts a random turn [ours]."""
+WANDER_TURN_STEPS = (10, 50)
+"""Range of a random turn's length, iterations [ours]."""
+WANDER_AVOID_GAP = 0.03
+"""A wanderer spins away when a surface ahead is closer than this, m [ours]."""
+PLACEMENT_TRIES = 64
+"""Candidates drawn per object when placing things at reset (first clear one is used)."""
+PLACEMENT_CLEARANCE = 0.01
+"""Minimum gap between objects placed at reset, m [ours]."""
+
+
+@pytree_dataclass
+class State:
+    """Everything about one run that changes (shapes: W wanderers, B boxes).
+
+    Attributes:
+        pose: [3] robot (x, y, heading).
+        wanderers: [W, 3] wandering e-puck poses.
+        wander_timer: [W] int, iterations left in a random turn (0 = cruising).
+        wander_dir: [W] +1 turn left, -1 turn right.
+        goal: [2] goal centre. boxes: [B, 2] box centres.
+        t: int, iterations since reset.
+    """
+
+    pose: jnp.ndarray
+    wanderers: jnp.ndarray
+    wander_timer: jnp.ndarray
+    wander_dir: jnp.ndarray
+    goal: jnp.ndarray
+    boxes: jnp.ndarray
+    t: jnp.ndarray
+
+
+@pytree_dataclass
+class Observation:
+    """What the robot's sensors report after a step.
+
+    Attributes:
+        ir: [8] IR readings (ps0..ps7), 0..4095.
+        vm: maximum IR reading.
+        blue: [3, 15] bool, blue (marker or goal) pixels after pixel noise; row 0 is the top.
+        blue_pixels: int, number of blue pixels.
+        goal_pixels: int, blue pixels in columns that see the goal.
+        blue_centroid: mean column (0..14, 0 = leftmost) of blue pixels; 7.0 when none.
+        materials: [15] int, material of the first surface per column within camera range.
+        depth: [15] distance of that surface, m (inf when nothing is in range).
+    """
+
+    ir: jnp.ndarray
+    vm: jnp.ndarray
+    blue: jnp.ndarray
+    blue_pixels: jnp.ndarray
+    goal_pixels: jnp.ndarray
+    blue_centroid: jnp.ndarray
+    materials: jnp.ndarray
+    depth: jnp.ndarray
+
+
+@pytree_dataclass
+class StepNoise:
+    """The random draws of one step (see :func:`sample_step_noise`).
+
+    Attributes:
+        wheel: [2] standard normals for the executed wheel speeds.
+        ir: [8] standard normals for the IR readings.
+        pixel: [3, 15] uniforms in [0, 1); a pixel flips where below the flip probability.
+        wander: [W, 3] uniforms: start a turn?, its length, its direction.
+    """
+
+    wheel: jnp.ndarray
+    ir: jnp.ndarray
+    pixel: jnp.ndarray
+    wander: jnp.ndarray
+
+
+# ---------------------------------------------------------------------------------- scene
+
+
+def _bounds(centre: jnp.ndarray, half: jnp.ndarray) -> jnp.ndarray:
+    return jnp.concatenate([centre - half, centre + half], axis=-1)
+
+
+def build_scene(state: State, world: World, params: SimParams, exclude: int = -1) -> Scene:
+    """The scene around robot ``exclude`` (0 = the robot, 1.. = wanderers; -1 = none).
+
+    Robots (the robot and the wanderers) are circles of material ``wall``; the goal is a box or
+    a circle of material ``goal`` per the world.
+    """
+    robots = jnp.concatenate([state.pose[None, :2], state.wanderers[:, :2]], axis=0)
+    if exclude >= 0:  # a robot never sees itself: drop it (statically, so no work is wasted)
+        robots = jnp.concatenate([robots[:exclude], robots[exclude + 1 :]], axis=0)
+    n_r = robots.shape[0]
+    robot_circ = jnp.concatenate([robots, jnp.full((n_r, 1), params.body_radius)], axis=1)
+    robot_valid = jnp.ones(n_r, bool)
+    box = _bounds(state.boxes, world.box_half)
+    box_mat, box_h, box_valid = world.box_material, world.box_height, world.box_valid
+    circ = jnp.concatenate([world.pillar, robot_circ], axis=0)
+    circ_mat = jnp.concatenate([world.pillar_material, jnp.full(n_r, WALL)])
+    circ_h = jnp.concatenate([world.pillar_height, jnp.full(n_r, ROBOT_HEIGHT)])
+    circ_valid = jnp.concatenate([world.pillar_valid, robot_valid])
+    one = jnp.ones(1, bool)
+    if world.goal_shape == "box":
+        box = jnp.concatenate([box, _bounds(state.goal, world.goal_half)[None]], axis=0)
+        box_mat = jnp.concatenate([box_mat, jnp.full(1, GOAL)])
+        box_h = jnp.concatenate([box_h, world.goal_height[None]])
+        box_valid = jnp.concatenate([box_valid, one])
+    else:
+        ball = jnp.concatenate([state.goal, world.goal_half[:1]])[None]
+        circ = jnp.concatenate([circ, ball], axis=0)
+        circ_mat = jnp.concatenate([circ_mat, jnp.full(1, GOAL)])
+        circ_h = jnp.concatenate([circ_h, world.goal_height[None]])
+        circ_valid = jnp.concatenate([circ_valid, one])
+    return Scene(
+        seg=world.seg,
+        seg_material=world.seg_material,
+        seg_height=world.seg_height,
+        seg_valid=world.seg_valid,
+        box=box,
+        box_material=box_mat.astype(jnp.int32),
+        box_height=box_h,
+        box_valid=box_valid,
+        circ=circ,
+        circ_material=circ_mat.astype(jnp.int32),
+        circ_height=circ_h,
+        circ_valid=circ_valid,
+    )
+
+
+# ---------------------------------------------------------------------------------- motion
+
+
+def wheel_to_body(wheels: jnp.ndarray, params: SimParams) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """Wheel speeds [2] (left, right; speed units) -> (forward speed m/s, turn rate rad/s)."""
+    lin = wheels * params.speed_unit * params.wheel_radius
+    return 0.5 * (lin[0] + lin[1]), (lin[1] - lin[0]) / params.axle
+
+
+def integrate_pose(pose: jnp.ndarray, v: jnp.ndarray, w: jnp.ndarray, dt) -> jnp.ndarray:
+    """Exact differential-drive arc over ``dt`` from pose [3] at speed v and turn rate w."""
+    x, y, th = pose
+    th1 = th + w * dt
+    straight = jnp.abs(w) < 1e-6
+    w_safe = jnp.where(straight, 1.0, w)
+    dx = jnp.where(straight, v * dt * jnp.cos(th), v / w_safe * (jnp.sin(th1) - jnp.sin(th)))
+    dy = jnp.where(straight, v * dt * jnp.sin(th), -v / w_safe * (jnp.cos(th1) - jnp.cos(th)))
+    th1 = th1 - 2.0 * jnp.pi * jnp.round(th1 / (2.0 * jnp.pi))  # wrap to [-pi, pi]
+    return jnp.stack([x + dx, y + dy, th1])
+
+
+def _move(pose, wheels, scene, params):
+    v, w = wheel_to_body(wheels, params)
+    cand = integrate_pose(pose, v, w, params.dt)
+    xy = resolve_disc(pose[:2], cand[:2], params.body_radius, scene)
+    return jnp.concatenate([xy, cand[2:]])
+
+
+def _wander_wheels(k: int, state: State, u: jnp.ndarray, scene: Scene, params: SimParams):
+    """Wheel speeds, timer and turn direction of wanderer ``k`` (avoid-obstacles random walk)."""
+    pose = state.wanderers[k]
+    c, s = jnp.cos(pose[2]), jnp.sin(pose[2])
+    # A surface is ahead when its normal (surface -> robot) points against the heading; the
+    # wanderer spins away from the side that the nearby surfaces ahead push it from.
+    near, push_left = False, 0.0
+    for gap, nx, ny in kind_gaps(pose[:2], params.body_radius, scene):
+        close = (nx * c + ny * s < 0.0) & (gap < WANDER_AVOID_GAP)
+        near = near | jnp.any(close)
+        lateral = (WANDER_AVOID_GAP - gap) * (c * ny - s * nx)
+        push_left = push_left + jnp.sum(jnp.where(close, lateral, 0.0))
+    away = jnp.where(push_left >= 0.0, 1.0, -1.0)
+    timer, turn = state.wander_timer[k], state.wander_dir[k]
+    lo, hi = WANDER_TURN_STEPS
+    start = (timer == 0) & (u[0] < WANDER_TURN_PROB)
+    timer = jnp.where(start, lo + jnp.floor(u[1] * (hi - lo)).astype(jnp.int32), timer)
+    turn = jnp.where(start, jnp.where(u[2] < 0.5, 1.0, -1.0), turn)
+    turning = timer > 0
+    v = WANDER_SPEED
+    spin = jnp.stack([-away * v, away * v])
+    arc = jnp.stack([v * (1.0 - 0.8 * (turn > 0)), v * (1.0 - 0.8 * (turn < 0))])
+    wheels = jnp.where(near, spin, jnp.where(turning, arc, jnp.stack([v, v])))
+    timer = jnp.where(near, timer, jnp.maximum(timer - 1, 0))
+    return wheels, timer, turn
+
+
+# ---------------------------------------------------------------------------------- sensing
+
+
+def _unit(angles: jnp.ndarray) -> jnp.ndarray:
+    return jnp.stack([jnp.cos(angles), jnp.sin(angles)], axis=-1)
+
+
+def _rotate(vecs: jnp.ndarray, c: jnp.ndarray, s: jnp.ndarray) -> jnp.ndarray:
+    """Rotate [N, 2] vectors by the angle whose cosine and sine are c, s."""
+    return jnp.stack([c * vecs[:, 0] - s * vecs[:, 1], s * vecs[:, 0] + c * vecs[:, 1]], axis=1)
+
+
+def sense(state: State, noise: StepNoise, world: World, params: SimParams) -> Observation:
+    """IR and camera readings of the robot in ``state``, with ``noise`` applied."""
+    scene = build_scene(state, world, params, exclude=0)
+    centre, th = state.pose[:2], state.pose[2]
+    c, s = jnp.cos(th), jnp.sin(th)
+    # Ray directions: fixed offsets from the heading rotated by it (two transcendentals, not 46).
+    # IR rays leave the centre along each bearing (the rim is body_radius along the same ray);
+    # camera rays leave the lens on the front rim, one per column, column 0 leftmost.
+    pix = params.camera_fov / CAMERA_COLUMNS
+    cols = jnp.arange(CAMERA_COLUMNS)
+    cam_offsets = 0.5 * params.camera_fov - (cols + 0.5) * pix
+    dirs = _rotate(_unit(jnp.concatenate([params.ir_bearings, cam_offsets])), c, s)
+    lens = centre + params.body_radius * jnp.stack([c, s])
+    origins = jnp.concatenate(
+        [jnp.broadcast_to(centre, (N_IR, 2)), jnp.broadcast_to(lens, (CAMERA_COLUMNS, 2))]
+    )
+    t, mat, height = cast_rays(origins, dirs, scene)
+
+    rim = jnp.maximum(t[:N_IR] - params.body_radius, 0.0)
+    ir = jnp.interp(rim, params.ir_dist, params.ir_value, right=0.0)
+    if world.ir_noise > 0:
+        ir = jnp.clip(ir * (1.0 + world.ir_noise * noise.ir), 0.0, params.ir_value[0])
+
+    depth, cmat, ch = t[N_IR:], mat[N_IR:], height[N_IR:]
+    in_range = depth <= params.camera_range
+    cmat = jnp.where(in_range, cmat, 0)
+    # Row k (0 = top) looks at elevation e_k = +pix, 0, -pix and sees the surface where
+    # atan(-camera_height / d) <= e_k <= atan((height - camera_height) / d), i.e. with
+    # d tan(e_k) between those two heights (no arctangent needed).
+    rise = jnp.tan(pix * (CAMERA_ROWS // 2 - jnp.arange(CAMERA_ROWS)))[:, None] * depth[None, :]
+    covers = (rise <= ch[None, :] - params.camera_height) & (rise >= -params.camera_height)
+    is_blue = ((cmat == MARKER) | (cmat == GOAL))[None, :]
+    blue = covers & is_blue
+    if world.pixel_flip > 0:
+        blue = blue ^ (noise.pixel < world.pixel_flip)
+    n_blue = jnp.sum(blue, dtype=jnp.int32)
+    goal_px = jnp.sum(blue & (cmat == GOAL)[None, :], dtype=jnp.int32)
+    col_sum = jnp.sum(blue * cols[None, :])
+    centroid = jnp.where(n_blue > 0, col_sum / jnp.maximum(n_blue, 1), (CAMERA_COLUMNS - 1) / 2)
+    return Observation(
+        ir=ir,
+        vm=jnp.max(ir),
+        blue=blue,
+        blue_pixels=n_blue,
+        goal_pixels=goal_px,
+        blue_centroid=centroid.astype(jnp.float32),
+        materials=cmat.astype(jnp.int32),
+        depth=jnp.where(in_range, depth, jnp.inf),
+    )
+
+
+# ---------------------------------------------------------------------------------- API
+
+
+def sample_step_noise(key: jax.Array, world: World) -> StepNoise:
+    """Every random number one step uses; noise a world turns off is not drawn (zeros)."""
+    k_wheel, k_ir, k_pix, k_wander = jax.random.split(key, 4)
+    n_w = world.n_wanderers
+
+    def normal(k, shape, on):
+        return jax.random.normal(k, shape) if on else jnp.zeros(shape)
+
+    if world.pixel_flip > 0:
+        pixel = jax.random.uniform(k_pix, (CAMERA_ROWS, CAMERA_COLUMNS))
+    else:  # never below a flip probability of 0
+        pixel = jnp.ones((CAMERA_ROWS, CAMERA_COLUMNS))
+    return StepNoise(
+        wheel=normal(k_wheel, (2,), world.wheel_noise > 0),
+        ir=normal(k_ir, (N_IR,), world.ir_noise > 0),
+        pixel=pixel,
+        wander=jax.random.uniform(k_wander, (n_w, 3)) if n_w else jnp.zeros((0, 3)),
+    )
+
+
+def step_with_noise(
+    state: State, wheel_speeds: jnp.ndarray, noise: StepNoise, world: World, params: SimParams
+) -> tuple[State, Observation]:
+    """One iteration (dt) given the step's random draws; see :func:`step`."""
+    wheels = jnp.clip(wheel_speeds, -params.max_speed, params.max_speed)
+    if world.wheel_noise > 0:
+        wheels = wheels * (1.0 + world.wheel_noise * noise.wheel)
+    pose = _move(state.pose, wheels, build_scene(state, world, params, exclude=0), params)
+    state = state.replace(pose=pose)
+    # Wanderers move one after another against everyone's latest position, so none can step
+    # into a robot that has already moved (see geometry.resolve_disc). Rows are collected and
+    # stacked rather than written with .at[k].set: a batched scatter is slow on CPU.
+    poses = [state.wanderers[k] for k in range(world.n_wanderers)]
+    timers, dirs = [], []
+    for k in range(world.n_wanderers):
+        scene = build_scene(state, world, params, exclude=k + 1)
+        w_wheels, timer, turn = _wander_wheels(k, state, noise.wander[k], scene, params)
+        poses[k] = _move(poses[k], w_wheels, scene, params)
+        timers.append(timer)
+        dirs.append(turn)
+        state = state.replace(wanderers=jnp.stack(poses))
+    if world.n_wanderers:
+        state = state.replace(wander_timer=jnp.stack(timers), wander_dir=jnp.stack(dirs))
+    state = state.replace(t=state.t + 1)
+    return state, sense(state, noise, world, params)
+
+
+def step(
+    key: jax.Array, state: State, wheel_speeds: jnp.ndarray, world: World, params: SimParams
+) -> tuple[State, Observation]:
+    """Advance one iteration: drive the robot, move the wanderers, read the sensors.
+
+    Args:
+        key: PRNG key for this step's noise and the wanderers' random walk.
+        state: the run's state.
+        wheel_speeds: [2] commanded (left, right) speeds, speed units (clipped to max_speed).
+        world, params: the world and robot constants.
+
+    Returns:
+        (new state, observation after the move).
+    """
+    return step_with_noise(state, wheel_speeds, sample_step_noise(key, world), world, params)
+
+
+def observe(key: jax.Array, state: State, world: World, params: SimParams) -> Observation:
+    """Sensor readings in ``state`` (e.g. right after reset), with fresh noise from ``key``."""
+    return sense(state, sample_step_noise(key, world), world, params)
+
+
+def _uniform_in(key, region, n):
+    u = jax.random.uniform(key, (n, 2))
+    return region[:2] + u * (region[2:] - region[:2])
+
+
+def _first_clear(cands: jnp.ndarray, clear: jnp.ndarray) -> jnp.ndarray:
+    """The first candidate that is clear (the first one if none is)."""
+    return cands[jnp.argmax(clear)]
+
+
+def reset(key: jax.Array, world: World, params: SimParams) -> State:
+    """A fresh run: boxes, goal, robot and wanderers placed at random in their regions.
+
+    Objects are placed in that order, each at the first of ``PLACEMENT_TRIES`` random
+    candidates that keeps ``PLACEMENT_CLEARANCE`` from everything placed before it.
+    """
+    n_b, n_w = world.box_half.shape[0], world.n_wanderers
+    k_box, k_goal, k_pos, k_head, k_wand, k_wh = jax.random.split(key, 6)
+    far = jnp.full((2,), -100.0)
+    state = State(
+        pose=jnp.concatenate([far, jnp.zeros(1)]),
+        wanderers=jnp.tile(jnp.array([-100.0, -100.0, 0.0]), (n_w, 1)),
+        wander_timer=jnp.zeros(n_w, jnp.int32),
+        wander_dir=jnp.ones(n_w),
+        goal=far,
+        boxes=jnp.tile(far, (n_b, 1)),
+        t=jnp.zeros((), jnp.int32),
+    )
+    # Parked objects sit far outside the arena, so scenes built while placing ignore them.
+    n = PLACEMENT_TRIES
+    for b, kb in enumerate(jax.random.split(k_box, n_b)):
+        cands = _uniform_in(kb, world.box_region[b], n)
+        # A box is tested as its circumscribed disc: conservative and cheap.
+        r = jnp.linalg.norm(world.box_half[b]) + PLACEMENT_CLEARANCE
+        scene = build_scene(state, world, params)
+        clear = jax.vmap(lambda c, r=r, s=scene: min_gap(c, r, s) >= 0)(cands)
+        state = state.replace(boxes=state.boxes.at[b].set(_first_clear(cands, clear)))
+    scene = build_scene(state, world, params)
+    cands = _uniform_in(k_goal, world.goal_region, n)
+    r = jnp.linalg.norm(world.goal_half) if world.goal_shape == "box" else world.goal_half[0]
+    clear = jax.vmap(lambda c: min_gap(c, r + PLACEMENT_CLEARANCE, scene) >= 0)(cands)
+    state = state.replace(goal=_first_clear(cands, clear))
+
+    def place_robot(key, region, state, exclude):
+        scene = build_scene(state, world, params, exclude=exclude)
+        cands = _uniform_in(key, region, n)
+        r = params.body_radius + PLACEMENT_CLEARANCE
+        clear = jax.vmap(lambda c: min_gap(c, r, scene) >= 0)(cands)
+        return _first_clear(cands, clear)
+
+    heading = jax.random.uniform(
+        k_head, (), minval=world.start_heading[0], maxval=world.start_heading[1]
+    )
+    xy = place_robot(k_pos, world.start_region, state, exclude=0)
+    state = state.replace(pose=jnp.concatenate([xy, heading[None]]))
+    wh = jax.random.uniform(k_wh, (n_w,), minval=-jnp.pi, maxval=jnp.pi)
+    for k, kw in enumerate(jax.random.split(k_wand, max(n_w, 1))[:n_w]):
+        xy = place_robot(kw, world.wanderer_region[k], state, exclude=k + 1)
+        state = state.replace(
+            wanderers=state.wanderers.at[k].set(jnp.concatenate([xy, wh[k : k + 1]]))
+        )
+    return state

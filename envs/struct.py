@@ -1,0 +1,28 @@
+"""Frozen dataclasses registered as JAX pytrees (the state and parameter containers)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import jax
+
+
+def static_field(**kwargs: Any) -> Any:
+    """A dataclass field kept out of the pytree leaves (shapes, names, flags fixed when traced)."""
+    return dataclasses.field(metadata={"static": True}, **kwargs)
+
+
+def pytree_dataclass(cls: type) -> type:
+    """Make ``cls`` a frozen dataclass and register it as a pytree.
+
+    Fields made with :func:`static_field` become pytree metadata (hashable, part of the
+    compiled function's identity); every other field is a leaf. ``obj.replace(**kw)`` is added.
+    """
+    cls = dataclasses.dataclass(frozen=True)(cls)
+    fields = dataclasses.fields(cls)
+    meta = [f.name for f in fields if f.metadata.get("static", False)]
+    data = [f.name for f in fields if not f.metadata.get("static", False)]
+    jax.tree_util.register_dataclass(cls, data_fields=data, meta_fields=meta)
+    cls.replace = lambda self, **kw: dataclasses.replace(self, **kw)
+    return cls

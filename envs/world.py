@@ -1,0 +1,341 @@
+"""Worlds as data: TOML files loaded into fixed-shape padded arrays (SPEC section 3).
+
+A world file declares the arena, static walls (line segments), rectangular boxes and cylindrical
+pillars (each with a material and a height), the goal (a block or a ball) with the region its
+centre is drawn from, the robot's start region, the wandering e-pucks and the noise model. Boxes
+may be fixed (``center``) or placed at random each run (``region``). See ``worlds/world1.toml``
+for a commented example.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+
+from .params import MATERIALS
+from .struct import pytree_dataclass, static_field
+
+BUILTIN_WORLDS = ("ga_maze", "world1", "world2", "real")
+
+
+class WorldError(ValueError):
+    """A world file is missing, malformed or physically impossible (the message is one line)."""
+
+
+@pytree_dataclass
+class World:
+    """One world, padded to fixed shapes. Leaves are float32/int32/bool arrays.
+
+    Shapes: S segments, B boxes, C pillars, W wanderers (S, B, C >= 1; padding has valid=False).
+
+    Attributes:
+        arena: [4] (xmin, ymin, xmax, ymax) of the outer walls, m.
+        seg: [S, 4] (x1, y1, x2, y2); seg_material [S] int; seg_height [S] m; seg_valid [S].
+        box_half: [B, 2] half extents; box_region [B, 4] region of the box centre (a point for a
+            fixed box); box_material [B]; box_height [B]; box_valid [B].
+        pillar: [C, 3] (x, y, radius); pillar_material [C]; pillar_height [C]; pillar_valid [C].
+        goal_half: [2] half extents of a goal block, or (radius, radius) of a goal ball.
+        goal_height: scalar m. goal_region: [4] region of the goal centre.
+        start_region: [4] region of the robot's start position; start_heading: [2] (min, max) rad.
+        wanderer_region: [W, 4] start region of each wandering e-puck.
+        name: the world's name (static). goal_shape: "box" or "ball" (static).
+        ir_noise: relative std of IR readings; pixel_flip: per-pixel flip probability;
+            wheel_noise: relative std of executed wheel speeds (static floats; all 0 = noiseless).
+    """
+
+    arena: jnp.ndarray
+    seg: jnp.ndarray
+    seg_material: jnp.ndarray
+    seg_height: jnp.ndarray
+    seg_valid: jnp.ndarray
+    box_half: jnp.ndarray
+    box_region: jnp.ndarray
+    box_material: jnp.ndarray
+    box_height: jnp.ndarray
+    box_valid: jnp.ndarray
+    pillar: jnp.ndarray
+    pillar_material: jnp.ndarray
+    pillar_height: jnp.ndarray
+    pillar_valid: jnp.ndarray
+    goal_half: jnp.ndarray
+    goal_height: jnp.ndarray
+    goal_region: jnp.ndarray
+    start_region: jnp.ndarray
+    start_heading: jnp.ndarray
+    wanderer_region: jnp.ndarray
+    name: str = static_field(default="world")
+    goal_shape: str = static_field(default="box")
+    # Noise levels are static: a noiseless world draws no noise at all (it is a large share of a
+    # step's cost on a CPU), at the price of one compilation per noise level.
+    ir_noise: float = static_field(default=0.0)
+    pixel_flip: float = static_field(default=0.0)
+    wheel_noise: float = static_field(default=0.0)
+
+    @property
+    def n_wanderers(self) -> int:
+        return self.wanderer_region.shape[0]
+
+
+@dataclass(frozen=True)
+class Capacity:
+    """Minimum padded sizes; worlds loaded with one Capacity share compiled functions."""
+
+    segments: int = 1
+    boxes: int = 1
+    pillars: int = 1
+
+
+def _fail(src: str, field: str, msg: str) -> WorldError:
+    return WorldError(f"{src}: field '{field}': {msg}")
+
+
+class _Reader:
+    """Typed field access with one-line errors naming the file and field."""
+
+    def __init__(self, src: str):
+        self.src = src
+
+    def get(self, table: dict, key: str, path: str, kind: str, default: Any = ...) -> Any:
+        field = f"{path}.{key}" if path else key
+        if key not in table:
+            if default is ...:
+                raise _fail(self.src, field, "missing")
+            return default
+        value = table[key]
+        if kind == "number":
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise _fail(self.src, field, f"expected a number, got {value!r}")
+            if not math.isfinite(value):
+                raise _fail(self.src, field, f"expected a finite number, got {value!r}")
+            return float(value)
+        if kind == "int":
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise _fail(self.src, field, f"expected an integer, got {value!r}")
+            return value
+        if kind == "str":
+            if not isinstance(value, str):
+                raise _fail(self.src, field, f"expected a string, got {value!r}")
+            return value
+        if kind.startswith("vec"):
+            n = int(kind[3:])
+            ok = isinstance(value, list) and len(value) == n
+            ok = ok and all(
+                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+                for v in value
+            )
+            if not ok:
+                raise _fail(self.src, field, f"expected a list of {n} numbers, got {value!r}")
+            return [float(v) for v in value]
+        if kind == "table":
+            if not isinstance(value, dict):
+                raise _fail(self.src, field, "expected a table")
+            return value
+        if kind == "tables":
+            if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+                raise _fail(self.src, field, "expected an array of tables ([[...]])")
+            return value
+        raise AssertionError(kind)
+
+    def positive(self, table: dict, key: str, path: str, default: Any = ...) -> float:
+        value = self.get(table, key, path, "number", default)
+        if value <= 0:
+            raise _fail(self.src, f"{path}.{key}", f"must be positive, got {value}")
+        return value
+
+    def material(self, table: dict, path: str, default: str) -> int:
+        name = self.get(table, "material", path, "str", default)
+        if name not in MATERIALS or name == "none":
+            allowed = ", ".join(m for m in MATERIALS if m != "none")
+            raise _fail(self.src, f"{path}.material", f"unknown material {name!r} ({allowed})")
+        return MATERIALS[name]
+
+    def region(self, table: dict, key: str, path: str, arena: list[float], margin: float):
+        """A region [xmin, ymin, xmax, ymax] inside the arena, ``margin`` away from its walls."""
+        r = self.get(table, key, path, "vec4")
+        field = f"{path}.{key}"
+        if r[0] > r[2] or r[1] > r[3]:
+            raise _fail(self.src, field, f"needs xmin <= xmax and ymin <= ymax, got {r}")
+        lo_x, lo_y = arena[0] + margin, arena[1] + margin
+        hi_x, hi_y = arena[2] - margin, arena[3] - margin
+        if r[0] < lo_x - 1e-9 or r[1] < lo_y - 1e-9 or r[2] > hi_x + 1e-9 or r[3] > hi_y + 1e-9:
+            raise _fail(
+                self.src,
+                field,
+                f"{r} is outside the arena (must lie within [{lo_x:g}, {lo_y:g}, {hi_x:g}, "
+                f"{hi_y:g}] to keep {margin:g} m from the walls)",
+            )
+        return r
+
+
+def _pad(rows: list, n: int, width: int | None, fill: float = 0.0) -> np.ndarray:
+    shape = (n,) if width is None else (n, width)
+    out = np.full(shape, fill, np.float64)
+    if rows:
+        out[: len(rows)] = np.asarray(rows, np.float64).reshape((len(rows),) + shape[1:])
+    return out
+
+
+def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radius: float = 0.037):
+    """Build a :class:`World` from a parsed TOML document; ``src`` names it in errors."""
+    rd = _Reader(src)
+    name = rd.get(doc, "name", "", "str")
+    arena_t = rd.get(doc, "arena", "", "table")
+    width = rd.positive(arena_t, "width", "arena")
+    height = rd.positive(arena_t, "height", "arena")
+    wall_h = rd.positive(arena_t, "wall_height", "arena")
+    arena = [0.0, 0.0, width, height]
+
+    # Outer walls first, then the file's own segments.
+    segs = [[0, 0, width, 0], [width, 0, width, height], [width, height, 0, height]]
+    segs.append([0, height, 0, 0])
+    seg_mat = [MATERIALS["wall"]] * 4
+    seg_h = [wall_h] * 4
+    for k, w in enumerate(rd.get(doc, "walls", "", "tables", [])):
+        path = f"walls[{k}]"
+        a = rd.get(w, "from", path, "vec2")
+        b = rd.get(w, "to", path, "vec2")
+        for p, key in ((a, "from"), (b, "to")):
+            if not (0 <= p[0] <= width and 0 <= p[1] <= height):
+                raise _fail(src, f"{path}.{key}", f"{p} is outside the arena")
+        if a == b:
+            raise _fail(src, path, "zero-length wall (from == to)")
+        segs.append(a + b)
+        seg_mat.append(rd.material(w, path, "wall"))
+        seg_h.append(rd.positive(w, "height", path, wall_h))
+
+    box_half, box_region, box_mat, box_h = [], [], [], []
+    for k, bx in enumerate(rd.get(doc, "boxes", "", "tables", [])):
+        path = f"boxes[{k}]"
+        half = rd.get(bx, "half_size", path, "vec2")
+        if min(half) <= 0:
+            raise _fail(src, f"{path}.half_size", f"must be positive, got {half}")
+        if ("center" in bx) == ("region" in bx):
+            raise _fail(src, path, "give exactly one of 'center' (fixed) or 'region' (random)")
+        margin = max(half)
+        if "center" in bx:
+            c = rd.get(bx, "center", path, "vec2")
+            region = rd.region({"center": c + c}, "center", path, arena, 0.0)
+            if not (half[0] <= c[0] <= width - half[0] and half[1] <= c[1] <= height - half[1]):
+                raise _fail(src, f"{path}.center", f"box at {c} pokes out of the arena")
+        else:
+            region = rd.region(bx, "region", path, arena, margin)
+        box_half.append(half)
+        box_region.append(region)
+        box_mat.append(rd.material(bx, path, "wall"))
+        box_h.append(rd.positive(bx, "height", path, wall_h))
+
+    pillars, pil_mat, pil_h = [], [], []
+    for k, p in enumerate(rd.get(doc, "pillars", "", "tables", [])):
+        path = f"pillars[{k}]"
+        c = rd.get(p, "center", path, "vec2")
+        r = rd.positive(p, "radius", path)
+        if not (0 <= c[0] <= width and 0 <= c[1] <= height):
+            raise _fail(src, f"{path}.center", f"{c} is outside the arena")
+        pillars.append(c + [r])
+        pil_mat.append(rd.material(p, path, "wall"))
+        pil_h.append(rd.positive(p, "height", path, wall_h))
+
+    goal_t = rd.get(doc, "goal", "", "table")
+    goal_shape = rd.get(goal_t, "shape", "goal", "str")
+    if goal_shape == "box":
+        goal_half = rd.get(goal_t, "half_size", "goal", "vec2")
+        if min(goal_half) <= 0:
+            raise _fail(src, "goal.half_size", f"must be positive, got {goal_half}")
+    elif goal_shape == "ball":
+        r = rd.positive(goal_t, "radius", "goal")
+        goal_half = [r, r]
+    else:
+        raise _fail(src, "goal.shape", f"expected 'box' or 'ball', got {goal_shape!r}")
+    goal_h = rd.positive(goal_t, "height", "goal")
+    goal_region = rd.region(goal_t, "region", "goal", arena, max(goal_half))
+
+    robot_t = rd.get(doc, "robot", "", "table")
+    start_region = rd.region(robot_t, "start_region", "robot", arena, body_radius)
+    heading = rd.get(robot_t, "start_heading", "robot", "vec2", [-math.pi, math.pi])
+    if heading[0] > heading[1]:
+        raise _fail(src, "robot.start_heading", f"needs min <= max, got {heading}")
+
+    wander_regions = []
+    for k, wd in enumerate(rd.get(doc, "wanderers", "", "tables", [])):
+        wander_regions.append(rd.region(wd, "region", f"wanderers[{k}]", arena, body_radius))
+
+    noise_t = rd.get(doc, "noise", "", "table", {})
+    noise = {}
+    for key, default in (("ir_relative_std", 0.0), ("pixel_flip_prob", 0.0)):
+        noise[key] = rd.get(noise_t, key, "noise", "number", default)
+    noise["wheel_relative_std"] = rd.get(noise_t, "wheel_relative_std", "noise", "number", 0.0)
+    for key, value in noise.items():
+        hi = 1.0 if key == "pixel_flip_prob" else 10.0
+        if not 0.0 <= value <= hi:
+            raise _fail(src, f"noise.{key}", f"must lie in [0, {hi:g}], got {value}")
+
+    n_s = max(len(segs), capacity.segments)
+    n_b = max(len(box_half), capacity.boxes, 1)
+    n_c = max(len(pillars), capacity.pillars, 1)
+    f32 = lambda a: jnp.asarray(a, jnp.float32)
+    i32 = lambda a: jnp.asarray(a, jnp.int32)
+    valid = lambda n_real, n: jnp.arange(n) < n_real
+    return World(
+        arena=f32(arena),
+        seg=f32(_pad(segs, n_s, 4)),
+        seg_material=i32(_pad(seg_mat, n_s, None)),
+        seg_height=f32(_pad(seg_h, n_s, None)),
+        seg_valid=valid(len(segs), n_s),
+        box_half=f32(_pad(box_half, n_b, 2, 0.01)),
+        # Padding boxes sit far outside the arena so that even unmasked they touch nothing.
+        box_region=f32(_pad(box_region, n_b, 4, -100.0)),
+        box_material=i32(_pad(box_mat, n_b, None)),
+        box_height=f32(_pad(box_h, n_b, None)),
+        box_valid=valid(len(box_half), n_b),
+        pillar=f32(_pad(pillars, n_c, 3, -100.0)),
+        pillar_material=i32(_pad(pil_mat, n_c, None)),
+        pillar_height=f32(_pad(pil_h, n_c, None)),
+        pillar_valid=valid(len(pillars), n_c),
+        goal_half=f32(goal_half),
+        goal_height=f32(goal_h),
+        goal_region=f32(goal_region),
+        start_region=f32(start_region),
+        start_heading=f32(heading),
+        wanderer_region=f32(np.asarray(wander_regions, np.float64).reshape(-1, 4)),
+        name=name,
+        goal_shape=goal_shape,
+        ir_noise=noise["ir_relative_std"],
+        pixel_flip=noise["pixel_flip_prob"],
+        wheel_noise=noise["wheel_relative_std"],
+    )
+
+
+def world_path(name: str) -> Path:
+    """Path of a built-in world file."""
+    return Path(str(resources.files(__package__).joinpath("worlds", f"{name}.toml")))
+
+
+def load_world(name_or_path: str | Path, capacity: Capacity = Capacity()) -> World:
+    """Load a built-in world by name (``world1``) or a world file by path.
+
+    Raises:
+        WorldError: one line naming the file and the offending field.
+    """
+    text = str(name_or_path)
+    if text in BUILTIN_WORLDS:
+        path = world_path(text)
+    else:
+        path = Path(text)
+        if not path.is_file():
+            raise WorldError(
+                f"{text}: no such world file (built-in worlds: {', '.join(BUILTIN_WORLDS)})"
+            )
+    try:
+        doc = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise WorldError(f"{path}: not valid TOML: {err}") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise WorldError(f"{path}: cannot read: {err}") from None
+    return parse_world(doc, str(path), capacity)

@@ -1,0 +1,343 @@
+"""The task loop shared by the GA (LTL) and the STL trials: one robot, one run to the target.
+
+Each iteration: read the antigen from the last observation, count collisions, apply the finish
+rule and the caps, let the controller learn and act, step the simulator. Written for one run;
+:func:`rollout` advances a batch of runs in lockstep with ``vmap`` inside a ``while_loop``, in
+segments so that a Python driver can show progress and stop as soon as every run has ended.
+
+Controllers are (init, learn, act) triples of pure functions, like optax's transformations.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxais import envs
+from jaxais.antigens import antigen, is_collision
+from jaxais.envs.struct import pytree_dataclass
+
+# Why a run ended (failed_by codes).
+RUNNING, FINISHED, FAILED_COLLISIONS, FAILED_TIME = 0, 1, 2, 3
+FAILED_BY_NAME = {FINISHED: None, FAILED_COLLISIONS: "collisions", FAILED_TIME: "time"}
+
+
+@dataclass(frozen=True)
+class EpisodeConfig:
+    """Static settings of a run (they fix loop lengths and buffer shapes).
+
+    Attributes:
+        tau_cap: time cap, simulated seconds [paper: 4000 s STL, ours: 500 s LTL].
+        collision_cap: collision cap [paper: 100].
+        finish_pixels: a run ends after more than this many goal pixels ... [paper: 40]
+        finish_streak: ... on this many consecutive iterations [paper: 3].
+        chunk: iterations per inner loop; trajectories are sampled once per chunk.
+        segment: iterations per compiled call of :func:`rollout`'s driver (progress granularity).
+        record: keep the trajectory (one pose per chunk).
+    """
+
+    tau_cap: float = 4000.0
+    collision_cap: int = 100
+    finish_pixels: int = 40
+    finish_streak: int = 3
+    chunk: int = 25
+    segment: int = 5000
+    record: bool = False
+
+    def __post_init__(self):
+        for name in ("tau_cap", "collision_cap", "finish_streak", "chunk", "segment"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number, got {value!r}")
+        if self.finish_pixels < 0:
+            raise ValueError(f"finish_pixels must be >= 0, got {self.finish_pixels!r}")
+
+    def max_iterations(self, dt: float) -> int:
+        """Iterations until the time cap."""
+        return int(math.ceil(self.tau_cap / dt - 1e-9))
+
+
+@pytree_dataclass
+class Percept:
+    """What a controller sees at one iteration (all scalars).
+
+    Attributes:
+        m, m_prev: antigen now and at the previous iteration (m_prev = 0 at t = 0).
+        v, v_prev: Vm (maximum IR reading) now and before.
+        blue_pixels: number of blue pixels; centroid: their mean column (7 when none).
+        t: iterations since the start of the run.
+    """
+
+    m: jnp.ndarray
+    m_prev: jnp.ndarray
+    v: jnp.ndarray
+    v_prev: jnp.ndarray
+    blue_pixels: jnp.ndarray
+    centroid: jnp.ndarray
+    t: jnp.ndarray
+
+
+class Controller(NamedTuple):
+    """A controller as three pure functions of one robot.
+
+    init(key, params) -> cstate; learn(key, cstate, percept, params) -> cstate (scores the
+    antibody that acted last); act(key, cstate, percept, params) -> (cstate, wheels [2]).
+    ``params`` is the controller's own pytree (antibodies, flags, constants).
+    """
+
+    init: Callable[..., Any]
+    learn: Callable[..., Any]
+    act: Callable[..., Any]
+
+
+@pytree_dataclass
+class Run:
+    """One run in progress.
+
+    Attributes:
+        sim: simulator state. obs: last observation. ctrl: controller state. key: PRNG key.
+        m_prev, v_prev: previous antigen and Vm. collisions: collisions so far.
+        streak: consecutive iterations with more than finish_pixels goal pixels.
+        t: iterations so far. status: RUNNING, FINISHED, FAILED_COLLISIONS or FAILED_TIME.
+    """
+
+    sim: envs.State
+    obs: envs.Observation
+    ctrl: Any
+    key: jax.Array
+    m_prev: jnp.ndarray
+    v_prev: jnp.ndarray
+    collisions: jnp.ndarray
+    streak: jnp.ndarray
+    t: jnp.ndarray
+    status: jnp.ndarray
+
+
+def start(
+    reset_key: jax.Array,
+    run_key: jax.Array,
+    world: envs.World,
+    sim_params: envs.SimParams,
+    controller: Controller,
+    ctrl_params: Any,
+) -> Run:
+    """A run at t = 0: the world reset from ``reset_key``, everything else from ``run_key``."""
+    k_obs, k_ctrl, k_run = jax.random.split(run_key, 3)
+    sim = envs.reset(reset_key, world, sim_params)
+    return Run(
+        sim=sim,
+        obs=envs.observe(k_obs, sim, world, sim_params),
+        ctrl=controller.init(k_ctrl, ctrl_params),
+        key=k_run,
+        m_prev=jnp.int32(0),
+        v_prev=jnp.float32(0.0),
+        collisions=jnp.int32(0),
+        streak=jnp.int32(0),
+        t=jnp.int32(0),
+        status=jnp.int32(RUNNING),
+    )
+
+
+def iterate(
+    run: Run,
+    world: envs.World,
+    sim_params: envs.SimParams,
+    controller: Controller,
+    ctrl_params: Any,
+    config: EpisodeConfig,
+) -> Run:
+    """One iteration of one run; a run that has ended is returned unchanged."""
+    obs = run.obs
+    m = antigen(obs.ir, obs.blue_pixels)
+    # A collision is the antigen entering 5-7 from a non-collision antigen [ours].
+    collisions = run.collisions + (is_collision(m) & ~is_collision(run.m_prev)).astype(jnp.int32)
+    streak = jnp.where(obs.goal_pixels > config.finish_pixels, run.streak + 1, 0)
+    status = jnp.select(
+        [
+            streak >= config.finish_streak,
+            collisions >= config.collision_cap,
+            run.t >= config.max_iterations(sim_params.dt),
+        ],
+        [FINISHED, FAILED_COLLISIONS, FAILED_TIME],
+        RUNNING,
+    ).astype(jnp.int32)
+
+    key, k_learn, k_act, k_step = jax.random.split(run.key, 4)
+    percept = Percept(
+        m=m,
+        m_prev=run.m_prev,
+        v=obs.vm,
+        v_prev=run.v_prev,
+        blue_pixels=obs.blue_pixels,
+        centroid=obs.blue_centroid,
+        t=run.t,
+    )
+    ctrl = controller.learn(k_learn, run.ctrl, percept, ctrl_params)
+    ctrl, wheels = controller.act(k_act, ctrl, percept, ctrl_params)
+    sim, obs = envs.step(k_step, run.sim, wheels, world, sim_params)
+    moved = Run(
+        sim=sim,
+        obs=obs,
+        ctrl=ctrl,
+        key=key,
+        m_prev=m,
+        v_prev=percept.v,
+        collisions=collisions,
+        streak=streak,
+        t=run.t + 1,
+        status=status,
+    )
+    # The iteration that detects the end only records it; nothing moves from then on.
+    ended = moved.replace(
+        sim=run.sim, obs=run.obs, ctrl=run.ctrl, key=run.key, t=run.t, m_prev=run.m_prev
+    )
+    over = (run.status != RUNNING) | (status != RUNNING)
+    keep = jax.tree.map(lambda a, b: jnp.where(run.status != RUNNING, a, b), run, ended)
+    return jax.tree.map(lambda a, b: jnp.where(over, a, b), keep, moved)
+
+
+@pytree_dataclass
+class Batch:
+    """A batch of runs advanced together, with the optional trajectory buffer.
+
+    Attributes:
+        runs: Run with a leading batch axis [n].
+        poses: [n, K, 3] poses sampled once per chunk (K = 1 when not recording).
+        chunks: number of chunks done (the trajectory's fill level).
+    """
+
+    runs: Run
+    poses: jnp.ndarray
+    chunks: jnp.ndarray
+
+
+def trajectory_length(config: EpisodeConfig, dt: float) -> int:
+    """Pose samples kept per run: one at the start and one per chunk."""
+    return -(-config.max_iterations(dt) // config.chunk) + 2 if config.record else 1
+
+
+def start_batch(
+    reset_keys: jax.Array,
+    run_keys: jax.Array,
+    world: envs.World,
+    sim_params: envs.SimParams,
+    controller: Controller,
+    ctrl_params: Any,
+    config: EpisodeConfig,
+) -> Batch:
+    """Start n runs (``reset_keys``, ``run_keys`` [n]; ``ctrl_params`` batched along axis 0)."""
+    runs = jax.vmap(start, in_axes=(0, 0, None, None, None, 0))(
+        reset_keys, run_keys, world, sim_params, controller, ctrl_params
+    )
+    n, k = reset_keys.shape[0], trajectory_length(config, float(sim_params.dt))
+    poses = jnp.zeros((n, k, 3)).at[:, 0].set(runs.sim.pose)
+    return Batch(runs=runs, poses=poses, chunks=jnp.int32(0))
+
+
+def advance(
+    batch: Batch,
+    world: envs.World,
+    sim_params: envs.SimParams,
+    controller: Controller,
+    ctrl_params: Any,
+    config: EpisodeConfig,
+) -> Batch:
+    """Advance every run by up to ``config.segment`` iterations, stopping early once all ended."""
+    step_all = jax.vmap(iterate, in_axes=(0, None, None, None, 0, None))
+    n_chunks = max(1, config.segment // config.chunk)
+
+    def chunk(batch: Batch) -> Batch:
+        runs = jax.lax.fori_loop(
+            0,
+            config.chunk,
+            lambda _, r: step_all(r, world, sim_params, controller, ctrl_params, config),
+            batch.runs,
+        )
+        poses = batch.poses
+        if config.record:
+            idx = jnp.minimum(batch.chunks + 1, poses.shape[1] - 1)
+            poses = jax.lax.dynamic_update_slice_in_dim(poses, runs.sim.pose[:, None], idx, 1)
+        return Batch(runs=runs, poses=poses, chunks=batch.chunks + 1)
+
+    def cond(carry):
+        i, b = carry
+        return (i < n_chunks) & jnp.any(b.runs.status == RUNNING)
+
+    return jax.lax.while_loop(cond, lambda c: (c[0] + 1, chunk(c[1])), (0, batch))[1]
+
+
+def rollout(
+    reset_keys: jax.Array,
+    run_keys: jax.Array,
+    world: envs.World,
+    sim_params: envs.SimParams,
+    controller: Controller,
+    ctrl_params: Any,
+    config: EpisodeConfig,
+    progress: Callable[[int], None] | None = None,
+    compiled: dict | None = None,
+) -> Batch:
+    """Run a batch to the end: every run finished or stopped by a cap.
+
+    Args:
+        reset_keys, run_keys: [n] PRNG keys (world placement; everything else).
+        ctrl_params: controller parameters with a leading batch axis [n].
+        progress: called with the iterations done after every segment (e.g. tqdm's update).
+        compiled: optional cache dict, so repeated calls with the same controller reuse the
+            compiled programs.
+
+    Returns:
+        The final :class:`Batch`.
+    """
+    cache = compiled if compiled is not None else {}
+    key = (id(controller), world.name, config)
+    if key not in cache:
+        cache[key] = (
+            envs.jit(start_batch, static_argnums=(4, 6)),
+            envs.jit(advance, static_argnums=(3, 5)),
+        )
+    start_fn, advance_fn = cache[key]
+    batch = start_fn(reset_keys, run_keys, world, sim_params, controller, ctrl_params, config)
+    done_before = 0
+    while True:
+        batch = advance_fn(batch, world, sim_params, controller, ctrl_params, config)
+        t = int(np.max(np.asarray(batch.runs.t)))
+        if progress is not None:
+            progress(t - done_before)
+        done_before = t
+        if not np.any(np.asarray(batch.runs.status) == RUNNING):
+            return batch
+
+
+def outcome(runs: Run, config: EpisodeConfig, dt: float) -> dict[str, np.ndarray]:
+    """Per-run τ (s, capped), collisions (capped), f = (ρc + τ)/2 with ρ = 8, and the status.
+
+    Returns:
+        NumPy arrays [n]: tau, collisions, fitness, status, iterations.
+    """
+    status = np.asarray(runs.status)
+    t = np.asarray(runs.t)
+    tau = np.minimum(t * dt, config.tau_cap)
+    collisions = np.minimum(np.asarray(runs.collisions), config.collision_cap)
+    return {
+        "tau": tau,
+        "collisions": collisions,
+        "fitness": fitness(tau, collisions),
+        "status": status,
+        "iterations": t,
+    }
+
+
+RHO = 8.0
+"""Weight of a collision against a second of task time [paper]."""
+
+
+def fitness(tau, collisions, rho: float = RHO):
+    """Paper eq (11): f = (ρc + τ)/2, lower is better (used for both LTL and STL)."""
+    return (rho * collisions + tau) / 2.0

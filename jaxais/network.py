@@ -1,0 +1,327 @@
+"""The idiotypic immune network: equations (1)-(10) of Whitbrook et al. (SPEC section 7).
+
+Every function is written for one network of ``x`` antibody sets by ``y`` antigens (5 x 8 in the
+paper, never assumed here): pure, float32, fixed shapes, explicit PRNG keys, no Python branching
+on traced values, so callers batch robots, trials and parameter grids with ``vmap``.
+
+Readings of the paper decided here:
+
+- Eq (1) prints ``8 c_k`` in the sum; ``rho`` is used in both places (the paper sets rho = 8).
+- Eq (3): a set gets at most one idiotope, drawn uniformly among the entries strictly below their
+  column mean; a set with no such entry gets none.
+- Eq (4) is not clipped (the paper clips only the scored antibody's P, in RL), and a column whose
+  current mean is 0 is left unchanged [ours: guard].
+- Eqs (7)-(8) sum over the antigens j of every set i against the stage-1 winner's set n,
+  including i = n: stimulation pairs the idiotope of alpha (I_nj) with each set's paratopes
+  (1 - P_ij); suppression pairs the paratope of alpha (P_nj) with each set's idiotopes (I_ij),
+  exactly as the text describes. Concentrations are taken before the clone update.
+- The text after eq (9) says clones are updated "using (1)" and concentrations "using (2)"; these
+  are read as eqs (5) and (6). Eq (5) uses S2 and touches only the antigen's column; clone counts
+  are floored at 0 [ours].
+- Ties in both selection stages are broken uniformly at random [ours].
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxais.envs.struct import pytree_dataclass, static_field
+
+__all__ = [
+    "NetworkParams",
+    "concentrations",
+    "idiotopes",
+    "idiotypic_select",
+    "initial_clones",
+    "network_params",
+    "random_tiebreak_argmax",
+    "relative_fitness",
+    "rescale_paratopes",
+    "seed_paratopes",
+    "select_alpha",
+    "stimulation_suppression",
+]
+
+
+@pytree_dataclass
+class NetworkParams:
+    """Constants of the idiotypic network [paper, SPEC section 7].
+
+    The float constants are pytree leaves, so a batch of networks with different constants is one
+    ``vmap``. ``idiotope_period`` is static: it is a loop schedule, fixed at trace time.
+    Build with :func:`network_params`, which validates; ``validate`` needs concrete values, so call
+    it outside ``jit``.
+
+    Attributes:
+        b: clone-production scale of eq (5).
+        k1: stimulation magnitude of eq (7).
+        k2: suppression magnitude of eq (8).
+        k3: death rate of eq (5), in [0, 1].
+        Phi: concentration scale of eq (6), > 0.
+        rho: weight of collisions against completion time in eq (1).
+        phi: paratope scale of eq (2), > 0.
+        initial_clones: clones per antibody at the start of the STL phase.
+        idiotope_period: iterations between idiotope recomputations (eq 3), >= 1.
+    """
+
+    b: float = 100.0
+    k1: float = 0.85
+    k2: float = 1.10
+    k3: float = 0.0
+    Phi: float = 25.0
+    rho: float = 8.0
+    phi: float = 20.0
+    initial_clones: float = 1000.0
+    idiotope_period: int = static_field(default=120)
+
+    def validate(self) -> NetworkParams:
+        """Check every constant's range (batched leaves are checked elementwise).
+
+        Returns:
+            ``self``, so construction can be chained.
+
+        Raises:
+            ValueError: a one-line message naming the first bad field.
+        """
+        for name, (ok, rule) in _FLOAT_RULES.items():
+            value = np.asarray(getattr(self, name), dtype=np.float64)
+            # Written as "not ok" so NaN fails every rule.
+            if not np.all(ok(value)):
+                raise ValueError(f"NetworkParams.{name} must be {rule}, got {value}")
+        period = self.idiotope_period
+        if isinstance(period, bool) or not isinstance(period, int | np.integer) or period < 1:
+            raise ValueError(f"NetworkParams.idiotope_period must be an int >= 1, got {period!r}")
+        return self
+
+
+_FLOAT_RULES = {
+    "b": (lambda v: v >= 0, ">= 0"),
+    "k1": (lambda v: v >= 0, ">= 0"),
+    "k2": (lambda v: v >= 0, ">= 0"),
+    "k3": (lambda v: (v >= 0) & (v <= 1), "in [0, 1]"),
+    "Phi": (lambda v: v > 0, "> 0"),
+    "rho": (lambda v: v >= 0, ">= 0"),
+    "phi": (lambda v: v > 0, "> 0"),
+    "initial_clones": (lambda v: v > 0, "> 0"),
+}
+
+
+def network_params(**overrides: float | int) -> NetworkParams:
+    """Paper constants with ``overrides`` applied, validated.
+
+    Raises:
+        ValueError: an unknown field name or an out-of-range value.
+    """
+    unknown = sorted(set(overrides) - set(NetworkParams.__dataclass_fields__))
+    if unknown:
+        raise ValueError(f"unknown NetworkParams field(s): {', '.join(unknown)}")
+    return NetworkParams(**overrides).validate()
+
+
+def random_tiebreak_argmax(key: jax.Array, values: jax.Array) -> jax.Array:
+    """Index of the largest value, chosen uniformly at random among exact ties.
+
+    Args:
+        key: PRNG key.
+        values: [x] scores.
+
+    Returns:
+        int32 scalar index.
+    """
+    values = jnp.asarray(values)
+    is_max = values == jnp.max(values)
+    # i.i.d. uniform scores make each tied index equally likely to hold the largest one.
+    scores = jnp.where(is_max, jax.random.uniform(key, values.shape), -1.0)
+    return jnp.argmax(scores).astype(jnp.int32)
+
+
+def relative_fitness(tau: jax.Array, collisions: jax.Array, rho: float = 8.0) -> jax.Array:
+    """Eq (1): relative fitness of each evolved set; sums to 1, lower cost gives higher mu.
+
+    Args:
+        tau: [x] task completion times (must make every ``tau + rho * c`` positive).
+        collisions: [x] collision counts.
+        rho: collision weight.
+
+    Returns:
+        mu: [x] float32.
+    """
+    cost = jnp.asarray(tau, jnp.float32) + rho * jnp.asarray(collisions, jnp.float32)
+    # 1 / (cost_i * sum_k 1/cost_k), written as a normalised inverse cost.
+    inverse = 1.0 / cost
+    return inverse / jnp.sum(inverse)
+
+
+def seed_paratopes(L: jax.Array, mu: jax.Array, phi: float = 20.0) -> jax.Array:
+    """Eq (2): seeded paratopes P = L * mu / phi, clipped to [0, 1] [ours: clip].
+
+    Args:
+        L: [x, y] final RL scores of the evolved antibodies.
+        mu: [x] relative fitness of each set (eq 1).
+        phi: scale (the largest L * mu is about 20).
+
+    Returns:
+        P: [x, y] float32.
+    """
+    L = jnp.asarray(L, jnp.float32)
+    mu = jnp.asarray(mu, jnp.float32)
+    return jnp.clip(L * mu[:, None] / phi, 0.0, 1.0)
+
+
+def idiotopes(key: jax.Array, P: jax.Array) -> jax.Array:
+    """Eq (3): idiotope matrix, at most one 1 per set.
+
+    Entries strictly below their column (antigen) mean are candidates; each set keeps one of its
+    candidates, chosen uniformly at random, and a set without candidates keeps none.
+
+    Args:
+        key: PRNG key.
+        P: [x, y] paratopes.
+
+    Returns:
+        I: [x, y] float32 of 0.0 / 1.0.
+    """
+    P = jnp.asarray(P, jnp.float32)
+    sigma = jnp.mean(P, axis=0)
+    # No entry equal to its column's maximum is below the exact mean; this second test stops
+    # float rounding of the mean from making every entry of a constant column a candidate.
+    candidate = (sigma > P) & (jnp.max(P, axis=0) > P)
+    # Drawn flat and reshaped: same i.i.d. scores, and XLA compiles a 1-D threefry about twice
+    # as fast as a 2-D one on CPU.
+    noise = jax.random.uniform(key, (P.size,)).reshape(P.shape)
+    scores = jnp.where(candidate, noise, -1.0)
+    chosen = jax.nn.one_hot(jnp.argmax(scores, axis=1), P.shape[1], dtype=jnp.float32)
+    return chosen * jnp.any(candidate, axis=1, keepdims=True)
+
+
+def rescale_paratopes(P: jax.Array, sigma0: jax.Array) -> jax.Array:
+    """Eq (4): scale every column back to its initial mean.
+
+    Not clipped: the paper bounds only the scored antibody's P (in RL), so a rescaled value may
+    leave [0, 1]. A column whose current mean is 0 cannot be rescaled and is returned unchanged
+    [ours: guard].
+
+    Args:
+        P: [x, y] paratopes after RL.
+        sigma0: [y] initial column means.
+
+    Returns:
+        P: [x, y] float32.
+    """
+    P = jnp.asarray(P, jnp.float32)
+    sigma = jnp.mean(P, axis=0)
+    positive = sigma > 0
+    # The inner where keeps the division finite so neither the value nor its gradient is NaN.
+    scale = jnp.where(
+        positive, jnp.asarray(sigma0, jnp.float32) / jnp.where(positive, sigma, 1.0), 1.0
+    )
+    return P * scale
+
+
+def initial_clones(x: int, y: int, n0: float = 1000.0) -> jax.Array:
+    """Clone counts at the start of the STL phase.
+
+    Args:
+        x: number of sets (static). y: number of antigens (static). n0: clones per antibody.
+
+    Returns:
+        N: [x, y] float32, all ``n0``.
+    """
+    return jnp.full((x, y), n0, jnp.float32)
+
+
+def concentrations(N: jax.Array, Phi: float) -> jax.Array:
+    """Eq (6): C = Phi * N / sum(N); all zeros if there are no clones at all (no NaN).
+
+    Args:
+        N: [x, y] clone counts.
+        Phi: scale; the concentrations sum to Phi.
+
+    Returns:
+        C: [x, y] float32.
+    """
+    N = jnp.asarray(N, jnp.float32)
+    total = jnp.sum(N)
+    return jnp.where(total > 0, Phi * N / jnp.where(total > 0, total, 1.0), 0.0)
+
+
+def select_alpha(key: jax.Array, P: jax.Array, antigen: jax.Array | int) -> jax.Array:
+    """Selection stage 1: the set whose antibody for ``antigen`` has the highest paratope.
+
+    Args:
+        key: PRNG key for ties [ours].
+        P: [x, y] paratopes.
+        antigen: index m of the presenting antigen.
+
+    Returns:
+        n: int32 set index of alpha = A_nm.
+    """
+    return random_tiebreak_argmax(key, jnp.asarray(P, jnp.float32)[:, antigen])
+
+
+def stimulation_suppression(
+    P: jax.Array, I: jax.Array, C: jax.Array, n: jax.Array | int, k1: float, k2: float
+) -> tuple[jax.Array, jax.Array]:
+    """Eqs (7)-(8): how much alpha's set ``n`` stimulates and suppresses each set.
+
+    eps_i = k1 * sum_j (1 - P_ij) I_nj C_ij C_nj   (idiotope of alpha vs paratopes of set i)
+    delta_i = k2 * sum_j P_nj I_ij C_ij C_nj       (paratope of alpha vs idiotopes of set i)
+
+    Args:
+        P: [x, y] paratopes. I: [x, y] idiotopes. C: [x, y] concentrations before the update.
+        n: set index of the stage-1 winner alpha.
+        k1: stimulation magnitude. k2: suppression magnitude.
+
+    Returns:
+        eps: [x] float32, delta: [x] float32.
+    """
+    P = jnp.asarray(P, jnp.float32)
+    I = jnp.asarray(I, jnp.float32)
+    C = jnp.asarray(C, jnp.float32)
+    eps = k1 * jnp.sum((1.0 - P) * I[n] * C * C[n], axis=1)
+    delta = k2 * jnp.sum(P[n] * I * C * C[n], axis=1)
+    return eps, delta
+
+
+def idiotypic_select(
+    key: jax.Array,
+    P: jax.Array,
+    I: jax.Array,
+    N: jax.Array,
+    antigen: jax.Array | int,
+    params: NetworkParams,
+) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """Three-stage idiotypic selection (eqs 5-10) for the presenting antigen.
+
+    Stage 1 picks alpha (:func:`select_alpha`). Stage 2 computes S2 = P_im + eps - delta
+    (eq 9) for every set, then updates the antigen's column of clones with eq (5) using S2,
+    floored at 0 [ours]. Stage 3 re-evaluates concentrations (eq 6) and picks beta, the set with
+    the highest activation lambda = C_im * S2 (eq 10). An idiotypic difference is alpha != beta.
+
+    Args:
+        key: PRNG key (split into one subkey per stage's tie-break).
+        P: [x, y] paratopes. I: [x, y] idiotopes. N: [x, y] clone counts.
+        antigen: index m of the presenting antigen.
+        params: network constants (b, k1, k2, k3, Phi are used).
+
+    Returns:
+        alpha: int32 set index of the stage-1 winner.
+        beta: int32 set index of the stage-3 winner, the antibody that acts.
+        N_new: [x, y] float32 clone counts; only column ``antigen`` differs from ``N``.
+    """
+    key_alpha, key_beta = jax.random.split(key)
+    P = jnp.asarray(P, jnp.float32)
+    N = jnp.asarray(N, jnp.float32)
+    alpha = select_alpha(key_alpha, P, antigen)
+    eps, delta = stimulation_suppression(
+        P, I, concentrations(N, params.Phi), alpha, params.k1, params.k2
+    )
+    s2 = P[:, antigen] + eps - delta
+    # A strongly suppressed antibody would otherwise get a negative number of clones.
+    column = jnp.maximum(params.b * s2 + N[:, antigen] * (1.0 - params.k3), 0.0)
+    N_new = N.at[:, antigen].set(column)
+    activation = concentrations(N_new, params.Phi)[:, antigen] * s2
+    beta = random_tiebreak_argmax(key_beta, activation)
+    return alpha, beta, N_new

@@ -1,0 +1,218 @@
+"""Reinforcement scores and the stuck penalties (SPEC 6, the paper's Table 2 and section 4.4).
+
+Pure functions for one robot, shared by the GA (LTL, cumulative score L) and the immune network
+(STL, paratope P). Antigens fall in three groups: 0 target unseen, 1 target seen, 2-7 obstacle
+or collision. The antibody that acted at t-1 is scored from the pair (m_{t-1}, m_t):
+
+======  =====  =========================================================================
+old     new    score
+======  =====  =========================================================================
+0       0      +0.05
+1       0      -0.10
+2-7     0      +0.10
+0       1      +0.10
+1       1      0.05 (1 - |x - 7| / 7), x the blue centroid column (0..14) [ours]
+2-7     1      +0.20
+0       2-7    -0.05
+1       2-7    -0.05
+2-7     2-7    0.25 (lev_old - lev_new) + 0.25 clip((V_old - V_new) / V_old, -1, 1)
+               - 0.10 [same antigen and V_new >= V_old], clipped to [-0.40, 0.50] [ours]
+======  =====  =========================================================================
+
+lev is 1 for obstacle and 2 for collision antigens, V the maximum IR reading ``Vm``.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from jaxais.antigens import TARGET_SEEN, TARGET_UNSEEN, is_obstacle_or_collision, severity
+from jaxais.envs.struct import pytree_dataclass
+
+__all__ = [
+    "CENTRE_COLUMN",
+    "CENTRE_HALF_WIDTH",
+    "OBSTACLE_LIMIT",
+    "PENALTY_IDIOTYPIC",
+    "PENALTY_NON_IDIOTYPIC",
+    "PENALTY_NO_PROGRESS",
+    "PenaltyCounters",
+    "SCORE_AVOIDED",
+    "SCORE_AVOIDED_AND_SEEN",
+    "SCORE_FOUND_MARKER",
+    "SCORE_KEPT_MARKER_MAX",
+    "SCORE_LOST_MARKER",
+    "SCORE_OBSTACLE_MAX",
+    "SCORE_OBSTACLE_MIN",
+    "SCORE_SEEN_TO_OBSTACLE",
+    "SCORE_UNSEEN_TO_OBSTACLE",
+    "SCORE_UNSEEN_TO_UNSEEN",
+    "UNSEEN_LIMIT",
+    "V_PREV_FLOOR",
+    "WEIGHT_PROXIMITY",
+    "WEIGHT_SEVERITY",
+    "init_counters",
+    "penalty_size",
+    "rl_score",
+    "update_penalty",
+]
+
+# Fixed rows of Table 2 [paper].
+SCORE_UNSEEN_TO_UNSEEN = 0.05
+"""0 -> 0: no obstacles encountered."""
+SCORE_LOST_MARKER = -0.10
+"""1 -> 0: lost sight of the marker."""
+SCORE_AVOIDED = 0.10
+"""2-7 -> 0: avoided the obstacle."""
+SCORE_FOUND_MARKER = 0.10
+"""0 -> 1: found the marker."""
+SCORE_AVOIDED_AND_SEEN = 0.20
+"""2-7 -> 1: avoided the obstacle and gained or kept sight of the marker."""
+SCORE_UNSEEN_TO_OBSTACLE = -0.05
+"""0 -> 2-7: encountered an obstacle."""
+SCORE_SEEN_TO_OBSTACLE = -0.05
+"""1 -> 2-7: encountered an obstacle."""
+
+# 1 -> 1, "0.00 to 0.05 depending on the marker's orientation" [paper: range; ours: formula].
+SCORE_KEPT_MARKER_MAX = 0.05
+"""1 -> 1 score with the marker dead ahead."""
+CENTRE_COLUMN = 7.0
+"""Camera column straight ahead (of 0..14)."""
+CENTRE_HALF_WIDTH = 7.0
+"""Centroid offset from the centre at which the 1 -> 1 score reaches 0 (the image edge)."""
+
+# 2-7 -> 2-7, "-0.40 to 0.50, depending on several factors" [paper: range; ours: formula].
+WEIGHT_SEVERITY = 0.25
+"""Per level of severity gained (collision -> obstacle) or lost."""
+WEIGHT_PROXIMITY = 0.25
+"""Times the relative fall of Vm, clipped to [-1, 1]."""
+PENALTY_NO_PROGRESS = 0.10
+"""Subtracted when the antigen is unchanged and Vm did not fall."""
+SCORE_OBSTACLE_MIN = -0.40
+SCORE_OBSTACLE_MAX = 0.50
+V_PREV_FLOOR = 1e-6
+"""Denominator floor for the relative Vm change, so V_old = 0 gives no NaN (it cannot occur with
+a real 2-7 antigen, whose Vm is at least 250)."""
+
+# Stuck penalties [paper].
+UNSEEN_LIMIT = 250
+"""Penalise after more than this many consecutive iterations of antigen 0."""
+OBSTACLE_LIMIT = 15
+"""Penalise after more than this many consecutive iterations of antigens 2-7."""
+PENALTY_IDIOTYPIC = 0.5
+"""Score removed from the acting antibody by a penalty in idiotypic systems."""
+PENALTY_NON_IDIOTYPIC = 1.0
+"""Score removed from the acting antibody by a penalty in non-idiotypic systems."""
+
+# [old group, new group] for the fixed rows; group 0 unseen, 1 seen, 2 obstacle/collision. The
+# two ranged cells (1 -> 1, 2-7 -> 2-7) are computed and hold NaN here.
+_TABLE = np.array(
+    [
+        [SCORE_UNSEEN_TO_UNSEEN, SCORE_FOUND_MARKER, SCORE_UNSEEN_TO_OBSTACLE],
+        [SCORE_LOST_MARKER, np.nan, SCORE_SEEN_TO_OBSTACLE],
+        [SCORE_AVOIDED, SCORE_AVOIDED_AND_SEEN, np.nan],
+    ],
+    dtype=np.float32,
+)
+
+
+def _group(m: jnp.ndarray) -> jnp.ndarray:
+    return jnp.minimum(jnp.asarray(m, jnp.int32), 2)
+
+
+def rl_score(
+    m_prev: jnp.ndarray,
+    m: jnp.ndarray,
+    v_prev: jnp.ndarray,
+    v: jnp.ndarray,
+    centroid: jnp.ndarray,
+) -> jnp.ndarray:
+    """Table 2 score of the antibody that acted at t-1 (see the module table).
+
+    Args:
+        m_prev: [] int antigen at t-1.
+        m: [] int antigen at t.
+        v_prev: [] float Vm (maximum IR reading) at t-1.
+        v: [] float Vm at t.
+        centroid: [] float blue centroid column at t (0..14; used by 1 -> 1 only).
+
+    Returns:
+        [] float32 score in [-0.40, 0.50].
+    """
+    v_prev = jnp.asarray(v_prev, jnp.float32)
+    v = jnp.asarray(v, jnp.float32)
+    g_prev, g = _group(m_prev), _group(m)
+
+    offset = jnp.abs(jnp.asarray(centroid, jnp.float32) - CENTRE_COLUMN) / CENTRE_HALF_WIDTH
+    kept_marker = SCORE_KEPT_MARKER_MAX * jnp.clip(1.0 - offset, 0.0, 1.0)
+
+    relative_fall = jnp.clip((v_prev - v) / jnp.maximum(v_prev, V_PREV_FLOOR), -1.0, 1.0)
+    no_progress = (m == m_prev) & (v >= v_prev)
+    obstacle = (
+        WEIGHT_SEVERITY * (severity(m_prev) - severity(m)).astype(jnp.float32)
+        + WEIGHT_PROXIMITY * relative_fall
+        - PENALTY_NO_PROGRESS * no_progress.astype(jnp.float32)
+    )
+    obstacle = jnp.clip(obstacle, SCORE_OBSTACLE_MIN, SCORE_OBSTACLE_MAX)
+
+    fixed = jnp.asarray(_TABLE)[g_prev, g]
+    both_seen = (g_prev == TARGET_SEEN) & (g == TARGET_SEEN)
+    both_obstacle = is_obstacle_or_collision(m_prev) & is_obstacle_or_collision(m)
+    return jnp.where(both_seen, kept_marker, jnp.where(both_obstacle, obstacle, fixed))
+
+
+@pytree_dataclass
+class PenaltyCounters:
+    """Lengths of the current runs of stuck-looking antigens.
+
+    Attributes:
+        unseen_run: [] int32 consecutive iterations of antigen 0, up to and including the last
+            one passed to :func:`update_penalty` (0 after a penalty).
+        obstacle_run: [] int32 consecutive iterations of antigens 2-7, likewise.
+    """
+
+    unseen_run: jnp.ndarray
+    obstacle_run: jnp.ndarray
+
+
+def init_counters() -> PenaltyCounters:
+    """Counters at the start of a run (no antigen seen yet)."""
+    return PenaltyCounters(unseen_run=jnp.int32(0), obstacle_run=jnp.int32(0))
+
+
+def update_penalty(
+    counters: PenaltyCounters, m: jnp.ndarray
+) -> tuple[PenaltyCounters, jnp.ndarray]:
+    """Count the current antigen ``m`` into the runs and say whether a penalty fires now.
+
+    A run grows by one for each consecutive iteration whose antigen is in its group (0 for the
+    unseen run, 2-7 for the obstacle run) and drops to 0 on any other antigen. A penalty fires on
+    the iteration that makes a run exceed its limit, i.e. on the 251st consecutive antigen 0 or
+    the 16th consecutive antigen in 2-7; that run then restarts at 0, so while the robot stays
+    stuck the penalty repeats on the 502nd, 753rd, ... (resp. 32nd, 48th, ...) consecutive
+    iteration. Call it once per iteration with that iteration's antigen, and apply
+    ``PENALTY_IDIOTYPIC`` or ``PENALTY_NON_IDIOTYPIC`` (see :func:`penalty_size`) to the antibody
+    that is being scored when it returns True.
+
+    Args:
+        counters: runs before this iteration.
+        m: [] int antigen of this iteration.
+
+    Returns:
+        (updated counters, [] bool penalise).
+    """
+    unseen = jnp.where(m == TARGET_UNSEEN, counters.unseen_run + 1, 0)
+    obstacle = jnp.where(is_obstacle_or_collision(m), counters.obstacle_run + 1, 0)
+    fire_unseen = unseen > UNSEEN_LIMIT
+    fire_obstacle = obstacle > OBSTACLE_LIMIT
+    new = PenaltyCounters(
+        unseen_run=jnp.where(fire_unseen, 0, unseen).astype(jnp.int32),
+        obstacle_run=jnp.where(fire_obstacle, 0, obstacle).astype(jnp.int32),
+    )
+    return new, fire_unseen | fire_obstacle
+
+
+def penalty_size(idiotypic: bool | jnp.ndarray) -> jnp.ndarray:
+    """Score removed by one penalty: 0.5 with idiotypic selection, 1.0 without [paper]."""
+    return jnp.where(idiotypic, PENALTY_IDIOTYPIC, PENALTY_NON_IDIOTYPIC).astype(jnp.float32)

@@ -1,0 +1,579 @@
+"""The results report: our Tables 3-5 beside the paper's, H1-H4, robustness tests and figures.
+
+Figures are drawn with matplotlib's object-oriented API on the Agg canvas (no pyplot, no
+display, no global backend change). The paper's tables ship as package data and are loaded with
+:func:`load_paper_tables`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Mapping, Sequence
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from . import stats
+
+__all__ = ["load_paper_tables", "ordering_differences", "write_report"]
+
+WorldDrawer = Callable[[Any, str], None]
+"""``world_drawer(ax, world_name)`` draws a world's walls and obstacles on a matplotlib Axes."""
+
+_T3_COLS = (("c", "c", 1), ("tau", "τ (s)", 0), ("f", "f", 0))  # key, header, decimals
+_T5_COLS = (("c", "c cap", 0), ("tau", "τ cap", 0), ("total", "total", 0))
+_METRIC_NAME = {"c": "c", "tau": "τ", "f": "f", "total": "total"}
+_RANK_MARK = "†"
+_SIG_MARK = "‡"
+_SIG_LEVEL = 99
+
+
+def load_paper_tables() -> dict:
+    """The paper's Tables 3, 4, 5 (+ notes, source, hypotheses, protocol) from package data.
+
+    Returns:
+        ``{"source": str, "notes": [str], "table3": {world: {system: {"c","tau","f"}}},
+        "table4": {world: {"A vs B": {"c","tau","f"}}}, "table5": {world: {system:
+        {"c","tau","total"}}}, "table5_mean": {system: {...}}, "hypotheses": {"H1": {"supported",
+        "statement", "paper_says"}, ...}, "protocol": {...}}``.
+    """
+    text = resources.files("jaxais").joinpath("data/paper_tables.json").read_text("utf-8")
+    return json.loads(text)
+
+
+# --------------------------------------------------------------------------- small helpers
+
+
+def _canonical(names: Sequence[str], order: Sequence[str]) -> list[str]:
+    """``names`` without repeats: those in ``order`` first, in that order, then the rest."""
+    unique = list(dict.fromkeys(names))
+    return [n for n in order if n in unique] + [n for n in unique if n not in order]
+
+
+def _worlds(*tables: Mapping[str, Any]) -> list[str]:
+    return _canonical([w for t in tables for w in t], stats.WORLDS)
+
+
+def _rows(*rows: Mapping[str, Any]) -> list[str]:
+    return _canonical([s for r in rows for s in r], stats.SYSTEMS)
+
+
+def _num(x: Any, decimals: int = 0) -> str:
+    if x is None:
+        return "–"
+    x = float(x)
+    if math.isinf(x):
+        return "+inf" if x > 0 else "−inf"
+    return f"{x:.{decimals}f}"
+
+
+def _p(p: float) -> str:
+    return "0" if p == 0 else f"{p:.2g}"
+
+
+def _table(header: Sequence[str], body: Sequence[Sequence[str]], align: str = "") -> list[str]:
+    align = align or "l" + "r" * (len(header) - 1)
+    sep = ["---:" if a == "r" else "---" for a in align]
+    lines = ["| " + " | ".join(header) + " |", "| " + " | ".join(sep) + " |"]
+    lines += ["| " + " | ".join(row) + " |" for row in body]
+    return lines + [""]
+
+
+def _ranks(values: Mapping[str, float]) -> dict[str, int]:
+    """Competition ranks (1 = lowest = best; ties share the lower rank)."""
+    return {k: 1 + sum(w < v for w in values.values()) for k, v in values.items()}
+
+
+def _order_string(values: Mapping[str, float]) -> str:
+    items = sorted(values.items(), key=lambda kv: kv[1])
+    out = items[0][0]
+    for (_, prev), (name, v) in zip(items, items[1:], strict=False):
+        out += (" = " if v == prev else " < ") + name
+    return out
+
+
+# --------------------------------------------------------------------------- ordering
+
+
+def ordering_differences(
+    ours: Mapping[str, Mapping[str, Mapping[str, Any]]],
+    paper: Mapping[str, Mapping[str, Mapping[str, Any]]],
+    columns: Sequence[str],
+) -> list[dict[str, Any]]:
+    """Where the ranking of systems differs between our table and the paper's.
+
+    For each world and column, the systems present in both tables are ranked by value (lower is
+    better; competition ranking). Our values are first rounded to integers, the paper's
+    precision, so that rounding alone does not break a tie.
+
+    Returns:
+        One ``{"world", "column", "systems": [names whose rank differs], "ours": {system: rank},
+        "paper": {system: rank}, "ours_order": str, "paper_order": str}`` per world and column
+        with a difference.
+    """
+    out = []
+    for world in _worlds(ours, paper):
+        common = [s for s in _rows(ours.get(world, {})) if s in paper.get(world, {})]
+        if len(common) < 2:
+            continue
+        for col in columns:
+            mine = {s: float(round(ours[world][s][col])) for s in common}
+            theirs = {s: float(paper[world][s][col]) for s in common}
+            r_ours, r_paper = _ranks(mine), _ranks(theirs)
+            differ = [s for s in common if r_ours[s] != r_paper[s]]
+            if differ:
+                out.append(
+                    {
+                        "world": world,
+                        "column": col,
+                        "systems": differ,
+                        "ours": r_ours,
+                        "paper": r_paper,
+                        "ours_order": _order_string(mine),
+                        "paper_order": _order_string(theirs),
+                    }
+                )
+    return out
+
+
+def _flagged(diffs: Sequence[Mapping[str, Any]]) -> set[tuple[str, str, str]]:
+    return {(d["world"], s, d["column"]) for d in diffs for s in d["systems"]}
+
+
+# --------------------------------------------------------------------------- sections
+
+
+def _side_by_side(
+    title: str,
+    ours: Mapping[str, Any],
+    paper: Mapping[str, Any],
+    cols: Sequence[tuple[str, str, int]],
+    flagged: set[tuple[str, str, str]],
+    n_trials: Mapping[str, Mapping[str, int]] | None,
+) -> list[str]:
+    lines = [f"### {title}", ""]
+    for world in _worlds(ours, paper):
+        mine, theirs = ours.get(world, {}), paper.get(world, {})
+        header = ["System"] + (["n"] if n_trials is not None else [])
+        header += [f"{h} ours / paper" for _, h, _ in cols]
+        body = []
+        for s in _rows(mine, theirs):
+            row = [s] + ([str(n_trials.get(world, {}).get(s, "–"))] if n_trials is not None else [])
+            for key, _, dec in cols:
+                a = mine.get(s, {}).get(key)
+                b = theirs.get(s, {}).get(key)
+                mark = f" {_RANK_MARK}" if (world, s, key) in flagged else ""
+                row.append(f"{_num(a, dec)} / {_num(b)}{mark}")
+            body.append(row)
+        lines += [f"**{world}**", ""] + _table(header, body)
+    return lines
+
+
+def _table4_section(ours: Mapping[str, Any], paper: Mapping[str, Any]) -> list[str]:
+    lines = [
+        "### Table 4: significance levels 100 (1 − p), two-tailed Student's t (ours / paper)",
+        "",
+        f"Significant at the paper's 99 % level when the level is ≥ {_SIG_LEVEL}. "
+        f"{_SIG_MARK} marks a cell where our verdict (significant or not) differs from the "
+        "paper's. Levels carry no sign: see the mean differences in the robustness table.",
+        "",
+    ]
+    for world in _worlds(ours, paper):
+        mine, theirs = ours.get(world, {}), paper.get(world, {})
+        pairs = [f"{a} vs {b}" for a, b in stats.COMPARISONS]
+        pairs = [p for p in pairs if p in mine or p in theirs]
+        body = []
+        for pair in pairs:
+            row = [pair]
+            for m in stats.METRICS:
+                a, b = mine.get(pair, {}).get(m), theirs.get(pair, {}).get(m)
+                differs = a is not None and b is not None and (a >= _SIG_LEVEL) != (b >= _SIG_LEVEL)
+                row.append(f"{_num(a)} / {_num(b)}" + (f" {_SIG_MARK}" if differs else ""))
+            body.append(row)
+        header = ["Comparison"] + [f"{_METRIC_NAME[m]} ours / paper" for m in stats.METRICS]
+        lines += [f"**{world}**", ""] + _table(header, body)
+    return lines
+
+
+def _significance_differences(ours: Mapping[str, Any], paper: Mapping[str, Any]) -> list[str]:
+    out = []
+    for world in _worlds(ours, paper):
+        for pair, row in ours.get(world, {}).items():
+            ref = paper.get(world, {}).get(pair)
+            if ref is None:
+                continue
+            for m in stats.METRICS:
+                if (row[m] >= _SIG_LEVEL) != (ref[m] >= _SIG_LEVEL):
+                    out.append(
+                        f"- {world}, Table 4 {pair}, {_METRIC_NAME[m]}: level {row[m]} "
+                        f"(paper {ref[m]})"
+                    )
+    return out
+
+
+def _ordering_section(diffs3: list, diffs5: list, ours4: Mapping, paper4: Mapping) -> list[str]:
+    lines = [
+        "## Where our ordering differs from the paper",
+        "",
+        "Systems ranked from best (lowest) to worst per world and column; our values rounded to "
+        "integers first, like the paper's. Cells marked † in Tables 3 and 5.",
+        "",
+    ]
+    for label, diffs in (("Table 3", diffs3), ("Table 5", diffs5)):
+        for d in diffs:
+            col = _METRIC_NAME[d["column"]]
+            moved = ", ".join(f"{s} {d['ours'][s]} vs {d['paper'][s]}" for s in d["systems"])
+            lines += [
+                f"- **{d['world']}, {label} {col}** (rank ours vs paper: {moved})",
+                f"  - ours: {d['ours_order']}",
+                f"  - paper: {d['paper_order']}",
+            ]
+    sig = _significance_differences(ours4, paper4)
+    if sig:
+        lines += ["", "Table 4 verdicts at 99 % that differ from the paper's (‡):", ""] + sig
+    if not (diffs3 or diffs5 or sig):
+        lines.append("No differences: every ranking and every 99 % verdict matches the paper.")
+    return lines + [""]
+
+
+def _hypotheses_section(ours: Mapping[str, Any], paper: Mapping[str, Any]) -> list[str]:
+    def verdict(h: Mapping[str, Any] | None) -> str:
+        if h is None:
+            return "–"
+        return "supported" if h.get("supported") else "not supported"
+
+    names = list(dict.fromkeys([*ours, *paper]))
+    body = [
+        [h, paper.get(h, {}).get("statement", ""), verdict(ours.get(h)), verdict(paper.get(h))]
+        for h in names
+    ]
+    lines = ["## Hypotheses", ""]
+    lines += _table(["", "Hypothesis", "Ours", "Paper"], body, align="llll")
+    for h in names:
+        lines += [f"**{h}.** {ours.get(h, {}).get('evidence', 'Not evaluated.')}", ""]
+        if "paper_says" in paper.get(h, {}):
+            lines += [f"*Paper:* {paper[h]['paper_says']}.", ""]
+    return lines
+
+
+def _robustness_section(
+    comps: Mapping[str, Any], paper4: Mapping[str, Any], alpha: float
+) -> list[str]:
+    lines = [
+        "## Robustness of the comparisons",
+        "",
+        "τ is capped at 4000 s and c at 100, so their distributions are skewed and piled up at the "
+        "caps; Student's t (the paper's test) assumes normal data with equal variances. Welch's t "
+        "drops the equal-variance assumption and the Mann–Whitney U test is rank-based, so it is "
+        "the one to trust for τ. Δ = mean A − mean B (negative: A better); U counts pairs with "
+        f"A > B. The last column says whether all three tests agree at p < {alpha:g}.",
+        "",
+    ]
+    header = [
+        "Comparison",
+        "",
+        "Δ mean",
+        "Student t (p)",
+        "level ours / paper",
+        "Welch t (p)",
+        "Mann–Whitney U (p)",
+        "Cohen's d",
+        "tests agree",
+    ]
+    for world in _worlds(comps):
+        body = []
+        by_pair = comps[world]
+        for pair, by_metric in by_pair.items():
+            for m, r in by_metric.items():
+                ref = paper4.get(world, {}).get(pair, {}).get(m)
+                sig = {r["student_p"] < alpha, r["welch_p"] < alpha, r["mwu_p"] < alpha}
+                body.append(
+                    [
+                        pair,
+                        _METRIC_NAME[m],
+                        _num(r["mean_diff"], 1),
+                        f"{_num(r['student_t'], 2)} ({_p(r['student_p'])})",
+                        f"{r['level']} / {_num(ref)}",
+                        f"{_num(r['welch_t'], 2)} ({_p(r['welch_p'])})",
+                        f"{_num(r['mwu_u'], 1)} ({_p(r['mwu_p'])})",
+                        _num(r["cohens_d"], 2),
+                        "yes" if len(sig) == 1 else "**no**",
+                    ]
+                )
+        lines += [f"**{world}**", ""] + _table(header, body, align="llrrrrrrl")
+    return lines
+
+
+def _idiotypic_section(rates: Mapping[str, Any], paper: Mapping[str, Any]) -> list[str]:
+    target = paper.get("protocol", {}).get("idiotypic_difference_rate_target_percent", 20)
+    lines = [
+        "## Idiotypic difference rate",
+        "",
+        "Mean over trials of the rate at which the idiotypic network's choice differs from the "
+        f"best-matching antibody (as recorded by the engine). The paper tuned its constants for "
+        f"about {target} %. Systems without a rate are left out.",
+        "",
+    ]
+    worlds = _worlds(rates)
+    systems = [
+        s
+        for s in _rows(*(rates[w] for w in worlds))
+        if any(rates[w].get(s) is not None for w in worlds)
+    ]
+    if not systems:
+        return lines[:2] + ["No trial reported an idiotypic difference rate.", ""]
+    body = [[s] + [_num(rates[w].get(s), 3) for w in worlds] for s in systems]
+    return lines + _table(["System", *worlds], body)
+
+
+def _ltl_populations(ltl: Mapping[str, Any]) -> list[dict[str, Any]]:
+    if "populations" in ltl:
+        return list(ltl["populations"])
+    gens = sorted(ltl.get("generations", []), key=lambda g: g["generation"])
+    if not gens:
+        return []
+    first, last = gens[0]["populations"], gens[-1]["populations"]
+    return [
+        {"best_f_initial": a.get("best_f"), "best_f_final": b.get("best_f")}
+        for a, b in zip(first, last, strict=False)
+    ]
+
+
+def _ltl_section(ltl: Mapping[str, Any] | None, figure: str | None) -> list[str]:
+    lines = ["## Long-term learning (GA)", ""]
+    if ltl is None:
+        return lines + ["No LTL summary was given.", ""]
+    pops = _ltl_populations(ltl)
+    if pops:
+        body = [
+            [str(i), _num(p.get("best_f_initial"), 1), _num(p.get("best_f_final"), 1)]
+            for i, p in enumerate(pops)
+        ]
+        lines += _table(["Population", "best f, generation 0", "best f, final"], body)
+    extra = {k: v for k, v in ltl.items() if k not in ("populations", "generations") and _scalar(v)}
+    if extra:
+        lines += _table(["Quantity", "Value"], [[k, _value(v)] for k, v in extra.items()], "lr")
+    if figure:
+        lines += [f"![GA fitness per generation]({figure})", ""]
+    return lines
+
+
+def _scalar(v: Any) -> bool:
+    return v is None or isinstance(v, str | bool | int | float | np.generic)
+
+
+def _value(v: Any) -> str:
+    if isinstance(v, float | np.floating) and not isinstance(v, bool):
+        return f"{float(v):.4g}"
+    return str(v)
+
+
+def _flatten(d: Mapping[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
+    out: list[tuple[str, Any]] = []
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        out += _flatten(v, key + ".") if isinstance(v, Mapping) else [(key, v)]
+    return out
+
+
+def _config_section(config: Mapping[str, Any], timings: Mapping[str, Any] | None) -> list[str]:
+    text = json.dumps(stats.jsonable(config), indent=2, default=str)
+    lines = ["## Run configuration", "", "```json", text, "```", "", "## Timings", ""]
+    if not timings:
+        return lines + ["No timings were given.", ""]
+    return lines + _table(["Stage", "Value"], [[k, _value(v)] for k, v in _flatten(timings)], "lr")
+
+
+# --------------------------------------------------------------------------- figures
+
+
+def _new_figure(width: float, height: float) -> Figure:
+    fig = Figure(figsize=(width, height), layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _box_figure(
+    world: str,
+    results: Mapping[str, Sequence[Mapping[str, Any]]],
+    paper3: Mapping[str, Any],
+    caps: Mapping[str, float],
+    path: Path,
+) -> None:
+    systems = _rows({s: t for s, t in results.items() if len(t) > 0})
+    fig = _new_figure(4.2 * len(stats.METRICS), 4.0)
+    for ax, m in zip(fig.subplots(1, len(stats.METRICS)), stats.METRICS, strict=True):
+        data = [stats.metric_values(results[s], m) for s in systems]
+        x = np.arange(1, len(systems) + 1)
+        ax.boxplot(data, positions=x, widths=0.6, showfliers=True)
+        ax.plot(x, [d.mean() for d in data], "^", color="tab:blue", label="our mean")
+        px = [(i, paper3[s][m]) for i, s in zip(x, systems, strict=True) if s in paper3]
+        if px:
+            ax.plot(*zip(*px, strict=True), "x", color="tab:red", ms=8, label="paper mean")
+        if m in caps:
+            ax.axhline(caps[m], color="0.5", ls="--", lw=0.8, label="cap")
+        ax.set_xticks(x, systems, rotation=45)
+        ax.set_title(f"{world}: {_METRIC_NAME[m]}")
+        ax.grid(axis="y", alpha=0.3)
+    ax.legend(loc="best", fontsize="small")
+    fig.savefig(path, dpi=110)
+
+
+def _trajectory_figure(
+    world: str,
+    trajectories: Mapping[str, np.ndarray],
+    drawer: WorldDrawer | None,
+    path: Path,
+) -> None:
+    systems = _rows(trajectories)
+    cols = min(4, len(systems))
+    rows = math.ceil(len(systems) / cols)
+    fig = _new_figure(3.6 * cols, 3.6 * rows)
+    axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
+    for ax, s in zip(axes, systems, strict=False):
+        if drawer is not None:
+            drawer(ax, world)
+        xy = np.asarray(trajectories[s], dtype=float).reshape(-1, 2)
+        ax.plot(xy[:, 0], xy[:, 1], lw=1.0, color="tab:blue")
+        if len(xy):
+            ax.plot(*xy[0], "o", color="tab:green", ms=6, label="start")
+            ax.plot(*xy[-1], "*", color="tab:red", ms=10, label="end")
+        ax.set_aspect("equal")
+        ax.set_title(s)
+    for ax in axes[len(systems) :]:
+        ax.set_axis_off()
+    axes[0].legend(loc="best", fontsize="small")
+    fig.suptitle(f"{world}: one example trajectory per system")
+    fig.savefig(path, dpi=110)
+
+
+def _ltl_figure(ltl: Mapping[str, Any], path: Path) -> bool:
+    gens = sorted(ltl.get("generations", []), key=lambda g: g["generation"])
+    if not gens:
+        return False
+    fig = _new_figure(7.0, 4.5)
+    ax = fig.subplots()
+    g = [row["generation"] for row in gens]
+    for i in range(len(gens[0]["populations"])):
+        color = f"C{i % 10}"
+        best = [row["populations"][i].get("best_f", np.nan) for row in gens]
+        mean = [row["populations"][i].get("mean_f", np.nan) for row in gens]
+        ax.plot(g, best, "-", color=color, label=f"population {i}")
+        ax.plot(g, mean, "--", color=color, alpha=0.6)
+    ax.set_xlabel("generation")
+    ax.set_ylabel("f (lower is better)")
+    ax.set_title("LTL: best (solid) and mean (dashed) f per population")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize="small")
+    fig.savefig(path, dpi=110)
+    return True
+
+
+# --------------------------------------------------------------------------- entry point
+
+
+def write_report(
+    out_dir: str | Path,
+    tables: Mapping[str, Any],
+    results_by_world: stats.ResultsByWorld,
+    paper: Mapping[str, Any],
+    ltl_summary: Mapping[str, Any] | None,
+    config: Mapping[str, Any],
+    timings: Mapping[str, Any] | None,
+    example_trajectories: Mapping[str, Mapping[str, np.ndarray]] | None = None,
+    world_drawer: WorldDrawer | None = None,
+) -> Path:
+    """Write ``out_dir/report.md`` and its figures in ``out_dir/figures/``.
+
+    Args:
+        out_dir: output folder (created if needed).
+        tables: :func:`jaxais.stats.build_tables` of ``results_by_world``.
+        results_by_world: ``{world: {system: [trial record]}}`` (for the robustness tests, trial
+            counts and box plots).
+        paper: :func:`load_paper_tables`.
+        ltl_summary: ``None`` or ``{"populations": [{"best_f_initial", "best_f_final"}],
+            "generations": [{"generation": g, "populations": [{"best_f", "mean_f"}]}],
+            **scalars}`` (each part optional; per-population initial/final best f are taken from
+            ``generations`` when ``populations`` is absent; other scalar entries such as
+            ``wall_time_s`` are listed).
+        config: the run configuration (shown as JSON).
+        timings: ``None`` or ``{stage: seconds or nested dict}``.
+        example_trajectories: ``{world: {system: xy [T, 2]}}`` drawn to ``figures/traj_{world}``.
+        world_drawer: ``world_drawer(ax, world_name)`` draws the world under each trajectory.
+
+    Returns:
+        The path of ``report.md``.
+    """
+    out = Path(out_dir)
+    fig_dir = out / "figures"
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    caps = paper.get("protocol", {}).get("caps", {"c": 100, "tau": 4000})
+    alpha = 1.0 - _SIG_LEVEL / 100.0
+
+    figures: list[tuple[str, str]] = []
+    for world in _worlds(results_by_world):
+        name = f"figures/box_{world}.png"
+        _box_figure(
+            world, results_by_world[world], paper.get("table3", {}).get(world, {}), caps, out / name
+        )
+        figures.append((f"{world}: c, τ and f per system", name))
+    for world, trajectories in (example_trajectories or {}).items():
+        if trajectories:
+            name = f"figures/traj_{world}.png"
+            _trajectory_figure(world, trajectories, world_drawer, out / name)
+            figures.append((f"{world}: example trajectories", name))
+    ltl_fig = "figures/ltl_fitness.png"
+    if not (ltl_summary and _ltl_figure(ltl_summary, out / ltl_fig)):
+        ltl_fig = None
+
+    n_trials = {w: {s: len(t) for s, t in r.items()} for w, r in results_by_world.items()}
+    p3, p4, p5 = (paper.get(k, {}) for k in ("table3", "table4", "table5"))
+    diffs3 = ordering_differences(tables["table3"], p3, stats.METRICS)
+    diffs5 = ordering_differences(tables["table5"], p5, stats.FAILURE_COLUMNS)
+
+    lines = [
+        "# jaxais results beside Whitbrook, Aickelin & Garibaldi (2008)",
+        "",
+        f"Paper: {paper.get('source', 'see jaxais/data/paper_tables.json')}",
+        "",
+        "Lower is better for c (collisions), τ (seconds) and f = (8c + τ)/2. Each cell reads "
+        "*ours / paper*; – marks a value that does not exist. † marks a system whose rank among "
+        "the systems of that world and column differs from the paper's.",
+        "",
+    ]
+    lines += _hypotheses_section(tables["hypotheses"], paper.get("hypotheses", {}))
+    lines += ["## Tables", ""]
+    lines += _side_by_side(
+        "Table 3: mean c, τ and f", tables["table3"], p3, _T3_COLS, _flagged(diffs3), n_trials
+    )
+    lines += _side_by_side(
+        "Table 5: failure rates (%) by collision cap, by time cap and overall",
+        tables["table5"],
+        p5,
+        _T5_COLS,
+        _flagged(diffs5),
+        None,
+    )
+    lines += [
+        "In the paper the c-cap and τ-cap columns overlap (a run can breach both); ours stop at "
+        "the first cap, so our c + τ = total.",
+        "",
+    ]
+    lines += _table4_section(tables["table4"], p4)
+    lines += _ordering_section(diffs3, diffs5, tables["table4"], p4)
+    lines += _robustness_section(stats.comparisons(results_by_world), p4, alpha)
+    lines += _idiotypic_section(tables.get("idiotypic_difference_rate", {}), paper)
+    lines += _ltl_section(ltl_summary, ltl_fig)
+    lines += ["## Figures", ""]
+    for caption, name in figures:
+        lines += [f"**{caption}**", "", f"![{caption}]({name})", ""]
+    lines += _config_section(config, timings)
+
+    path = out / "report.md"
+    path.write_text("\n".join(lines).rstrip() + "\n", encoding="utf-8")
+    return path

@@ -1,0 +1,155 @@
+"""The LTL seed: five evolved antibody sets with their τ_i, c_i and L_ij, on disk.
+
+A seed directory holds ``seed.json`` (readable: behaviour types by name, attributes, τ, c, L, and
+the command, seed and version that made it) and ``arrays/``, an orbax checkpoint of the same
+numbers at full precision. Loading reads the orbax arrays and checks them against the JSON.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from jaxais.antibodies import Antibodies, from_dicts, to_dicts, within_limits
+from jaxais.envs.struct import pytree_dataclass
+
+SEED_JSON = "seed.json"
+ARRAYS_DIR = "arrays"
+_FIELDS = ("type", "speed", "freq", "angle", "direction", "right_freq", "right_angle")
+
+
+class SeedError(ValueError):
+    """A seed directory is missing, incomplete or corrupt (the message is one line)."""
+
+
+@pytree_dataclass
+class Seed:
+    """Evolved sets for the STL.
+
+    Attributes:
+        antibodies: [x, y] the sets (x = 5 populations' best robots, y = 8 antigens).
+        tau: [x] task time of each set's robot, s. collisions: [x] its collisions.
+        L: [x, y] each antibody's cumulative RL score.
+    """
+
+    antibodies: Antibodies
+    tau: np.ndarray
+    collisions: np.ndarray
+    L: np.ndarray
+
+
+def default_seed_dir() -> Path:
+    """The seed shipped in ``checkpoints/default`` (``scripts/evolve.py`` with its defaults)."""
+    return Path(str(resources.files("jaxais.checkpoints").joinpath("default")))
+
+
+def _arrays(seed: Seed) -> dict[str, np.ndarray]:
+    out = {f"ab_{f}": np.asarray(getattr(seed.antibodies, f)) for f in _FIELDS}
+    out.update(
+        tau=np.asarray(seed.tau, np.float32),
+        collisions=np.asarray(seed.collisions, np.int32),
+        L=np.asarray(seed.L, np.float32),
+    )
+    return out
+
+
+def seed_to_json(seed: Seed, provenance: dict[str, Any]) -> dict[str, Any]:
+    """The readable form of a seed (one entry per set)."""
+    sets = []
+    for i in range(seed.tau.shape[0]):
+        one = Antibodies(**{f: np.asarray(getattr(seed.antibodies, f))[i] for f in _FIELDS})
+        sets.append(
+            {
+                "set": i,
+                "tau": float(seed.tau[i]),
+                "collisions": int(seed.collisions[i]),
+                "L": [float(x) for x in np.asarray(seed.L[i])],
+                "antibodies": to_dicts(one),
+            }
+        )
+    return {"format": "jaxais-seed/1", **provenance, "sets": sets}
+
+
+def save_seed(path: str | Path, seed: Seed, provenance: dict[str, Any]) -> Path:
+    """Write a seed directory atomically (built beside ``path``, then renamed into place).
+
+    Args:
+        path: the seed directory to create or replace.
+        seed: the sets.
+        provenance: command, seed, package version, ... (stored in seed.json).
+    """
+    import orbax.checkpoint as ocp
+
+    path = Path(path).absolute()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
+    try:
+        with ocp.StandardCheckpointer() as ckpt:
+            ckpt.save(tmp / ARRAYS_DIR, _arrays(seed))
+        (tmp / SEED_JSON).write_text(json.dumps(seed_to_json(seed, provenance), indent=1))
+        if path.exists():
+            old = path.with_name(f".{path.name}.old")
+            shutil.rmtree(old, ignore_errors=True)
+            path.rename(old)
+            tmp.rename(path)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            tmp.rename(path)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return path
+
+
+def load_seed(path: str | Path | None = None) -> tuple[Seed, dict[str, Any]]:
+    """Read a seed directory (default: the shipped seed).
+
+    Returns:
+        (seed, the parsed seed.json).
+
+    Raises:
+        SeedError: one line saying what is missing or corrupt and how to make a new seed.
+    """
+    import orbax.checkpoint as ocp
+
+    path = default_seed_dir() if path is None else Path(path)
+    hint = "make one with scripts/evolve.py --out DIR and pass --seeds DIR/seed"
+    if not path.is_dir():
+        raise SeedError(f"{path}: no such seed directory ({hint})")
+    if not (path / SEED_JSON).is_file() or not (path / ARRAYS_DIR).is_dir():
+        raise SeedError(
+            f"{path}: not a seed directory, {SEED_JSON} or {ARRAYS_DIR}/ missing ({hint})"
+        )
+    try:
+        meta = json.loads((path / SEED_JSON).read_text())
+        with ocp.StandardCheckpointer() as ckpt:
+            arrays = ckpt.restore((path / ARRAYS_DIR).absolute())
+        arrays = {k: np.asarray(v) for k, v in arrays.items()}
+        antibodies = Antibodies(**{f: arrays[f"ab_{f}"] for f in _FIELDS})
+        seed = Seed(
+            antibodies=antibodies, tau=arrays["tau"], collisions=arrays["collisions"], L=arrays["L"]
+        )
+    except Exception as err:  # noqa: BLE001 (any failure to read is a corrupt seed)
+        msg = str(err).splitlines()[0] if str(err) else type(err).__name__
+        raise SeedError(f"{path}: corrupt seed ({msg[:200]}); {hint}") from None
+    x = seed.tau.shape[0]
+    if seed.antibodies.type.shape != (x, 8) or seed.L.shape != (x, 8) or x < 1:
+        raise SeedError(f"{path}: seed arrays have inconsistent shapes ({hint})")
+    if not bool(np.all(np.asarray(within_limits(antibodies)))):
+        raise SeedError(f"{path}: seed antibodies break Table 1's limits ({hint})")
+    # The readable file must describe the same sets as the arrays.
+    try:
+        readable = [from_dicts(s["antibodies"]) for s in meta["sets"]]
+    except (KeyError, TypeError, ValueError) as err:
+        raise SeedError(f"{path}: {SEED_JSON} is malformed ({err}); {hint}") from None
+    if len(readable) != x or any(
+        not np.array_equal(np.asarray(r.type), np.asarray(seed.antibodies.type[i]))
+        for i, r in enumerate(readable)
+    ):
+        raise SeedError(f"{path}: {SEED_JSON} disagrees with {ARRAYS_DIR}/ ({hint})")
+    return seed, meta

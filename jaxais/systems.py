@@ -1,0 +1,119 @@
+"""The five STL systems of the paper (SPEC 8) as :class:`~jaxais.controllers.System` data.
+
+| code | sets | idiotypic | replacement |
+|------|------|-----------|-------------|
+| SIE  | LTL seed | yes | no |
+| SRL  | LTL seed | no  | no |
+| UIE  | random set R1 or R2 | yes | yes |
+| URL  | random set R1 or R2 | no  | yes |
+| HDC  | hand-designed, fixed, no learning | - | - |
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxais.antibodies import Antibodies, from_dicts, sample_antibodies
+from jaxais.controllers import System
+from jaxais.network import NetworkParams, relative_fitness, seed_paratopes
+from jaxais.seed import Seed
+
+SYSTEMS = ("SIE", "SRL", "UIE", "URL", "HDC")
+RANDOM_SETS = {"R1": 1, "R2": 2}
+"""The fixed random initial sets R1 and R2: PRNG seeds of their draws [ours]."""
+LABELS = ("SIE", "SRL", "UIE-R1", "URL-R1", "UIE-R2", "URL-R2", "HDC")
+"""System labels as in the paper's tables; the index is each label's stable stream id."""
+UNSEEDED_P = (0.25, 0.75)
+"""Range of the unseeded systems' initial paratopes [paper]."""
+N_SETS = 5
+
+HAND_DESIGNED = [
+    # [ours] The paper's HDC wanders at random to search, reverses while turning to escape
+    # collisions and steers away from detected obstacles; we add marker tracking when the target
+    # is seen, without which it could not finish the task.
+    {"antigen": "target unseen", "type": "wander both", "S": 350, "F": 15, "A": 60, "Rf": 18,
+     "Ra": 60},
+    {"antigen": "target seen", "type": "track markers", "S": 350, "A": 30},
+    {"antigen": "obstacle right", "type": "forward turn", "S": 250, "A": 90, "D": "left"},
+    {"antigen": "obstacle rear", "type": "forward turn", "S": 300, "A": 20, "D": "left"},
+    {"antigen": "obstacle left", "type": "forward turn", "S": 250, "A": 90, "D": "right"},
+    # Reversing with the right wheel slowed swings the front left, away from a right-hand hit.
+    {"antigen": "collision right", "type": "reverse turn", "S": 300, "A": 60, "D": "right"},
+    {"antigen": "collision rear", "type": "forward turn", "S": 300, "A": 40, "D": "left"},
+    {"antigen": "collision left", "type": "reverse turn", "S": 300, "A": 60, "D": "left"},
+]  # fmt: skip
+
+
+def label(system: str, random_set: str | None = None) -> str:
+    """Table label of a system: ``UIE`` with R1 is ``UIE-R1``; seeded systems and HDC as is."""
+    return f"{system}-{random_set}" if system in ("UIE", "URL") else system
+
+
+def parse_label(name: str) -> tuple[str, str | None]:
+    """Inverse of :func:`label`: ``"URL-R2"`` -> ``("URL", "R2")``."""
+    system, _, random_set = name.partition("-")
+    if system not in SYSTEMS or (system in ("UIE", "URL")) != bool(random_set):
+        raise ValueError(f"unknown system {name!r} (one of {', '.join(LABELS)})")
+    if random_set and random_set not in RANDOM_SETS:
+        raise ValueError(f"unknown random set {random_set!r} (one of {', '.join(RANDOM_SETS)})")
+    return system, random_set or None
+
+
+def random_sets(name: str, x: int = N_SETS) -> tuple[Antibodies, np.ndarray]:
+    """A fixed random initial repertoire: [x, 8] antibodies and their initial P ~ U[0.25, 0.75]."""
+    if name not in RANDOM_SETS:
+        raise ValueError(f"unknown random set {name!r} (one of {', '.join(RANDOM_SETS)})")
+    k_ab, k_p = jax.random.split(jax.random.key(RANDOM_SETS[name]))
+    antibodies = sample_antibodies(k_ab, (x, 8))
+    P = jax.random.uniform(k_p, (x * 8,), minval=UNSEEDED_P[0], maxval=UNSEEDED_P[1])
+    return antibodies, np.asarray(P.reshape(x, 8))
+
+
+def hand_designed_sets(x: int = N_SETS) -> tuple[Antibodies, np.ndarray]:
+    """HDC as a network: set 0 holds the hand-designed behaviours and alone has P = 1."""
+    one = from_dicts(HAND_DESIGNED)
+    antibodies = jax.tree.map(lambda a: jnp.stack([a] * x), one)
+    P = np.zeros((x, 8), np.float32)
+    P[0] = 1.0
+    return antibodies, P
+
+
+def make_system(
+    name: str,
+    seed: Seed | None = None,
+    random_set: str | None = None,
+    network: NetworkParams | None = None,
+) -> System:
+    """Build one system.
+
+    Args:
+        name: SIE, SRL, UIE, URL or HDC (or a label such as ``UIE-R2``).
+        seed: the LTL seed (needed by SIE and SRL).
+        random_set: R1 or R2 (needed by UIE and URL).
+        network: network constants (default: the paper's).
+    """
+    if "-" in name:
+        name, random_set = parse_label(name)
+    network = NetworkParams() if network is None else network
+    if name in ("SIE", "SRL"):
+        if seed is None:
+            raise ValueError(f"{name} needs an LTL seed")
+        mu = relative_fitness(seed.tau, seed.collisions, network.rho)
+        antibodies, P = seed.antibodies, seed_paratopes(seed.L, mu, network.phi)
+    elif name in ("UIE", "URL"):
+        antibodies, P = random_sets(random_set or "")
+    elif name == "HDC":
+        antibodies, P = hand_designed_sets()
+    else:
+        raise ValueError(f"unknown system {name!r} (one of {', '.join(SYSTEMS)})")
+    antibodies = jax.tree.map(jnp.asarray, antibodies)
+    return System(
+        antibodies=antibodies,
+        paratopes=jnp.asarray(P, jnp.float32),
+        learning=jnp.asarray(name != "HDC"),
+        idiotypic=jnp.asarray(name in ("SIE", "UIE")),
+        replacement=jnp.asarray(name in ("UIE", "URL")),
+        network=network,
+    )

@@ -1,0 +1,145 @@
+"""Statistical trials (SPEC 9): n runs of each system in a world as one compiled, vmapped batch.
+
+Randomness is split so results do not depend on what else shares a batch: trial i's world
+placement comes from (seed, i) alone, so every system meets the same start configurations (common
+random numbers), and its dynamics from (seed, system label, i).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxais import envs
+from jaxais.controllers import STL, System
+from jaxais.episode import FAILED_BY_NAME, EpisodeConfig, outcome, rollout
+from jaxais.systems import LABELS
+
+STL_CONFIG = EpisodeConfig(tau_cap=4000.0, collision_cap=100)
+"""The paper's STL caps: 4000 s and 100 collisions."""
+
+_COMPILED: dict = {}
+
+
+@dataclass
+class TrialSet:
+    """The trials of one system in one world.
+
+    Attributes:
+        records: one dict per trial (tau, collisions, fitness, failed, failed_by,
+            idiotypic_difference_rate, iterations, replaced).
+        trajectories: [n] arrays [T_i, 3] of poses sampled every ``chunk`` iterations, or None.
+    """
+
+    records: list[dict[str, Any]]
+    trajectories: list[np.ndarray] | None
+
+
+def trial_keys(seed: int, system_label: str, n: int) -> tuple[jax.Array, jax.Array]:
+    """(reset keys, run keys), each [n], of a system's trials."""
+    base = jax.random.key(seed)
+    trials = jnp.arange(n)
+    reset = jax.vmap(lambda i: jax.random.fold_in(jax.random.fold_in(base, 0), i))(trials)
+    stream = jax.random.fold_in(base, 1 + LABELS.index(system_label))
+    run = jax.vmap(lambda i: jax.random.fold_in(stream, i))(trials)
+    return reset, run
+
+
+def run_trials(
+    world: envs.World,
+    systems: Mapping[str, System],
+    n_trials: int | Mapping[str, int],
+    seed: int,
+    config: EpisodeConfig = STL_CONFIG,
+    sim_params: envs.SimParams | None = None,
+    progress: Any = None,
+) -> dict[str, TrialSet]:
+    """Run every system's trials in one batch.
+
+    Args:
+        world: the world.
+        systems: label (from :data:`jaxais.systems.LABELS`) -> System.
+        n_trials: trials per system (or per label).
+        seed: the run's seed.
+        config: caps and recording (``config.record`` keeps trajectories).
+        progress: optional tqdm-like object with ``update(n)``, advanced in simulated iterations.
+
+    Returns:
+        label -> :class:`TrialSet`.
+    """
+    sim_params = envs.default_params() if sim_params is None else sim_params
+    counts = {k: n_trials if isinstance(n_trials, int) else n_trials[k] for k in systems}
+    for name, n in counts.items():
+        if name not in LABELS:
+            raise ValueError(f"unknown system label {name!r} (one of {', '.join(LABELS)})")
+        if n < 1:
+            raise ValueError(f"trials must be >= 1, got {n} for {name}")
+    keys = [trial_keys(seed, name, counts[name]) for name in systems]
+    reset_keys = jnp.concatenate([k[0] for k in keys])
+    run_keys = jnp.concatenate([k[1] for k in keys])
+    params = jax.tree.map(
+        lambda *xs: jnp.concatenate(xs),
+        *[
+            jax.tree.map(lambda a, n=counts[name]: jnp.broadcast_to(a, (n, *jnp.shape(a))), s)
+            for name, s in systems.items()
+        ],
+    )
+    update = None if progress is None else progress.update
+    batch = rollout(reset_keys, run_keys, world, sim_params, STL, params, config, update, _COMPILED)
+    res = outcome(batch.runs, config, float(sim_params.dt))
+    ctrl = batch.runs.ctrl
+    differences = np.asarray(ctrl.differences)
+    selections = np.maximum(np.asarray(ctrl.selections), 1)
+    idiotypic = np.asarray(params.idiotypic)
+    replaced = np.asarray(ctrl.replaced)
+    chunks = np.asarray(batch.runs.t) // config.chunk
+    poses = np.asarray(batch.poses)
+
+    out, start = {}, 0
+    for name in systems:
+        records, trajectories = [], []
+        for i in range(start, start + counts[name]):
+            status = int(res["status"][i])
+            records.append(
+                {
+                    "tau": float(res["tau"][i]),
+                    "collisions": int(res["collisions"][i]),
+                    "fitness": float(res["fitness"][i]),
+                    "failed": FAILED_BY_NAME[status] is not None,
+                    "failed_by": FAILED_BY_NAME[status],
+                    "idiotypic_difference_rate": (
+                        float(differences[i] / selections[i]) if idiotypic[i] else None
+                    ),
+                    "iterations": int(res["iterations"][i]),
+                    "replaced": int(replaced[i]),
+                }
+            )
+            if config.record:
+                trajectories.append(poses[i, : chunks[i] + 2])
+        out[name] = TrialSet(records, trajectories if config.record else None)
+        start += counts[name]
+    return out
+
+
+def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
+    """Means and failure rates of a list of trial records."""
+    arr = lambda k: np.asarray([r[k] for r in records], float)
+    rates = [r["idiotypic_difference_rate"] for r in records]
+    n = len(records)
+    return {
+        "n": n,
+        "tau": float(arr("tau").mean()),
+        "collisions": float(arr("collisions").mean()),
+        "fitness": float(arr("fitness").mean()),
+        "failure_rate": sum(r["failed"] for r in records) / n,
+        "failed_by_collisions": sum(r["failed_by"] == "collisions" for r in records) / n,
+        "failed_by_time": sum(r["failed_by"] == "time" for r in records) / n,
+        "idiotypic_difference_rate": (
+            None if any(x is None for x in rates) else float(np.mean(rates))
+        ),
+    }

@@ -1,0 +1,343 @@
+"""Tests of jaxais.stats: hand-worked statistics, table assembly and the H1-H4 verdicts."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import stats as sps
+
+from jaxais import stats
+
+A = [1.0, 2.0, 3.0]
+B = [4.0, 5.0, 6.0, 7.0]
+
+
+# --------------------------------------------------------------------------- references (no scipy)
+
+
+def t_density(x: np.ndarray, df: float) -> np.ndarray:
+    """Student's t density, written out with math.lgamma."""
+    log_c = math.lgamma((df + 1) / 2) - math.lgamma(df / 2) - 0.5 * math.log(df * math.pi)
+    return np.exp(log_c) * (1 + x**2 / df) ** (-(df + 1) / 2)
+
+
+def two_tailed_p_by_integration(t: float, df: float) -> float:
+    """p = 1 - 2 * integral_0^|t| density (trapezoid rule on 200 001 points)."""
+    x = np.linspace(0.0, abs(t), 200_001)
+    return 1.0 - 2.0 * float(np.trapezoid(t_density(x, df), x))
+
+
+def two_tailed_p_df5(t: float) -> float:
+    """Closed form for 5 degrees of freedom (Abramowitz & Stegun 26.7.3):
+    P(|T| < t) = (2/pi) (theta + sin(theta) cos(theta) (1 + (2/3) cos^2(theta))),
+    theta = atan(t / sqrt(5))."""
+    th = math.atan(abs(t) / math.sqrt(5))
+    a = 2 / math.pi * (th + math.sin(th) * math.cos(th) * (1 + 2 / 3 * math.cos(th) ** 2))
+    return 1.0 - a
+
+
+def trial(tau: float, c: int = 0, failed_by: str | None = None, rate: float | None = None):
+    return {
+        "tau": float(tau),
+        "collisions": int(c),
+        "fitness": (8 * c + tau) / 2,
+        "failed": failed_by is not None,
+        "failed_by": failed_by,
+        "idiotypic_difference_rate": rate,
+        "iterations": int(tau / 0.032),
+    }
+
+
+def trials_with_f(f_mean: float, n: int = 8, spread: float = 4.0) -> list[dict]:
+    """n trials with c = 0 whose f values are f_mean + spread * (-1.75, ..., 1.75)."""
+    offsets = np.linspace(-1.75, 1.75, n) * spread
+    return [trial(2 * (f_mean + o)) for o in offsets]
+
+
+# --------------------------------------------------------------------------- systems and pairs
+
+
+def test_systems_and_worlds():
+    assert stats.SYSTEMS == ("SIE", "SRL", "UIE-R1", "URL-R1", "UIE-R2", "URL-R2", "HDC")
+    assert stats.WORLDS == ("world1", "world2", "real")
+    assert stats.systems_for_world("real") == ("SIE", "SRL", "UIE-R1", "URL-R1", "HDC")
+    assert stats.systems_for_world("world2") == stats.SYSTEMS
+
+
+def test_comparison_pairs_follow_table4_and_filter_per_world():
+    assert len(stats.COMPARISONS) == 12
+    assert stats.COMPARISONS[0] == ("SIE", "SRL")
+    assert stats.COMPARISONS[-1] == ("UIE-R2", "URL-R2")
+    assert stats.comparison_pairs("world1") == stats.COMPARISONS
+    real = stats.comparison_pairs("real")
+    assert real == (
+        ("SIE", "SRL"),
+        ("SIE", "HDC"),
+        ("SIE", "UIE-R1"),
+        ("SIE", "URL-R1"),
+        ("SRL", "UIE-R1"),
+        ("SRL", "URL-R1"),
+        ("UIE-R1", "URL-R1"),
+    )
+    assert stats.comparison_pairs("world1", ["SIE", "HDC", "SRL"]) == (
+        ("SIE", "SRL"),
+        ("SIE", "HDC"),
+    )
+
+
+# --------------------------------------------------------------------------- hand-worked tests
+
+
+def test_student_t_by_hand():
+    # mean_a = 2, mean_b = 5.5; s_a^2 = 1, s_b^2 = (2.25 + .25 + .25 + 2.25)/3 = 5/3.
+    # pooled s^2 = (2*1 + 3*5/3) / 5 = 7/5; se^2 = 7/5 * (1/3 + 1/4) = 49/60.
+    # t = -3.5 / sqrt(49/60) = -sqrt(15) on 5 df.
+    t, p = stats.student_t(A, B)
+    assert t == pytest.approx(-math.sqrt(15), rel=1e-12)
+    assert p == pytest.approx(two_tailed_p_df5(math.sqrt(15)), rel=1e-9)
+    assert p == pytest.approx(two_tailed_p_by_integration(math.sqrt(15), 5), abs=1e-8)
+    # Table value: t_{0.995, 5} = 4.032 and t_{0.99, 5} = 3.365, so 0.01 < p < 0.02.
+    assert 0.01 < p < 0.02
+    assert stats.significance_level(p) == 99  # 100 (1 - 0.01172) = 98.8
+
+
+def test_welch_t_by_hand():
+    # se^2 = 1/3 + (5/3)/4 = 3/4, t = -3.5 / sqrt(3/4) = -7/sqrt(3).
+    # df = (3/4)^2 / ((1/3)^2/2 + (5/12)^2/3) = (9/16) / (49/432) = 243/49.
+    t, p = stats.welch_t(A, B)
+    assert t == pytest.approx(-7 / math.sqrt(3), rel=1e-12)
+    assert p == pytest.approx(two_tailed_p_by_integration(7 / math.sqrt(3), 243 / 49), abs=1e-8)
+
+
+def test_cohens_d_by_hand():
+    # d = (2 - 5.5) / sqrt(7/5)
+    assert stats.cohens_d(A, B) == pytest.approx(-3.5 / math.sqrt(1.4), rel=1e-12)
+    assert stats.cohens_d(B, A) == pytest.approx(3.5 / math.sqrt(1.4), rel=1e-12)
+
+
+def test_mann_whitney_u_by_hand():
+    # No a_i exceeds any b_j: U = 0. Exact two-sided p = 2 * P(U <= 0) = 2 / C(7, 3) = 2/35.
+    u, p = stats.mann_whitney_u(A, B)
+    assert u == 0.0
+    assert p == pytest.approx(2 / 35, rel=1e-12)
+    # With ties: a = [1, 3, 5], b = [2, 3, 4]. Pairs a > b: 1 -> 0; 3 -> 1 (2) + 0.5 (tie 3);
+    # 5 -> 3. U = 4.5 = n_a n_b / 2, so the test sees no shift.
+    u, p = stats.mann_whitney_u([1, 3, 5], [2, 3, 4])
+    assert u == 4.5
+    assert p == pytest.approx(1.0)
+    u_ab, _ = stats.mann_whitney_u(B, A)
+    assert u_ab == 12.0  # U_a + U_b = n_a n_b
+
+
+def test_significance_level_rounds_half_up():
+    assert stats.significance_level(0.0) == 100
+    assert stats.significance_level(0.005) == 100  # 99.5
+    assert stats.significance_level(0.0149) == 99
+    assert stats.significance_level(0.51) == 49
+    assert stats.significance_level(1.0) == 0
+
+
+def test_degenerate_cases():
+    # Zero variance, equal means: no difference.
+    assert stats.student_t([2, 2, 2], [2, 2]) == (0.0, 1.0)
+    assert stats.welch_t([2, 2, 2], [2, 2]) == (0.0, 1.0)
+    assert stats.cohens_d([2, 2, 2], [2, 2]) == 0.0
+    assert stats.mann_whitney_u([2, 2, 2], [2, 2]) == (3.0, 1.0)
+    # Zero variance, different means: certain difference, infinite statistic with A's sign.
+    assert stats.student_t([1, 1, 1], [3, 3]) == (-math.inf, 0.0)
+    assert stats.welch_t([3, 3], [1, 1, 1]) == (math.inf, 0.0)
+    assert stats.cohens_d([1, 1, 1], [3, 3]) == -math.inf
+    # Too few observations to estimate a variance: no evidence.
+    assert stats.student_t([1], [2]) == (0.0, 1.0)
+    assert stats.welch_t([1], [2, 3, 4]) == (0.0, 1.0)
+    assert stats.cohens_d([1], [2]) == 0.0
+    # One group of one with the other varying is fine for Student's (pooled) test.
+    t, p = stats.student_t([1], [2, 3, 4])
+    assert math.isfinite(t) and 0 < p < 1
+    # One group constant, the other not: Welch works (df = n_b - 1).
+    t, p = stats.welch_t([0, 0, 0], [1, 2, 3])
+    assert t == pytest.approx(-2 / math.sqrt(1 / 3))
+    with pytest.raises(ValueError):
+        stats.student_t([], [1, 2])
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.lists(st.floats(-1e3, 1e3), min_size=2, max_size=12),
+    st.lists(st.floats(-1e3, 1e3), min_size=2, max_size=12),
+)
+def test_t_tests_match_scipy_reference(a, b):
+    if np.var(a) < 1e-6 or np.var(b) < 1e-6:
+        return  # scipy returns NaN here; our documented degenerate rules differ on purpose
+    t, p = stats.student_t(a, b)
+    ref = sps.ttest_ind(a, b)
+    np.testing.assert_allclose([t, p], [ref.statistic, ref.pvalue], rtol=1e-7, atol=1e-12)
+    t, p = stats.welch_t(a, b)
+    ref = sps.ttest_ind(a, b, equal_var=False)
+    np.testing.assert_allclose([t, p], [ref.statistic, ref.pvalue], rtol=1e-7, atol=1e-12)
+
+
+# --------------------------------------------------------------------------- tables
+
+
+def small_results() -> dict:
+    return {
+        "world1": {
+            "SIE": [trial(100, 1), trial(200, 3)],  # c 2, tau 150, f (8*2 + 150)/2 = 83
+            "HDC": [
+                trial(4000, 2, "time"),
+                trial(300, 100, "collisions"),
+                trial(500, 0),
+                trial(600, 2),
+            ],
+            "UIE-R2": [trial(50, 0, rate=0.1), trial(70, 0, rate=0.3), trial(60, 0)],
+        },
+        "real": {
+            "SIE": [trial(10, 0, rate=0.2), trial(20, 0, rate=0.4)],
+            "UIE-R2": [trial(10, 0), trial(20, 0)],  # not a real-world system: no comparison
+        },
+    }
+
+
+def test_table3_means():
+    t3 = stats.table3(small_results())
+    assert t3["world1"]["SIE"] == {"c": 2.0, "tau": 150.0, "f": 83.0}
+    assert t3["world1"]["HDC"]["tau"] == pytest.approx((4000 + 300 + 500 + 600) / 4)
+    assert t3["world1"]["HDC"]["c"] == pytest.approx(26.0)
+    # Paper's system order, whatever the input order.
+    assert list(t3["world1"]) == ["SIE", "UIE-R2", "HDC"]
+
+
+def test_table5_failure_rates():
+    t5 = stats.table5(small_results())
+    assert t5["world1"]["HDC"] == {"c": 25.0, "tau": 25.0, "total": 50.0}
+    assert t5["world1"]["SIE"] == {"c": 0.0, "tau": 0.0, "total": 0.0}
+
+
+def test_table4_and_comparisons_filtered_per_world():
+    res = small_results()
+    comps = stats.comparisons(res)
+    assert list(comps["world1"]) == ["SIE vs HDC", "SIE vs UIE-R2"]
+    assert comps["real"] == {}  # R2 is not a real-world system
+    row = comps["world1"]["SIE vs HDC"]["tau"]
+    assert row["mean_diff"] == pytest.approx(150 - 1350)
+    assert set(row) == {
+        "n_a",
+        "n_b",
+        "mean_a",
+        "mean_b",
+        "mean_diff",
+        "student_t",
+        "student_p",
+        "level",
+        "welch_t",
+        "welch_p",
+        "mwu_u",
+        "mwu_p",
+        "cohens_d",
+    }
+    t, p = stats.student_t([100, 200], [4000, 300, 500, 600])
+    assert row["student_t"] == t and row["level"] == stats.significance_level(p)
+    t4 = stats.table4(res)
+    assert t4["world1"]["SIE vs HDC"]["tau"] == row["level"]
+    assert set(t4["world1"]["SIE vs HDC"]) == {"c", "tau", "f"}
+
+
+def test_idiotypic_difference_rates():
+    rates = stats.idiotypic_difference_rates(small_results())
+    assert rates["world1"]["UIE-R2"] == pytest.approx(0.2)  # None ignored
+    assert rates["world1"]["HDC"] is None
+    assert rates["real"]["SIE"] == pytest.approx(0.3)
+
+
+def test_build_tables_is_plain_json():
+    res = small_results()
+    res["world2"] = {"SIE": [trial(10), trial(10)], "SRL": [trial(30), trial(30)]}  # t = -inf
+    tables = stats.build_tables(res)
+    assert set(tables) == {"table3", "table4", "table5", "idiotypic_difference_rate", "hypotheses"}
+    assert tables["table4"]["world2"]["SIE vs SRL"]["tau"] == 100
+    json.loads(json.dumps(tables, allow_nan=False))
+
+
+# --------------------------------------------------------------------------- hypotheses
+
+
+def paper_like(overrides: dict | None = None, worlds=stats.WORLDS) -> dict:
+    """All systems in all worlds, SIE best by far, with f means overridable per world/system."""
+    base = {"SIE": 100, "SRL": 200, "HDC": 300, "UIE-R1": 400, "UIE-R2": 420}
+    base |= {"URL-R1": 500, "URL-R2": 520}
+    out = {}
+    for w in worlds:
+        means = base | (overrides or {}).get(w, {})
+        out[w] = {s: trials_with_f(means[s]) for s in stats.systems_for_world(w)}
+    return out
+
+
+def test_all_hypotheses_supported_on_clear_results():
+    h = stats.hypotheses(paper_like())
+    assert {k: v["supported"] for k, v in h.items()} == dict.fromkeys(
+        ("H1", "H2", "H3", "H4"), True
+    )
+    assert h["H1"]["evidence"].startswith("Supported.")
+    assert "world1: SIE f 100" in h["H1"]["evidence"]
+    assert "significant in 3 of 3 worlds" in h["H2"]["evidence"]
+
+
+def test_h1_fails_when_srl_is_worse_than_url():
+    h = stats.hypotheses(paper_like({"world2": {"SRL": 510}}))
+    assert not h["H1"]["supported"]
+    assert "world2: SRL f 510 >= URL-R1 500" in h["H1"]["evidence"]
+    # SRL vs UIE (different selection) is not part of the rule.
+    assert stats.hypotheses(paper_like({"real": {"SRL": 450}}))["H1"]["supported"]
+
+
+def test_h1_fails_when_sie_not_significantly_better():
+    res = paper_like()
+    res["world1"]["UIE-R1"] = trials_with_f(103)  # above SIE's 100, but not significantly
+    h = stats.hypotheses(res)
+    assert not h["H1"]["supported"]
+    assert "SIE vs UIE-R1 not significantly lower" in h["H1"]["evidence"]
+
+
+def test_h2_needs_a_strict_majority_of_significant_worlds():
+    # Like the paper: significant in world1 and real, lower but not significant in world2.
+    res = paper_like()
+    res["world2"]["SRL"] = trials_with_f(103)
+    h = stats.hypotheses(res)
+    assert h["H2"]["supported"]
+    assert "significant in 2 of 3 worlds" in h["H2"]["evidence"]
+    res["real"]["SRL"] = trials_with_f(103)
+    h = stats.hypotheses(res)
+    assert not h["H2"]["supported"]
+    assert "significant in only 1 of 3 worlds" in h["H2"]["evidence"]
+
+
+def test_h2_and_h3_fail_when_sie_is_worse_somewhere():
+    h = stats.hypotheses(paper_like({"real": {"SRL": 90, "HDC": 50}}))
+    assert not h["H2"]["supported"] and not h["H3"]["supported"]
+    assert "real: SIE f 100 >= SRL 90" in h["H2"]["evidence"]
+    assert "real: SIE f 100 >= HDC 50" in h["H3"]["evidence"]
+
+
+def test_h4_needs_zero_sie_failures():
+    res = paper_like()
+    assert stats.hypotheses(res)["H4"]["supported"]
+    res["real"]["SIE"][0] = trial(4000, 0, "time")
+    h = stats.hypotheses(res)
+    assert not h["H4"]["supported"]
+    assert "real: 12 % failures" in h["H4"]["evidence"]
+
+
+def test_missing_worlds_are_skipped_and_untestable_is_not_supported():
+    h = stats.hypotheses(paper_like(worlds=("world2",)))
+    assert all(v["supported"] for v in h.values())
+    assert "world1" not in h["H2"]["evidence"]
+    assert "significant in 1 of 1 worlds" in h["H2"]["evidence"]
+    h = stats.hypotheses({"world1": {"HDC": trials_with_f(100)}})
+    assert not any(v["supported"] for v in h.values())
+    assert all(v["evidence"].startswith("Not testable") for v in h.values())

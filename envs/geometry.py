@@ -206,15 +206,17 @@ def resolve_disc(
     p_new: jnp.ndarray,
     radius: jnp.ndarray,
     scene: Scene,
-    iters: int = 2,
+    iters: int = 1,
     skin: float = 2e-5,
 ) -> jnp.ndarray:
     """Move a disc from ``p_old`` to ``p_new`` without overlapping anything.
 
     Each pass pushes the disc out of every surface it penetrates along that surface's normal,
     to ``skin`` metres of clearance, so a disc driven into a wall stays in contact and slides along
-    it. If overlap remains after ``iters`` passes (a tight pocket) the disc keeps ``p_old``, which
-    was clear; so no overlap ever arises from a clear start.
+    it; in a corner the pushes from both walls add up. If overlap remains after ``iters`` passes
+    (a tight pocket) the disc keeps ``p_old``, which was clear; so no overlap ever arises from a
+    clear start. One pass suffices for the worlds' walls, boxes and pillars (a step moves at most
+    4.5 mm); more passes cost compile and run time in every step.
 
     Returns:
         [2] the resolved centre.

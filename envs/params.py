@@ -45,7 +45,6 @@ class SimParams:
         camera_range: m; camera_height: lens height above the floor, m.
         ir_dist: [10] table distances (m); ir_value: [10] table readings.
         ir_bearings: [8] sensor bearings, rad.
-        collision_iters: fixed number of push-out passes per step (a Python int is fine).
     """
 
     # Static: the control period fixes loop schedules (iterations to a time cap).

@@ -85,7 +85,12 @@ class World:
 
 @dataclass(frozen=True)
 class Capacity:
-    """Minimum padded sizes; worlds loaded with one Capacity share compiled functions."""
+    """Minimum padded sizes.
+
+    Worlds loaded with one Capacity have arrays of equal shapes. They share compiled functions
+    when their static fields match too: the name (``world.replace(name=...)``), the goal shape
+    and the noise levels.
+    """
 
     segments: int = 1
     boxes: int = 1

@@ -47,6 +47,7 @@ __all__ = [
     "USES",
     "WANDER_BOTH",
     "WANDER_SINGLE",
+    "antibodies_from_uniform",
     "antibody_distance",
     "attribute_matrix",
     "canonical",
@@ -216,6 +217,12 @@ def sample_attributes(key: jax.Array, type_: jnp.ndarray) -> Antibodies:
     return from_matrix(type_, _attributes_from_uniform(type_, u))
 
 
+def antibodies_from_uniform(u: jnp.ndarray) -> Antibodies:
+    """Random antibodies from i.i.d. uniforms ``u`` [..., 7] (type, then the six attributes)."""
+    type_ = _type_from_uniform(u[..., 0])
+    return from_matrix(type_, _attributes_from_uniform(type_, u[..., 1:]))
+
+
 def sample_antibodies(key: jax.Array, shape: int | tuple[int, ...] = (N_ANTIGENS,)) -> Antibodies:
     """Random antibodies: type uniform over 0-5, then attributes as :func:`sample_attributes`.
 
@@ -224,9 +231,7 @@ def sample_antibodies(key: jax.Array, shape: int | tuple[int, ...] = (N_ANTIGENS
         shape: batch shape, e.g. ``(8,)`` for a set or ``(5, 8)`` for the STL's five sets.
     """
     shape = (shape,) if isinstance(shape, int) else tuple(shape)
-    u = _uniform(key, shape + (1 + N_ATTRIBUTES,))
-    type_ = _type_from_uniform(u[..., 0])
-    return from_matrix(type_, _attributes_from_uniform(type_, u[..., 1:]))
+    return antibodies_from_uniform(_uniform(key, shape + (1 + N_ATTRIBUTES,)))
 
 
 def mutate(key: jax.Array, ab: Antibodies, rate: float | jnp.ndarray = 0.05) -> Antibodies:

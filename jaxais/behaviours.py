@@ -39,6 +39,7 @@ __all__ = [
     "MAX_WHEEL_SPEED",
     "STATIC_TURN_REDUCTION",
     "wheel_speeds",
+    "wheel_speeds_from_uniform",
 ]
 
 
@@ -71,7 +72,16 @@ def wheel_speeds(
     Returns:
         [2] float32 (left, right) speeds, clipped to +-``MAX_WHEEL_SPEED``.
     """
-    u = jax.random.uniform(key, (2,))
+    return wheel_speeds_from_uniform(jax.random.uniform(key, (2,)), ab, blue_pixels, blue_centroid)
+
+
+def wheel_speeds_from_uniform(
+    u: jnp.ndarray,
+    ab: Antibodies,
+    blue_pixels: jnp.ndarray,
+    blue_centroid: jnp.ndarray,
+) -> jnp.ndarray:
+    """:func:`wheel_speeds` given its random draw ``u`` [2] of uniforms in [0, 1)."""
     t = ab.type
     speed = jnp.asarray(ab.speed, jnp.float32)
     angle = jnp.asarray(ab.angle, jnp.float32)

@@ -13,11 +13,16 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from jaxais.antibodies import Antibodies, sample_antibodies, take
-from jaxais.behaviours import wheel_speeds
+from jaxais.antibodies import Antibodies, antibodies_from_uniform, take
+from jaxais.behaviours import wheel_speeds_from_uniform
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.episode import Controller, Percept
-from jaxais.network import NetworkParams, idiotopes, idiotypic_select, rescale_paratopes
+from jaxais.network import (
+    NetworkParams,
+    idiotopes,
+    idiotypic_select_from_uniform,
+    rescale_paratopes,
+)
 from jaxais.reinforcement import (
     PENALTY_NON_IDIOTYPIC,
     PenaltyCounters,
@@ -68,8 +73,8 @@ def ltl_controller() -> Controller:
         n = antibodies.type.shape[0]
         return LTLState(antibodies=antibodies, L=jnp.zeros(n), counters=init_counters())
 
-    def learn(key, state: LTLState, pc: Percept, antibodies):
-        del key, antibodies
+    def learn(u, state: LTLState, pc: Percept, antibodies):
+        del u, antibodies
         scored = _scored(state.L.shape, (pc.m_prev,)) & (pc.t > 0)
         counters, fire = update_penalty(state.counters, pc.m)
         r = rl_score(pc.m_prev, pc.m, pc.v_prev, pc.v, pc.centroid)
@@ -77,12 +82,12 @@ def ltl_controller() -> Controller:
         L = jnp.where(scored, jnp.clip(state.L + r, 0.0, L_MAX), state.L)
         return state.replace(L=L, counters=counters)
 
-    def act(key, state: LTLState, pc: Percept, antibodies):
+    def act(u, state: LTLState, pc: Percept, antibodies):
         del antibodies
         ab = take(state.antibodies, pc.m)
-        return state, wheel_speeds(key, ab, pc.blue_pixels, pc.centroid)
+        return state, wheel_speeds_from_uniform(u, ab, pc.blue_pixels, pc.centroid)
 
-    return Controller(init=init, learn=learn, act=act)
+    return Controller(init=init, learn=learn, act=act, n_uniform=lambda params: 2)
 
 
 # ---------------------------------------------------------------------------------- STL
@@ -120,6 +125,7 @@ class STLState:
         acting: set index of the antibody that acted last (scored at the next iteration).
         differences: iterations with alpha != beta. selections: iterations selected.
         replaced: antibodies replaced so far.
+        key: PRNG key of the periodic idiotope draws.
     """
 
     antibodies: Antibodies
@@ -132,6 +138,7 @@ class STLState:
     differences: jnp.ndarray
     selections: jnp.ndarray
     replaced: jnp.ndarray
+    key: jax.Array
 
 
 def stl_controller() -> Controller:
@@ -145,21 +152,37 @@ def stl_controller() -> Controller:
 
     def init(key, system: System):
         P = jnp.asarray(system.paratopes, jnp.float32)
+        k_idiotope, key = jax.random.split(key)
         return STLState(
             antibodies=system.antibodies,
             P=P,
             sigma0=jnp.mean(P, axis=0),
-            I=idiotopes(key, P),
+            I=idiotopes(k_idiotope, P),
             N=jnp.full(P.shape, system.network.initial_clones, jnp.float32),
             counters=init_counters(),
             acting=jnp.int32(0),
             differences=jnp.int32(0),
             selections=jnp.int32(0),
             replaced=jnp.int32(0),
+            key=key,
         )
 
-    def learn(key, s: STLState, pc: Percept, system: System):
-        k_idiotope, k_new, k_p = jax.random.split(key, 3)
+    def draws(system: System):
+        """Layout of one iteration's uniforms: (name, size) in order."""
+        x = system.paratopes.shape[-2]
+        return (("new", 7), ("new_p", 1), ("select", 2 * x), ("behave", 2))
+
+    def n_uniform(system: System) -> int:
+        return sum(n for _, n in draws(system))
+
+    def split(u, system: System) -> dict:
+        out, start = {}, 0
+        for name, n in draws(system):
+            out[name], start = u[start : start + n], start + n
+        return out
+
+    def learn(u, s: STLState, pc: Percept, system: System):
+        u = split(u, system)
         on = system.learning
         scored = _scored(s.P.shape, (s.acting, pc.m_prev)) & (pc.t > 0) & on
         r = rl_score(pc.m_prev, pc.m, pc.v_prev, pc.v, pc.centroid)
@@ -170,13 +193,19 @@ def stl_controller() -> Controller:
 
         weak = (P < REPLACE_BELOW) & system.replacement & on
         first = _scored(P.shape, jnp.unravel_index(jnp.argmax(weak), P.shape)) & jnp.any(weak)
-        fresh = sample_antibodies(k_new, ())
+        fresh = antibodies_from_uniform(u["new"])
         antibodies = jax.tree.map(lambda old, new: jnp.where(first, new, old), s.antibodies, fresh)
         lo, hi = REPLACEMENT_P
-        P = jnp.where(first, jax.random.uniform(k_p, (), minval=lo, maxval=hi), P)
+        P = jnp.where(first, lo + (hi - lo) * u["new_p"][0], P)
 
-        due = (pc.t % system.network.idiotope_period == 0) & (pc.t > 0)
-        I = jnp.where(due, idiotopes(k_idiotope, P), s.I)
+        # The idiotope is redrawn every idiotope_period iterations. The test is on the batch's
+        # tick (unbatched), so under vmap this stays a branch taken once per period.
+        due = (pc.tick % system.network.idiotope_period == 0) & (pc.tick > 0)
+        I = jax.lax.cond(
+            due,
+            lambda: idiotopes(jax.random.fold_in(s.key, pc.tick), P),
+            lambda: s.I,
+        )
         return s.replace(
             antibodies=antibodies,
             P=P,
@@ -185,9 +214,12 @@ def stl_controller() -> Controller:
             replaced=s.replaced + jnp.any(weak).astype(jnp.int32),
         )
 
-    def act(key, s: STLState, pc: Percept, system: System):
-        k_select, k_behave = jax.random.split(key)
-        alpha, beta, N = idiotypic_select(k_select, s.P, s.I, s.N, pc.m, system.network)
+    def act(u, s: STLState, pc: Percept, system: System):
+        u = split(u, system)
+        tiebreaks = u["select"].reshape(2, -1)
+        alpha, beta, N = idiotypic_select_from_uniform(
+            tiebreaks, s.P, s.I, s.N, pc.m, system.network
+        )
         idio = system.idiotypic
         acting = jnp.where(idio, beta, alpha)
         ab = take(s.antibodies, (acting, pc.m))
@@ -197,9 +229,9 @@ def stl_controller() -> Controller:
             differences=s.differences + (idio & (alpha != beta)).astype(jnp.int32),
             selections=s.selections + 1,
         )
-        return s, wheel_speeds(k_behave, ab, pc.blue_pixels, pc.centroid)
+        return s, wheel_speeds_from_uniform(u["behave"], ab, pc.blue_pixels, pc.centroid)
 
-    return Controller(init=init, learn=learn, act=act)
+    return Controller(init=init, learn=learn, act=act, n_uniform=n_uniform)
 
 
 LTL = ltl_controller()

@@ -11,6 +11,7 @@ Controllers are (init, learn, act) triples of pure functions, like optax's trans
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -55,6 +56,8 @@ class EpisodeConfig:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
+        if self.tau_cap > 1e6:  # iteration counters are int32
+            raise ValueError(f"tau_cap must be at most 1e6 s, got {self.tau_cap!r}")
         if self.finish_pixels < 0:
             raise ValueError(f"finish_pixels must be >= 0, got {self.finish_pixels!r}")
 
@@ -72,6 +75,9 @@ class Percept:
         v, v_prev: Vm (maximum IR reading) now and before.
         blue_pixels: number of blue pixels; centroid: their mean column (7 when none).
         t: iterations since the start of the run.
+        tick: iterations since the batch started, the same for every run of a batch (it equals
+            t while a run is going), so a periodic step can be a ``lax.cond`` that stays a
+            branch under ``vmap`` instead of being computed every iteration and masked.
     """
 
     m: jnp.ndarray
@@ -81,19 +87,24 @@ class Percept:
     blue_pixels: jnp.ndarray
     centroid: jnp.ndarray
     t: jnp.ndarray
+    tick: jnp.ndarray
 
 
 class Controller(NamedTuple):
-    """A controller as three pure functions of one robot.
+    """A controller as pure functions of one robot.
 
-    init(key, params) -> cstate; learn(key, cstate, percept, params) -> cstate (scores the
-    antibody that acted last); act(key, cstate, percept, params) -> (cstate, wheels [2]).
-    ``params`` is the controller's own pytree (antibodies, flags, constants).
+    init(key, params) -> cstate; learn(u, cstate, percept, params) -> cstate (scores the
+    antibody that acted last); act(u, cstate, percept, params) -> (cstate, wheels [2]).
+    ``params`` is the controller's own pytree (antibodies, flags, constants). Randomness comes
+    as uniforms ``u`` [n_uniform(params)] per iteration, shared by learn and act, which each
+    know their own slice: the loop draws them a chunk of iterations at a time, which keeps the
+    compiled loop small and fast (one vectorised draw instead of a dozen small ones per step).
     """
 
     init: Callable[..., Any]
     learn: Callable[..., Any]
     act: Callable[..., Any]
+    n_uniform: Callable[[Any], int]
 
 
 @pytree_dataclass
@@ -146,13 +157,21 @@ def start(
 
 def iterate(
     run: Run,
+    sim_noise: envs.StepNoise,
+    u: jnp.ndarray,
+    tick: jnp.ndarray,
     world: envs.World,
     sim_params: envs.SimParams,
     controller: Controller,
     ctrl_params: Any,
     config: EpisodeConfig,
 ) -> Run:
-    """One iteration of one run; a run that has ended is returned unchanged."""
+    """One iteration of one run, given its random draws; a run that has ended is unchanged.
+
+    Args:
+        sim_noise: the simulator step's draws. u: [n_uniform] the controller's uniforms.
+        tick: iterations since the batch started (unbatched; see :class:`Percept`).
+    """
     obs = run.obs
     m = antigen(obs.ir, obs.blue_pixels)
     # A collision is the antigen entering 5-7 from a non-collision antigen [ours].
@@ -167,8 +186,6 @@ def iterate(
         [FINISHED, FAILED_COLLISIONS, FAILED_TIME],
         RUNNING,
     ).astype(jnp.int32)
-
-    key, k_learn, k_act, k_step = jax.random.split(run.key, 4)
     percept = Percept(
         m=m,
         m_prev=run.m_prev,
@@ -177,29 +194,18 @@ def iterate(
         blue_pixels=obs.blue_pixels,
         centroid=obs.blue_centroid,
         t=run.t,
+        tick=tick,
     )
-    ctrl = controller.learn(k_learn, run.ctrl, percept, ctrl_params)
-    ctrl, wheels = controller.act(k_act, ctrl, percept, ctrl_params)
-    sim, obs = envs.step(k_step, run.sim, wheels, world, sim_params)
-    moved = Run(
-        sim=sim,
-        obs=obs,
-        ctrl=ctrl,
-        key=key,
-        m_prev=m,
-        v_prev=percept.v,
-        collisions=collisions,
-        streak=streak,
-        t=run.t + 1,
-        status=status,
+    ctrl = controller.learn(u, run.ctrl, percept, ctrl_params)
+    ctrl, wheels = controller.act(u, ctrl, percept, ctrl_params)
+    sim, new_obs = envs.step_with_noise(run.sim, wheels, sim_noise, world, sim_params)
+    # The iteration that detects the end records the counts and status and moves nothing.
+    counted = run.replace(collisions=collisions, streak=streak, status=status)
+    moved = counted.replace(
+        sim=sim, obs=new_obs, ctrl=ctrl, m_prev=m, v_prev=percept.v, t=run.t + 1
     )
-    # The iteration that detects the end only records it; nothing moves from then on.
-    ended = moved.replace(
-        sim=run.sim, obs=run.obs, ctrl=run.ctrl, key=run.key, t=run.t, m_prev=run.m_prev
-    )
-    over = (run.status != RUNNING) | (status != RUNNING)
-    keep = jax.tree.map(lambda a, b: jnp.where(run.status != RUNNING, a, b), run, ended)
-    return jax.tree.map(lambda a, b: jnp.where(over, a, b), keep, moved)
+    new = jax.tree.map(lambda a, b: jnp.where(status == RUNNING, a, b), moved, counted)
+    return jax.tree.map(lambda a, b: jnp.where(run.status == RUNNING, a, b), new, run)
 
 
 @pytree_dataclass
@@ -249,15 +255,37 @@ def advance(
     config: EpisodeConfig,
 ) -> Batch:
     """Advance every run by up to ``config.segment`` iterations, stopping early once all ended."""
-    step_all = jax.vmap(iterate, in_axes=(0, None, None, None, 0, None))
+    step_all = jax.vmap(iterate, in_axes=(0, 0, 0, None, None, None, None, 0, None))
     n_chunks = max(1, config.segment // config.chunk)
+    n_u = controller.n_uniform(ctrl_params)
+
+    def draws(key):
+        """One run's draws for a chunk: StepNoise [chunk, ...] and uniforms [chunk, n_u]."""
+        key, k_sim, k_ctrl = jax.random.split(key, 3)
+        noise = jax.vmap(envs.sample_step_noise, in_axes=(0, None))(
+            jax.random.split(k_sim, config.chunk), world
+        )
+        u = jax.random.uniform(k_ctrl, (config.chunk * n_u,)).reshape(config.chunk, n_u)
+        return key, noise, u
 
     def chunk(batch: Batch) -> Batch:
+        keys, noise, u = jax.vmap(draws)(batch.runs.key)
+        runs = batch.runs.replace(key=keys)
         runs = jax.lax.fori_loop(
             0,
             config.chunk,
-            lambda _, r: step_all(r, world, sim_params, controller, ctrl_params, config),
-            batch.runs,
+            lambda i, r: step_all(
+                r,
+                jax.tree.map(lambda a: a[:, i], noise),
+                u[:, i],
+                batch.chunks * config.chunk + i,
+                world,
+                sim_params,
+                controller,
+                ctrl_params,
+                config,
+            ),
+            runs,
         )
         poses = batch.poses
         if config.record:
@@ -272,6 +300,12 @@ def advance(
     return jax.lax.while_loop(cond, lambda c: (c[0] + 1, chunk(c[1])), (0, batch))[1]
 
 
+def _signature(tree: Any) -> tuple:
+    """Hashable shapes and dtypes of a pytree (what a compiled program depends on)."""
+    leaves, treedef = jax.tree.flatten(tree)
+    return treedef, tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves)
+
+
 def rollout(
     reset_keys: jax.Array,
     run_keys: jax.Array,
@@ -282,6 +316,7 @@ def rollout(
     config: EpisodeConfig,
     progress: Callable[[int], None] | None = None,
     compiled: dict | None = None,
+    timings: dict[str, float] | None = None,
 ) -> Batch:
     """Run a batch to the end: every run finished or stopped by a cap.
 
@@ -289,30 +324,50 @@ def rollout(
         reset_keys, run_keys: [n] PRNG keys (world placement; everything else).
         ctrl_params: controller parameters with a leading batch axis [n].
         progress: called with the iterations done after every segment (e.g. tqdm's update).
-        compiled: optional cache dict, so repeated calls with the same controller reuse the
-            compiled programs.
+        compiled: optional cache dict, so repeated calls with the same controller, world shapes
+            and batch shapes reuse the compiled programs.
+        timings: optional dict; ``compile_s`` and ``run_s`` are added to it.
 
     Returns:
         The final :class:`Batch`.
     """
     cache = compiled if compiled is not None else {}
-    key = (id(controller), world.name, config)
-    if key not in cache:
-        cache[key] = (
-            envs.jit(start_batch, static_argnums=(4, 6)),
-            envs.jit(advance, static_argnums=(3, 5)),
+    statics = (controller, config)
+    signature = (statics, _signature((reset_keys, run_keys, world, sim_params, ctrl_params)))
+    t0 = time.perf_counter()
+    if signature not in cache:
+        args = (reset_keys, run_keys, world, sim_params, controller, ctrl_params, config)
+        start_c = envs.jit(start_batch, static_argnums=(4, 6)).lower(*args).compile()
+        shapes = jax.eval_shape(
+            lambda *a: start_batch(*a[:4], controller, a[4], config),
+            reset_keys,
+            run_keys,
+            world,
+            sim_params,
+            ctrl_params,
         )
-    start_fn, advance_fn = cache[key]
-    batch = start_fn(reset_keys, run_keys, world, sim_params, controller, ctrl_params, config)
+        advance_c = (
+            envs.jit(advance, static_argnums=(3, 5))
+            .lower(shapes, world, sim_params, controller, ctrl_params, config)
+            .compile()
+        )
+        cache[signature] = (start_c, advance_c)
+    start_c, advance_c = cache[signature]
+    t1 = time.perf_counter()
+    batch = start_c(reset_keys, run_keys, world, sim_params, ctrl_params)
     done_before = 0
     while True:
-        batch = advance_fn(batch, world, sim_params, controller, ctrl_params, config)
+        batch = advance_c(batch, world, sim_params, ctrl_params)
         t = int(np.max(np.asarray(batch.runs.t)))
         if progress is not None:
             progress(t - done_before)
         done_before = t
         if not np.any(np.asarray(batch.runs.status) == RUNNING):
-            return batch
+            break
+    if timings is not None:
+        timings["compile_s"] = timings.get("compile_s", 0.0) + (t1 - t0)
+        timings["run_s"] = timings.get("run_s", 0.0) + (time.perf_counter() - t1)
+    return batch
 
 
 def outcome(runs: Run, config: EpisodeConfig, dt: float) -> dict[str, np.ndarray]:

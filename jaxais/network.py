@@ -34,6 +34,9 @@ __all__ = [
     "concentrations",
     "idiotopes",
     "idiotypic_select",
+    "idiotypic_select_from_uniform",
+    "idiotopes_from_uniform",
+    "tiebreak_argmax",
     "initial_clones",
     "network_params",
     "random_tiebreak_argmax",
@@ -120,6 +123,21 @@ def network_params(**overrides: float | int) -> NetworkParams:
     return NetworkParams(**overrides).validate()
 
 
+def tiebreak_argmax(u: jax.Array, values: jax.Array) -> jax.Array:
+    """Index of the largest value; among exact ties, the one with the largest ``u``.
+
+    Args:
+        u: [x] i.i.d. uniforms (each tied index is then equally likely to win).
+        values: [x] scores.
+
+    Returns:
+        int32 scalar index.
+    """
+    values = jnp.asarray(values)
+    is_max = values == jnp.max(values)
+    return jnp.argmax(jnp.where(is_max, u, -1.0)).astype(jnp.int32)
+
+
 def random_tiebreak_argmax(key: jax.Array, values: jax.Array) -> jax.Array:
     """Index of the largest value, chosen uniformly at random among exact ties.
 
@@ -131,10 +149,7 @@ def random_tiebreak_argmax(key: jax.Array, values: jax.Array) -> jax.Array:
         int32 scalar index.
     """
     values = jnp.asarray(values)
-    is_max = values == jnp.max(values)
-    # i.i.d. uniform scores make each tied index equally likely to hold the largest one.
-    scores = jnp.where(is_max, jax.random.uniform(key, values.shape), -1.0)
-    return jnp.argmax(scores).astype(jnp.int32)
+    return tiebreak_argmax(jax.random.uniform(key, values.shape), values)
 
 
 def relative_fitness(tau: jax.Array, collisions: jax.Array, rho: float = 8.0) -> jax.Array:
@@ -183,15 +198,20 @@ def idiotopes(key: jax.Array, P: jax.Array) -> jax.Array:
     Returns:
         I: [x, y] float32 of 0.0 / 1.0.
     """
+    # Drawn flat and reshaped: same i.i.d. scores, and XLA compiles a 1-D threefry about twice
+    # as fast as a 2-D one on CPU.
+    P = jnp.asarray(P, jnp.float32)
+    return idiotopes_from_uniform(jax.random.uniform(key, (P.size,)), P)
+
+
+def idiotopes_from_uniform(u: jax.Array, P: jax.Array) -> jax.Array:
+    """:func:`idiotopes` given its random draw ``u`` [x * y] of i.i.d. uniforms."""
     P = jnp.asarray(P, jnp.float32)
     sigma = jnp.mean(P, axis=0)
     # No entry equal to its column's maximum is below the exact mean; this second test stops
     # float rounding of the mean from making every entry of a constant column a candidate.
     candidate = (sigma > P) & (jnp.max(P, axis=0) > P)
-    # Drawn flat and reshaped: same i.i.d. scores, and XLA compiles a 1-D threefry about twice
-    # as fast as a 2-D one on CPU.
-    noise = jax.random.uniform(key, (P.size,)).reshape(P.shape)
-    scores = jnp.where(candidate, noise, -1.0)
+    scores = jnp.where(candidate, jnp.reshape(u, P.shape), -1.0)
     chosen = jax.nn.one_hot(jnp.argmax(scores, axis=1), P.shape[1], dtype=jnp.float32)
     return chosen * jnp.any(candidate, axis=1, keepdims=True)
 
@@ -312,16 +332,32 @@ def idiotypic_select(
         N_new: [x, y] float32 clone counts; only column ``antigen`` differs from ``N``.
     """
     key_alpha, key_beta = jax.random.split(key)
+    x = jnp.shape(P)[0]
+    u = jnp.stack([jax.random.uniform(key_alpha, (x,)), jax.random.uniform(key_beta, (x,))])
+    return idiotypic_select_from_uniform(u, P, I, N, antigen, params)
+
+
+def idiotypic_select_from_uniform(
+    u: jax.Array,
+    P: jax.Array,
+    I: jax.Array,
+    N: jax.Array,
+    antigen: jax.Array | int,
+    params: NetworkParams,
+) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """:func:`idiotypic_select` given its random draws ``u`` [2, x] (the two tie-breaks)."""
     P = jnp.asarray(P, jnp.float32)
     N = jnp.asarray(N, jnp.float32)
-    alpha = select_alpha(key_alpha, P, antigen)
+    alpha = tiebreak_argmax(u[0], P[:, antigen])
     eps, delta = stimulation_suppression(
         P, I, concentrations(N, params.Phi), alpha, params.k1, params.k2
     )
     s2 = P[:, antigen] + eps - delta
     # A strongly suppressed antibody would otherwise get a negative number of clones.
     column = jnp.maximum(params.b * s2 + N[:, antigen] * (1.0 - params.k3), 0.0)
-    N_new = N.at[:, antigen].set(column)
+    # A one-hot column write, not a scatter: cheaper inside a batched loop.
+    in_column = jnp.arange(N.shape[1]) == antigen
+    N_new = jnp.where(in_column[None, :], column[:, None], N)
     activation = concentrations(N_new, params.Phi)[:, antigen] * s2
-    beta = random_tiebreak_argmax(key_beta, activation)
+    beta = tiebreak_argmax(u[1], activation)
     return alpha, beta, N_new

@@ -58,6 +58,7 @@ def run_trials(
     config: EpisodeConfig = STL_CONFIG,
     sim_params: envs.SimParams | None = None,
     progress: Any = None,
+    timings: dict[str, float] | None = None,
 ) -> dict[str, TrialSet]:
     """Run every system's trials in one batch.
 
@@ -68,6 +69,7 @@ def run_trials(
         seed: the run's seed.
         config: caps and recording (``config.record`` keeps trajectories).
         progress: optional tqdm-like object with ``update(n)``, advanced in simulated iterations.
+        timings: optional dict collecting ``compile_s`` and ``run_s``.
 
     Returns:
         label -> :class:`TrialSet`.
@@ -90,7 +92,9 @@ def run_trials(
         ],
     )
     update = None if progress is None else progress.update
-    batch = rollout(reset_keys, run_keys, world, sim_params, STL, params, config, update, _COMPILED)
+    batch = rollout(
+        reset_keys, run_keys, world, sim_params, STL, params, config, update, _COMPILED, timings
+    )
     res = outcome(batch.runs, config, float(sim_params.dt))
     ctrl = batch.runs.ctrl
     differences = np.asarray(ctrl.differences)

@@ -1,0 +1,310 @@
+"""GA checkpoints with orbax-checkpoint: save after every generation, resume exactly.
+
+A checkpoint directory holds:
+
+- ``run.json``: the run's identity (GA settings, world, seed: whatever the caller passes), written
+  when a run starts; a resume with a different identity is refused.
+- ``<generation>/``: one orbax checkpoint per saved generation (``ocp.CheckpointManager``),
+  holding ``state`` (every array of :class:`jaxais.ga.GAState`, the typed PRNG key stored as its
+  ``jax.random.key_data``) and ``meta`` (JSON: the key's implementation, the GA settings and the
+  caller's extra data, e.g. the per-generation history of a script).
+
+Orbax writes each checkpoint into a temporary directory and renames it when complete, and the
+manager only lists complete ones; saving is synchronous here (``wait_until_finished`` returns
+after the rename) and keeps the last ``max_to_keep`` (>= 2) checkpoints, so the previous one is
+deleted only after the new one is complete. A run interrupted at any moment therefore leaves its
+last complete checkpoint valid.
+
+All failures (nothing to resume, a different run, a corrupt checkpoint) raise
+:class:`CheckpointError` with a one-line message.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+
+from jaxais.antibodies import within_limits
+from jaxais.ga import GAConfig, GAState, abstract_state
+
+__all__ = [
+    "FORMAT",
+    "RUN_JSON",
+    "CheckpointError",
+    "GACheckpointer",
+    "abstract_tree",
+    "state_from_tree",
+    "state_to_tree",
+]
+
+RUN_JSON = "run.json"
+"""The run's identity, beside the numbered checkpoints."""
+FORMAT = "jaxais-ga-checkpoint/1"
+"""Format tag stored in ``run.json`` and in every checkpoint's meta."""
+_SEP = "__"  # joins pytree path names into flat, filesystem-safe array names
+
+
+class CheckpointError(ValueError):
+    """No checkpoint to resume, a different run, or a corrupt checkpoint (one-line message)."""
+
+
+def _is_key(x: Any) -> bool:
+    return jax.dtypes.issubdtype(getattr(x, "dtype", None), jax.dtypes.prng_key)
+
+
+def _name(path: tuple[Any, ...]) -> str:
+    return _SEP.join(str(getattr(p, "name", getattr(p, "key", p))) for p in path)
+
+
+def state_to_tree(state: GAState) -> dict[str, np.ndarray]:
+    """The state as a flat dict of NumPy arrays (typed keys as their key data).
+
+    Returns:
+        name -> array, e.g. ``"population__type"`` [P, R, 8], ``"key"`` [2] uint32.
+    """
+    leaves = jax.tree_util.tree_flatten_with_path(state)[0]
+    return {
+        _name(path): np.asarray(jax.random.key_data(x) if _is_key(x) else x) for path, x in leaves
+    }
+
+
+def abstract_tree(config: GAConfig) -> dict[str, jax.ShapeDtypeStruct]:
+    """Shapes and dtypes of :func:`state_to_tree` for ``config`` (orbax's restore target)."""
+    leaves = jax.tree_util.tree_flatten_with_path(abstract_state(config))[0]
+    out = {}
+    for path, x in leaves:
+        if _is_key(x):
+            x = jax.eval_shape(jax.random.key_data, x)
+        out[_name(path)] = jax.ShapeDtypeStruct(x.shape, x.dtype)
+    return out
+
+
+def state_from_tree(
+    tree: dict[str, np.ndarray], config: GAConfig, key_impl: str | None = None
+) -> GAState:
+    """Inverse of :func:`state_to_tree` (the key rewrapped with ``jax.random.wrap_key_data``)."""
+    leaves, treedef = jax.tree_util.tree_flatten_with_path(abstract_state(config))
+    values = []
+    for path, x in leaves:
+        value = np.asarray(tree[_name(path)])
+        if _is_key(x):
+            value = jax.random.wrap_key_data(value, impl=key_impl)
+        values.append(value)
+    return jax.tree_util.tree_unflatten(treedef, values)
+
+
+def _first_line(err: BaseException, limit: int = 200) -> str:
+    text = str(err).strip().splitlines()
+    msg = text[0] if text else type(err).__name__
+    return msg if len(msg) <= limit else msg[: limit - 3] + "..."
+
+
+def _describe_difference(stored: dict[str, Any], given: dict[str, Any], where: str = "") -> str:
+    """The first differing entry, e.g. ``"config.mutation was 0.05, now 0.1"``."""
+    for k in sorted(set(stored) | set(given)):
+        a, b = stored.get(k), given.get(k)
+        if a != b:
+            if isinstance(a, dict) and isinstance(b, dict):
+                return _describe_difference(a, b, f"{where}{k}.")
+            return f"{where}{k} was {a!r}, now {b!r}"
+    return "identical"
+
+
+class GACheckpointer:
+    """Saves and restores :class:`jaxais.ga.GAState` after each generation.
+
+    Use as a context manager (it closes orbax's manager)::
+
+        with GACheckpointer(out / "checkpoints", run_info, resume=args.resume) as ckpt:
+            state, meta = ckpt.restore(config) if args.resume else (init(key, config), {})
+            ... ckpt.save(state, config, extra) after every generation ...
+
+    Args:
+        directory: the checkpoint directory (created if missing).
+        run_info: JSON-able identity of the run (settings that must match on resume; leave out
+            those a resume may change, such as the number of generations).
+        resume: True to continue an earlier run: it must exist and have the same ``run_info``.
+            False to start a new one: the directory must hold no complete checkpoint.
+        max_to_keep: complete checkpoints kept (at least 2, see the module notes).
+
+    Raises:
+        CheckpointError: see ``resume``.
+    """
+
+    def __init__(
+        self,
+        directory: str | Path,
+        run_info: dict[str, Any],
+        resume: bool,
+        max_to_keep: int = 2,
+    ):
+        import orbax.checkpoint as ocp
+
+        from jaxais.cli import atomic_write_json
+
+        if max_to_keep < 2:
+            raise ValueError(f"max_to_keep must be >= 2, got {max_to_keep}")
+        self.directory = Path(directory).absolute()
+        self._ocp = ocp
+        run_file = self.directory / RUN_JSON
+        info = {"format": FORMAT, **json.loads(json.dumps(run_info))}
+        has_steps = self.directory.is_dir() and self._complete_steps()
+        if resume:
+            if not has_steps:
+                raise CheckpointError(
+                    f"{self.directory}: no complete checkpoint to resume (start without --resume)"
+                )
+            try:
+                stored = json.loads(run_file.read_text())
+                if not isinstance(stored, dict):
+                    raise ValueError("not a JSON object")
+            except (OSError, ValueError) as err:
+                raise CheckpointError(
+                    f"{run_file}: missing or corrupt ({_first_line(err)}); cannot check that"
+                    " the resumed run has the same arguments"
+                ) from None
+            if stored != info:
+                raise CheckpointError(
+                    f"{self.directory}: cannot resume with different arguments"
+                    f" ({_describe_difference(stored, info)})"
+                )
+        else:
+            if has_steps:
+                raise CheckpointError(
+                    f"{self.directory} already holds checkpoints of a run: pass --resume to"
+                    " continue it, or choose another output directory"
+                )
+            self.directory.mkdir(parents=True, exist_ok=True)
+            atomic_write_json(run_file, info)
+        options = ocp.CheckpointManagerOptions(
+            max_to_keep=max_to_keep,
+            create=True,
+            # Synchronous saves: a checkpoint is complete (renamed into place) when save returns.
+            enable_async_checkpointing=False,
+            # Remove what an interrupted save left behind (never a complete checkpoint).
+            cleanup_tmp_directories=True,
+        )
+        self._manager = ocp.CheckpointManager(self.directory, options=options)
+
+    def _complete_steps(self) -> bool:
+        # Orbax names complete checkpoints by their step; temporary ones carry a suffix.
+        return any(p.is_dir() and p.name.isdigit() for p in self.directory.iterdir())
+
+    def __enter__(self) -> GACheckpointer:
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        if exc is None:
+            self.close()
+            return
+        # Already failing (e.g. Ctrl-C during a save): report that error, not a cleanup one.
+        with contextlib.suppress(Exception):
+            self.close()
+
+    def close(self) -> None:
+        """Wait for pending writes and release orbax's manager."""
+        self._manager.wait_until_finished()
+        self._manager.close()
+
+    def latest_generation(self) -> int | None:
+        """The generation of the newest complete checkpoint (None if there is none)."""
+        self._manager.reload()
+        return self._manager.latest_step()
+
+    def save(self, state: GAState, config: GAConfig, extra: dict[str, Any] | None = None) -> None:
+        """Save ``state`` as checkpoint ``state.generation`` and wait until it is complete.
+
+        Args:
+            state: the state after a generation.
+            config: its settings (stored in the meta for checking).
+            extra: JSON-able data to keep with it (e.g. the history of a script).
+        """
+        ocp = self._ocp
+        generation = int(state.generation)
+        meta = {
+            "format": FORMAT,
+            "generation": generation,
+            "key_impl": str(jax.random.key_impl(state.key)),
+            "config": config.to_dict(),
+            "extra": extra or {},
+        }
+        self._manager.save(
+            generation,
+            args=ocp.args.Composite(
+                state=ocp.args.StandardSave(state_to_tree(state)), meta=ocp.args.JsonSave(meta)
+            ),
+        )
+        self._manager.wait_until_finished()
+
+    def restore(
+        self, config: GAConfig, generation: int | None = None
+    ) -> tuple[GAState, dict[str, Any]]:
+        """Read a checkpoint (default: the newest complete one).
+
+        Args:
+            config: the run's settings (fix the shapes to read).
+            generation: which checkpoint, or None for the latest.
+
+        Returns:
+            (the state, the ``extra`` dict saved with it).
+
+        Raises:
+            CheckpointError: none to restore, or it is corrupt or does not fit ``config``.
+        """
+        ocp = self._ocp
+        step = self.latest_generation() if generation is None else generation
+        if step is None:
+            raise CheckpointError(f"{self.directory}: no complete checkpoint to resume")
+        where = self.directory / str(step)
+        hint = f"delete {where} to resume from an earlier checkpoint, or start again"
+        try:
+            restored = self._manager.restore(
+                step,
+                args=ocp.args.Composite(
+                    state=ocp.args.StandardRestore(abstract_tree(config)),
+                    meta=ocp.args.JsonRestore(),
+                ),
+            )
+            meta = restored.meta
+            if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+                raise ValueError("unknown checkpoint format")
+            state = state_from_tree(restored.state, config, meta.get("key_impl"))
+        except Exception as err:  # noqa: BLE001 (any failure to read is a corrupt checkpoint)
+            raise CheckpointError(
+                f"{where}: corrupt checkpoint ({_first_line(err)}); {hint}"
+            ) from None
+        problem = _check_state(state, config, step, meta)
+        if problem:
+            raise CheckpointError(f"{where}: corrupt checkpoint ({problem}); {hint}")
+        return state, meta.get("extra", {})
+
+
+def _check_state(state: GAState, config: GAConfig, step: int, meta: dict[str, Any]) -> str | None:
+    """What is wrong with a restored state, or None."""
+    if int(state.generation) != step or meta.get("generation") != step:
+        return f"it holds generation {int(state.generation)}, not {step}"
+    stored = meta.get("config", {})
+    for name in ("populations", "robots"):
+        if stored.get(name) != getattr(config, name):
+            return f"{name} = {stored.get(name)!r}, expected {getattr(config, name)!r}"
+    for name, ab in (
+        ("population", state.population),
+        ("evaluated", state.evaluated),
+        ("best", state.best.antibodies),
+    ):
+        if not bool(np.all(np.asarray(within_limits(ab)))):
+            return f"{name} antibodies break Table 1's limits"
+    if step > 0:
+        for name in ("fitness", "tau"):
+            values = np.asarray(getattr(state, name))
+            if not np.all(np.isfinite(values)) or np.any(values < 0):
+                return f"{name} holds invalid values"
+        if not math.isfinite(float(np.max(np.asarray(state.best.fitness)))):
+            return "best fitness holds invalid values"
+    return None

@@ -1,0 +1,106 @@
+"""Experiment plumbing shared by ``scripts/trials.py`` and ``scripts/reproduce.py``.
+
+Turns (world, systems, trials, seed) into the results document of one system in one world, with
+every parameter it used recorded, so a run can be regenerated from its JSON.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import jaxais
+from jaxais import envs
+from jaxais.controllers import System
+from jaxais.episode import EpisodeConfig
+from jaxais.network import NetworkParams
+from jaxais.seed import Seed, default_seed_dir, load_seed
+from jaxais.systems import LABELS, make_system, parse_label
+from jaxais.trials import TrialSet, summarise
+
+SIMULATED_WORLDS = ("world1", "world2")
+STL_WORLDS = ("world1", "world2", "real")
+
+
+def protocol(world: str) -> tuple[str, ...]:
+    """The paper's systems for a world: R1 and R2 in the simulated worlds, R1 only in `real`."""
+    if world == "real":
+        return ("SIE", "SRL", "UIE-R1", "URL-R1", "HDC")
+    return LABELS
+
+
+def paper_trials(world: str) -> int:
+    """The paper's trial count: 30 per simulated world, 20 in `real`."""
+    return 20 if world == "real" else 30
+
+
+def build_systems(
+    labels: list[str], seeds_dir: str | Path | None, network: NetworkParams | None = None
+) -> tuple[dict[str, System], dict[str, Any]]:
+    """Systems by label, loading the LTL seed only when a seeded system needs it.
+
+    Returns:
+        (label -> System, a description of the seed used: path and provenance, or None).
+    """
+    seed: Seed | None = None
+    seed_info: dict[str, Any] | None = None
+    if any(parse_label(name)[0] in ("SIE", "SRL") for name in labels):
+        path = default_seed_dir() if seeds_dir is None else Path(seeds_dir)
+        seed, meta = load_seed(path)
+        seed_info = {
+            "path": str(path),
+            "made_by": {k: meta.get(k) for k in ("command", "seed", "version") if k in meta},
+        }
+    return {name: make_system(name, seed, network=network) for name in labels}, seed_info
+
+
+def run_config(
+    world: envs.World,
+    world_source: str,
+    config: EpisodeConfig,
+    network: NetworkParams,
+    sim_params: envs.SimParams,
+    seed_info: dict[str, Any] | None,
+) -> dict[str, Any]:
+    """Every parameter a run used, as plain JSON."""
+    plain = lambda x: np.asarray(x).tolist()
+    return {
+        "world": {"name": world.name, "source": world_source},
+        "episode": dataclasses.asdict(config),
+        "network": {f.name: plain(getattr(network, f.name)) for f in dataclasses.fields(network)},
+        "simulator": {
+            f.name: plain(getattr(sim_params, f.name)) for f in dataclasses.fields(sim_params)
+        },
+        "ltl_seed": seed_info,
+        "jaxais_version": jaxais.__version__,
+    }
+
+
+def results_document(
+    label: str,
+    world_name: str,
+    seed: int,
+    trials: TrialSet,
+    config: dict[str, Any],
+) -> dict[str, Any]:
+    """The results.json of one system in one world."""
+    system, random_set = parse_label(label)
+    return {
+        "system": system,
+        "label": label,
+        "world": world_name,
+        "random_set": random_set,
+        "seed": seed,
+        "config": config,
+        "trials": trials.records,
+        "summary": summarise(trials.records),
+    }
+
+
+def trajectories_by_label(results: Mapping[str, TrialSet]) -> dict[str, list[np.ndarray]]:
+    """label -> list of [T, 3] pose arrays (only for results run with recording)."""
+    return {k: v.trajectories for k, v in results.items() if v.trajectories is not None}

@@ -1,0 +1,437 @@
+"""Pictures of worlds and runs with matplotlib: a world's map, trajectories and GIF animations.
+
+Everything here works on plain NumPy values outside jit (``np.asarray`` of the simulator's
+``World`` and ``State``), draws on an explicit ``Axes`` or a new ``matplotlib.figure.Figure``
+with the Agg canvas, and never touches pyplot's global state, so it is safe in scripts, tests
+and threads.
+
+Colours: walls dark grey, marker paint light blue, the goal dark blue; the robot's start
+region is a dashed green rectangle, the goal region dashed blue, the wanderers' regions dashed
+grey and the regions of randomly placed boxes dotted grey.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from typing import Any
+
+import jax
+import numpy as np
+from matplotlib import animation
+from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Circle, Rectangle
+
+from jaxais.cli import atomic_write
+from jaxais.envs import GOAL, MARKER, WALL, State, World
+
+__all__ = [
+    "MATERIAL_COLOURS",
+    "animate",
+    "draw_trajectory",
+    "draw_world",
+    "save_figure",
+    "world_figure",
+]
+
+MATERIAL_COLOURS = {WALL: "0.3", MARKER: "#5aa9e6", GOAL: "#1030c0"}
+"""Fill/line colour per surface material."""
+START_COLOUR = "tab:green"
+WANDERER_COLOUR = "0.55"
+BODY_RADIUS = 0.037
+"""E-puck body radius used for drawing robots, m (``default_params().body_radius``)."""
+ROBOT_COLOURS = ("tab:red", "tab:orange", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
+"""Colours of successive robots' trajectories (cycled)."""
+
+
+def _np(x: Any) -> np.ndarray:
+    return np.asarray(x, np.float64)
+
+
+def _region_rect(region: np.ndarray, **kw: Any) -> Rectangle:
+    x0, y0, x1, y1 = region
+    return Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, **kw)
+
+
+def _is_batched(state: State) -> bool:
+    return np.ndim(state.pose) > 1
+
+
+def _unstack(state: State) -> list[State]:
+    """A batched ``State`` (leading robot axis) as a list of single-robot states (NumPy)."""
+    n = np.shape(state.pose)[0]
+    return [jax.tree.map(lambda x, i=i: np.asarray(x)[i], state) for i in range(n)]
+
+
+def _draw_static(ax: Axes, world: World, show_regions: bool) -> None:
+    """Walls, pillars and the regions: the parts of a world that no run changes."""
+    seg = _np(world.seg)[np.asarray(world.seg_valid)]
+    mats = np.asarray(world.seg_material)[np.asarray(world.seg_valid)]
+    ax.add_collection(
+        LineCollection(
+            seg.reshape(-1, 2, 2),
+            colors=[MATERIAL_COLOURS.get(int(m), "k") for m in mats],
+            linewidths=[3.0 if m != WALL else 2.0 for m in mats],
+            capstyle="butt",
+            zorder=3,
+        )
+    )
+    for (x, y, r), m, ok in zip(
+        _np(world.pillar),
+        np.asarray(world.pillar_material),
+        np.asarray(world.pillar_valid),
+        strict=True,
+    ):
+        if ok:
+            colour = MATERIAL_COLOURS.get(int(m), "k")
+            ax.add_patch(Circle((x, y), r, facecolor=colour, edgecolor="k", lw=0.5, zorder=3))
+    if not show_regions:
+        return
+    ax.add_patch(
+        _region_rect(
+            _np(world.start_region),
+            ls="--",
+            lw=1.2,
+            ec=START_COLOUR,
+            label="start region",
+            zorder=2,
+        )
+    )
+    ax.add_patch(
+        _region_rect(
+            _np(world.goal_region),
+            ls="--",
+            lw=1.2,
+            ec=MATERIAL_COLOURS[GOAL],
+            label="goal region",
+            zorder=2,
+        )
+    )
+    for k, region in enumerate(_np(world.wanderer_region)):
+        ax.add_patch(
+            _region_rect(
+                region,
+                ls="--",
+                lw=1.0,
+                ec=WANDERER_COLOUR,
+                label="wanderer region" if k == 0 else None,
+                zorder=2,
+            )
+        )
+    seen: set[tuple[float, ...]] = set()
+    for region, ok in zip(_np(world.box_region), np.asarray(world.box_valid), strict=True):
+        fixed = region[0] == region[2] and region[1] == region[3]
+        if ok and not fixed and tuple(region) not in seen:
+            label = "box region" if not seen else None
+            seen.add(tuple(region))
+            ax.add_patch(_region_rect(region, ls=":", lw=1.0, ec="0.6", label=label, zorder=2))
+
+
+def _draw_objects(
+    ax: Axes,
+    world: World,
+    state: State | None,
+    *,
+    alpha: float = 1.0,
+    show_wanderers: bool = True,
+    body_radius: float = BODY_RADIUS,
+    wanderer_label: str | None = None,
+) -> None:
+    """Boxes and the goal (at ``state``'s positions, else their regions' centres); wanderers."""
+    region_centre = lambda r: 0.5 * (r[..., :2] + r[..., 2:])
+    boxes = _np(state.boxes) if state is not None else region_centre(_np(world.box_region))
+    goal = _np(state.goal) if state is not None else region_centre(_np(world.goal_region))
+    for (cx, cy), (hx, hy), m, ok in zip(
+        boxes,
+        _np(world.box_half),
+        np.asarray(world.box_material),
+        np.asarray(world.box_valid),
+        strict=True,
+    ):
+        if ok:
+            colour = MATERIAL_COLOURS.get(int(m), "k")
+            ax.add_patch(
+                Rectangle(
+                    (cx - hx, cy - hy),
+                    2 * hx,
+                    2 * hy,
+                    facecolor=colour,
+                    edgecolor="k",
+                    lw=0.5,
+                    alpha=alpha,
+                    zorder=3,
+                )
+            )
+    gh = _np(world.goal_half)
+    style = dict(facecolor=MATERIAL_COLOURS[GOAL], edgecolor="k", lw=0.5, alpha=alpha, zorder=3)
+    if world.goal_shape == "ball":
+        ax.add_patch(Circle(tuple(goal), gh[0], **style))
+    else:
+        ax.add_patch(Rectangle(tuple(goal - gh), 2 * gh[0], 2 * gh[1], **style))
+    if state is not None and show_wanderers:
+        for k, (x, y, _) in enumerate(_np(state.wanderers)):
+            ax.add_patch(
+                Circle(
+                    (x, y),
+                    body_radius,
+                    facecolor=WANDERER_COLOUR,
+                    edgecolor="k",
+                    lw=0.5,
+                    alpha=alpha,
+                    zorder=4,
+                    label=wanderer_label if k == 0 else None,
+                )
+            )
+
+
+def _frame_axes(ax: Axes, world: World) -> None:
+    x0, y0, x1, y1 = _np(world.arena)
+    pad = 0.03 * max(x1 - x0, y1 - y0)
+    ax.set_xlim(x0 - pad, x1 + pad)
+    ax.set_ylim(y0 - pad, y1 + pad)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+
+
+def draw_world(
+    ax: Axes,
+    world: World,
+    state: State | None = None,
+    *,
+    show_regions: bool = True,
+    show_wanderers: bool = True,
+    alpha: float = 1.0,
+    body_radius: float = BODY_RADIUS,
+) -> Axes:
+    """Draw a world: walls and marker paint, boxes, pillars, the goal and the regions.
+
+    Args:
+        ax: the axes to draw on (its limits and aspect are set to the arena).
+        world: the world (padding entries, ``*_valid == False``, are skipped).
+        state: one robot's ``State`` (no batch axis): boxes, goal and wanderers are drawn where
+            it has them. Without a state, each box and the goal sit at the centre of their
+            regions and no wanderers are drawn.
+        show_regions: draw the start, goal, wanderer and random-box regions (dashed/dotted).
+        show_wanderers: draw ``state``'s wanderers as grey discs.
+        alpha: opacity of the boxes, goal and wanderers.
+        body_radius: radius of a drawn e-puck, m.
+
+    Returns:
+        ``ax``.
+    """
+    if state is not None and _is_batched(state):
+        raise ValueError("draw_world takes one robot's State; index a batched State first")
+    _draw_static(ax, world, show_regions)
+    _draw_objects(
+        ax, world, state, alpha=alpha, show_wanderers=show_wanderers, body_radius=body_radius
+    )
+    _frame_axes(ax, world)
+    return ax
+
+
+def draw_trajectory(ax: Axes, xy: Any, label: str | None = None, **kw: Any) -> Line2D:
+    """Draw a path as a line with a hollow circle at its start and a filled square at its end.
+
+    Args:
+        ax: the axes.
+        xy: [T, 2] positions (a [T, 3] pose array is fine: the heading is ignored).
+        label: legend label of the line.
+        **kw: passed to ``ax.plot`` for the line (e.g. ``color``, ``lw``).
+
+    Returns:
+        The line.
+    """
+    xy = _np(xy)
+    if xy.ndim != 2 or xy.shape[1] < 2 or xy.shape[0] == 0:
+        raise ValueError(f"draw_trajectory needs a [T, 2] array with T >= 1, got {xy.shape}")
+    kw.setdefault("lw", 1.2)
+    (line,) = ax.plot(xy[:, 0], xy[:, 1], label=label, zorder=5, **kw)
+    colour = line.get_color()
+    ax.plot(*xy[0, :2], "o", ms=6, mfc="white", mec=colour, mew=1.5, zorder=6)
+    ax.plot(*xy[-1, :2], "s", ms=5, color=colour, zorder=6)
+    return line
+
+
+def _states_list(states: State | Sequence[State] | None) -> list[State]:
+    if states is None:
+        return []
+    if isinstance(states, State):
+        return _unstack(states) if _is_batched(states) else [states]
+    out: list[State] = []
+    for s in states:
+        out.extend(_states_list(s))
+    return out
+
+
+def _new_figure(figsize: tuple[float, float], layout: str | None = "constrained"):
+    fig = Figure(figsize=figsize, layout=layout)
+    FigureCanvasAgg(fig)
+    return fig, fig.add_subplot()
+
+
+def world_figure(
+    world: World,
+    states: State | Sequence[State] | None = None,
+    trajectories: Any = None,
+    title: str | None = None,
+    *,
+    labels: Sequence[str] | None = None,
+    show_regions: bool = True,
+) -> Figure:
+    """A figure of a world with optional robot states and trajectories.
+
+    Args:
+        world: the world.
+        states: a ``State``, a batched ``State`` (leading robot axis) or a list of them. The
+            first robot's boxes, goal and wanderers are drawn solid; further robots' (which may
+            differ in worlds with random placement) faintly.
+        trajectories: a [T, 2+] array, a [N, T, 2+] array or a list of [T_i, 2+] arrays.
+        title: the axes title (default: the world's name).
+        labels: legend labels of the trajectories (default ``robot 0``, ``robot 1``, ...).
+        show_regions: draw the start/goal/wanderer/box regions.
+
+    Returns:
+        A ``matplotlib.figure.Figure`` with an Agg canvas (``fig.savefig`` works; see also
+        :func:`save_figure`).
+    """
+    x0, y0, x1, y1 = _np(world.arena)
+    w, h = 5.0 * (x1 - x0) / (y1 - y0), 5.0  # plot area in inches, the arena's shape
+    if w > 9.0:
+        w, h = 9.0, 45.0 / w
+    fig, ax = _new_figure((w + 2.0, h + 0.7))  # room for the labels and the legend
+    _draw_static(ax, world, show_regions)
+    robots = _states_list(states)
+    if robots:
+        for i, s in enumerate(robots):
+            first = i == 0
+            label = "wanderer (at start)" if first else None
+            _draw_objects(ax, world, s, alpha=1.0 if first else 0.25, wanderer_label=label)
+    else:
+        _draw_objects(ax, world, None)
+    if trajectories is not None:
+        if isinstance(trajectories, list | tuple):
+            trajs = [np.asarray(t) for t in trajectories]
+        else:  # one array (NumPy or JAX): [T, 2+] or [N, T, 2+]
+            arr = np.asarray(trajectories)
+            trajs = [arr] if arr.ndim == 2 else list(arr)
+        for i, xy in enumerate(trajs):
+            label = labels[i] if labels is not None else f"robot {i}"
+            draw_trajectory(ax, xy, label=label, color=ROBOT_COLOURS[i % len(ROBOT_COLOURS)])
+    _frame_axes(ax, world)
+    ax.set_title(title if title is not None else world.name)
+    handles, _ = ax.get_legend_handles_labels()
+    if handles:
+        ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize="small", frameon=False)
+    return fig
+
+
+def save_figure(fig: Figure, path: str | os.PathLike[str], dpi: float = 120) -> None:
+    """Save ``fig`` atomically; the format follows the file's suffix (png when it has none)."""
+    fmt = os.path.splitext(os.fspath(path))[1].lstrip(".").lower() or "png"
+    atomic_write(path, lambda tmp: fig.savefig(tmp, format=fmt, dpi=dpi))
+
+
+def animate(
+    world: World,
+    poses: Any,
+    wanderers: Any,
+    out_path: str | os.PathLike[str],
+    fps: float = 25,
+    *,
+    state: State | None = None,
+    dt: float | None = None,
+    title: str | None = None,
+    dpi: float = 80,
+    trail: bool = True,
+    body_radius: float = BODY_RADIUS,
+) -> int:
+    """Write a GIF of a run (atomically, with matplotlib's ``PillowWriter``).
+
+    Each robot is a coloured disc with a tick along its heading (and, with ``trail``, the path
+    so far); wanderers are grey discs edged in their robot's colour.
+
+    Args:
+        world: the world.
+        poses: [T, 3] robot poses (x, y, heading), or [T, R, 3] for R robots in copies of the
+            world (one frame per row: subsample before calling).
+        wanderers: [T, W, 3] (or [T, R, W, 3]) wanderer poses, or None.
+        out_path: the GIF file (name ending in .gif: Pillow picks the format from it).
+        fps: frames per second.
+        state: the first robot's ``State`` (no batch axis) for box and goal positions (they do
+            not move during a run); without it they sit at their regions' centres.
+        dt: simulated seconds between frames, for a clock in the title (none if None).
+        title: title prefix (default: the world's name).
+        dpi: resolution (the figure is 5 x 5 inches).
+        trail: draw each robot's path so far.
+        body_radius: radius of a drawn e-puck, m.
+
+    Returns:
+        The number of frames written.
+    """
+    poses = _np(poses)
+    if poses.ndim == 2:
+        poses = poses[:, None]
+    if poses.ndim != 3 or poses.shape[-1] != 3 or poses.shape[0] == 0:
+        raise ValueError(f"animate needs poses [T, 3] or [T, R, 3], got {np.shape(poses)}")
+    n_t, n_r = poses.shape[:2]
+    wand = None if wanderers is None else _np(wanderers)
+    if wand is not None:
+        if wand.ndim == 3:
+            wand = wand[:, None]
+        if wand.shape[:2] != (n_t, n_r) or wand.shape[-1] != 3:
+            raise ValueError(f"wanderers {np.shape(wanderers)} do not match poses {poses.shape}")
+    if state is not None and _is_batched(state):
+        state = _unstack(state)[0]
+    if os.path.splitext(os.fspath(out_path))[1].lower() != ".gif":
+        raise ValueError(f"{out_path}: an animation must be written to a .gif file")
+
+    # A fixed layout: constrained layout would be re-solved for every frame (half the time).
+    fig, ax = _new_figure((5.0, 5.0), layout=None)
+    fig.subplots_adjust(left=0.02, right=0.98, bottom=0.02, top=0.93)
+    _draw_static(ax, world, show_regions=False)
+    _draw_objects(ax, world, state, show_wanderers=False)
+    _frame_axes(ax, world)
+    ax.set_axis_off()  # tick labels would take two thirds of each frame's drawing time
+    prefix = title if title is not None else world.name
+    robot_artists = []
+    for r in range(n_r):
+        colour = ROBOT_COLOURS[r % len(ROBOT_COLOURS)]
+        body = Circle((0, 0), body_radius, facecolor=colour, edgecolor="k", lw=0.8, zorder=7)
+        ax.add_patch(body)
+        (tick,) = ax.plot([], [], color="k", lw=1.5, zorder=8)
+        (path,) = ax.plot([], [], color=colour, lw=1.0, alpha=0.7, zorder=5)
+        others = []
+        for _ in range(0 if wand is None else wand.shape[2]):
+            disc = Circle(
+                (0, 0), body_radius, facecolor=WANDERER_COLOUR, edgecolor=colour, lw=1.0, zorder=6
+            )
+            ax.add_patch(disc)
+            others.append(disc)
+        robot_artists.append((body, tick, path, others))
+
+    def update(i: int) -> None:
+        for r, (body, tick, path, others) in enumerate(robot_artists):
+            x, y, th = poses[i, r]
+            body.center = (x, y)
+            tick.set_data([x, x + body_radius * np.cos(th)], [y, y + body_radius * np.sin(th)])
+            if trail:
+                path.set_data(poses[: i + 1, r, 0], poses[: i + 1, r, 1])
+            for k, disc in enumerate(others):
+                disc.center = tuple(wand[i, r, k, :2])
+        clock = f"  t = {i * dt:.1f} s" if dt is not None else ""
+        ax.set_title(f"{prefix}{clock}")
+
+    def write(tmp: Any) -> None:
+        writer = animation.PillowWriter(fps=fps)
+        with writer.saving(fig, os.fspath(tmp), dpi):
+            for i in range(n_t):
+                update(i)
+                writer.grab_frame()
+
+    atomic_write(out_path, write)
+    return n_t

@@ -1,0 +1,549 @@
+"""Benchmark the simulator on this machine and write the figures to a JSON file.
+
+    python scripts/bench.py --out bench.json [--world world1] [--steps 200] [--quick]
+        [--batches 1,30,1000,10000] [--repeats 5] [--numpy-robots 30] [--numpy-steps 20]
+        [--matmul 2048] [--devices N]
+
+Measured in one run (see ``BENCHMARKS``; each benchmark is a function that writes its figures
+into one results dict, so new ones -- e.g. controllers -- are added by appending to the list):
+
+- ``jax_steps_per_s``: robot-steps per second of ``jax.vmap(step)`` inside one compiled
+  ``lax.scan`` of ``--steps`` steps, per batch size (best of ``--repeats`` timed calls after a
+  warm-up call; the median is reported too), and ``compile_s``, the time to lower and compile
+  that program. The robots are driven by a cheap IR-reading policy (so that no sensing is dead
+  code), with a fresh key per robot per step split inside the scan.
+- ``numpy_steps_per_s``: the plain NumPy reference (``envs/reference.py``, ``ref_step``) on the
+  same world and policy, one robot-step at a time, and ``speedup_vs_numpy`` (JAX at batch 30, or
+  the nearest batch measured, over NumPy).
+- ``flops_per_step``: XLA's cost analysis of the compiled batched single-step program, divided
+  by the batch size; ``peak_flops``: the best float32 matmul rate; ``fraction_of_peak``:
+  ``flops_per_step`` x the steps/s at the largest batch over that peak.
+- ``jax_steps_per_s_sharded``: with more than one JAX device (``--devices N`` makes N host
+  devices by setting ``XLA_FLAGS=--xla_force_host_platform_device_count=N`` before JAX is
+  imported), the same programs with the batch axis sharded over a 1-D mesh.
+- ``machine``: platform, processor, CPUs, memory, versions, backend, devices, load, date.
+
+``--quick`` uses fewer steps, repeats and batch sizes (explicit flags still win). The JSON is
+written atomically; a short summary is printed at the end.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import platform
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from jaxais.cli import UserError, atomic_write_json, check_output_file, main_wrapper
+
+PROG = "bench.py"
+SCHEMA = "jaxais-bench/1"
+DEVICE_FLAG = "--xla_force_host_platform_device_count"
+
+FULL = dict(
+    steps=200, repeats=5, batches="1,30,1000,10000", numpy_robots=30, numpy_steps=20, matmul=2048
+)
+QUICK = dict(steps=50, repeats=2, batches="1,30,1000", numpy_robots=4, numpy_steps=5, matmul=512)
+SPEEDUP_BATCH = 30
+"""The batch size whose JAX rate is compared with NumPy's (a population of 30, as in the GA)."""
+RESET_CHUNK = 1000
+"""Robots reset in one compiled call; larger batches repeat these states (same work per step)."""
+FLOPS_BATCH = 1000
+"""Largest batch whose single-step program is cost-analysed."""
+CRUISE, GAIN = 300.0, 0.3
+"""The benchmark policy: wheels = CRUISE -/+ GAIN x (right IR - left IR)."""
+
+
+# ---------------------------------------------------------------------------------- CLI
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog=PROG, description="Benchmark the JAX e-puck simulator.")
+    p.add_argument("--out", default="bench.json", help="output JSON file (default bench.json)")
+    p.add_argument("--world", default="world1", help="built-in world name or .toml path")
+    p.add_argument("--steps", type=int, help="scan length per timed call (200; quick 50)")
+    p.add_argument("--quick", action="store_true", help="fewer steps, repeats and batch sizes")
+    p.add_argument(
+        "--batches", help="comma-separated batch sizes (1,30,1000,10000; quick 1,30,1000)"
+    )
+    p.add_argument("--repeats", type=int, help="timed calls per batch size (5; quick 2)")
+    p.add_argument("--numpy-robots", type=int, help="robots for the NumPy reference (30; quick 4)")
+    p.add_argument("--numpy-steps", type=int, help="steps per NumPy robot (20; quick 5)")
+    p.add_argument("--matmul", type=int, help="matrix size of the peak benchmark (2048; quick 512)")
+    p.add_argument(
+        "--devices", type=int, help=f"force N host devices ({DEVICE_FLAG}=N; set before JAX loads)"
+    )
+    args = p.parse_args(argv)
+    for name, value in (QUICK if args.quick else FULL).items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
+    return args
+
+
+def check_args(args: argparse.Namespace) -> None:
+    """Validate flags (before JAX is imported); turns ``--batches`` into a sorted int list."""
+    for name in ("steps", "repeats", "numpy_robots", "numpy_steps", "matmul"):
+        value = getattr(args, name)
+        if value <= 0:
+            flag = "--" + name.replace("_", "-")
+            raise UserError(f"{flag} must be a positive integer, got {value}")
+    if args.devices is not None and args.devices <= 0:
+        raise UserError(f"--devices must be a positive integer, got {args.devices}")
+    try:
+        batches = sorted({int(b) for b in args.batches.split(",") if b.strip()})
+    except ValueError:
+        raise UserError(
+            f"--batches must be comma-separated integers, got {args.batches!r}"
+        ) from None
+    if not batches or batches[0] <= 0:
+        raise UserError(f"--batches must be positive integers, got {args.batches!r}")
+    args.batches = batches
+    check_output_file(args.out, (".json",))
+
+
+def force_host_devices(n: int) -> None:
+    """Make XLA's CPU backend expose ``n`` devices (must run before JAX is imported)."""
+    if "jax" in sys.modules:
+        raise UserError("--devices must be applied before JAX is imported")
+    flags = [f for f in os.environ.get("XLA_FLAGS", "").split() if not f.startswith(DEVICE_FLAG)]
+    os.environ["XLA_FLAGS"] = " ".join([*flags, f"{DEVICE_FLAG}={n}"])
+
+
+# ---------------------------------------------------------------------------------- context
+
+
+@dataclass
+class Bench:
+    """What every benchmark function gets: the flags, the world and the shared results.
+
+    Attributes:
+        args: the parsed flags. world, params: the simulator's world and constants.
+        results: the JSON document being built; each benchmark adds its own keys.
+        cache: values shared between benchmarks (initial states, compiled programs).
+        notes: remarks collected for the JSON and the summary.
+    """
+
+    args: argparse.Namespace
+    world: Any
+    params: Any
+    results: dict[str, Any] = field(default_factory=dict)
+    cache: dict[str, Any] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
+def _timed(fn: Callable[[], Any], repeats: int) -> dict[str, Any]:
+    """Time ``repeats`` calls of ``fn`` after one warm-up call.
+
+    Returns:
+        ``best_s``, ``median_s``, ``times_s`` (every call's wall time) and ``cpu_per_wall``:
+        this process's CPU time over the wall time of the timed calls (about the number of
+        cores kept busy; 1.0 = one core).
+    """
+    import jax
+
+    jax.block_until_ready(fn())
+    times = []
+    cpu0 = time.process_time()
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        jax.block_until_ready(fn())
+        times.append(time.perf_counter() - t0)
+    cpu = time.process_time() - cpu0
+    return {
+        "best_s": min(times),
+        "median_s": statistics.median(times),
+        "times_s": times,
+        "cpu_per_wall": cpu / sum(times),
+    }
+
+
+def policy(obs):
+    """One robot's wheel speeds [2] from its ``Observation``: steer away from the nearer side."""
+    import jax.numpy as jnp
+
+    turn = GAIN * (obs.ir[0] + obs.ir[1] - obs.ir[6] - obs.ir[7])
+    return jnp.stack([CRUISE - turn, CRUISE + turn])
+
+
+def policy_numpy(obs: dict[str, Any]):
+    """:func:`policy` for the NumPy reference's observation dict."""
+    import numpy as np
+
+    ir = obs["ir"]
+    turn = GAIN * (ir[0] + ir[1] - ir[6] - ir[7])
+    return np.array([CRUISE - turn, CRUISE + turn])
+
+
+def make_rollout(n_steps: int, sharding: Any = None) -> Callable[..., Any]:
+    """``rollout(key, state, obs, world, params) -> (state, obs)``: ``n_steps`` batched steps.
+
+    Args:
+        n_steps: scan length.
+        sharding: a ``NamedSharding`` for the batch axis of the per-step keys and wheel speeds
+            (the states carry theirs in), or None for one device.
+    """
+    import jax
+    import jax.numpy as jnp
+
+    from jaxais import envs
+
+    v_step = jax.vmap(envs.step, in_axes=(0, 0, 0, None, None))
+    v_policy = jax.vmap(policy)
+
+    def rollout(key, state, obs, world, params):
+        n = state.t.shape[0]
+
+        def body(carry, k):
+            state, obs = carry
+            keys = jax.random.split(k, n)
+            wheels = v_policy(obs).astype(jnp.float32)
+            if sharding is not None:
+                keys = jax.lax.with_sharding_constraint(keys, sharding)
+                wheels = jax.lax.with_sharding_constraint(wheels, sharding)
+            return v_step(keys, state, wheels, world, params), None
+
+        carry, _ = jax.lax.scan(body, (state, obs), jax.random.split(key, n_steps))
+        return carry  # the final observation keeps every step's sensing alive
+
+    return envs.jit(rollout)
+
+
+def initial(b: Bench, n: int) -> tuple[Any, Any]:
+    """(states, observations) of ``n`` robots after reset (NumPy-tiled from one compiled call)."""
+    import jax
+    import numpy as np
+
+    from jaxais import envs
+
+    if "reset" not in b.cache:
+        chunk = min(max(b.args.batches + [b.args.numpy_robots]), RESET_CHUNK)
+
+        def reset_observe(key):
+            k_reset, k_obs = jax.random.split(key)
+            s = jax.vmap(envs.reset, in_axes=(0, None, None))(
+                jax.random.split(k_reset, chunk), b.world, b.params
+            )
+            o = jax.vmap(envs.observe, in_axes=(0, 0, None, None))(
+                jax.random.split(k_obs, chunk), s, b.world, b.params
+            )
+            return s, o
+
+        b.cache["reset"] = jax.device_get(envs.jit(reset_observe)(jax.random.key(0)))
+    state, obs = b.cache["reset"]
+    chunk = state.t.shape[0]
+    idx = np.arange(n) % chunk
+    return jax.tree.map(lambda x: np.asarray(x)[idx], (state, obs))
+
+
+# ---------------------------------------------------------------------------------- benchmarks
+
+
+def bench_machine(b: Bench) -> None:
+    """``machine``: what the figures were measured on."""
+    import jax
+    import jaxlib
+    import numpy as np
+
+    from jaxais import envs
+
+    def cpu_model() -> str:
+        try:
+            for line in Path("/proc/cpuinfo").read_text().splitlines():
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+        except OSError:
+            pass
+        return platform.processor() or platform.machine()
+
+    def memory_bytes() -> int | None:
+        try:
+            return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+        except (ValueError, OSError, AttributeError):
+            return None
+
+    affinity = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
+    b.results["machine"] = {
+        "platform": platform.platform(),
+        "machine": platform.machine(),
+        "processor": cpu_model(),
+        "cpu_count": os.cpu_count(),
+        "cpus_available": affinity,
+        "memory_bytes": memory_bytes(),
+        "python": sys.version.split()[0],
+        "numpy": np.__version__,
+        "jax": jax.__version__,
+        "jaxlib": getattr(jaxlib, "__version__", None) or jaxlib.version.__version__,
+        "backend": jax.default_backend(),
+        "device_count": jax.device_count(),
+        "device_kinds": sorted({d.device_kind for d in jax.devices()}),
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),
+        "compiler_options": envs.compiler_options(),
+        "load_average_start": list(os.getloadavg()),
+        "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+    }
+
+
+def _bench_batches(b: Bench, batches: list[int], sharding_for=None) -> dict[str, dict]:
+    """Compile and time the rollout at each batch size; {batch: {compile_s, best, median}}."""
+    import jax
+
+    out: dict[str, dict] = {}
+    key = jax.random.key(1)
+    steps = b.args.steps
+    for n in batches:
+        state, obs = initial(b, n)
+        sharding = sharding_for(n) if sharding_for is not None else None
+        # On the device(s) before timing: no host-to-device copy inside the timed calls.
+        state, obs = jax.device_put((state, obs), sharding)
+        rollout = make_rollout(steps, sharding)
+        t0 = time.perf_counter()
+        compiled = rollout.lower(key, state, obs, b.world, b.params).compile()
+        compile_s = time.perf_counter() - t0
+        t = _timed(
+            lambda c=compiled, s=state, o=obs: c(key, s, o, b.world, b.params), b.args.repeats
+        )
+        out[str(n)] = {
+            "compile_s": compile_s,
+            "steps_per_s": n * steps / t["best_s"],
+            "steps_per_s_median": n * steps / t["median_s"],
+            **t,
+        }
+    return out
+
+
+def bench_jax(b: Bench) -> None:
+    """``jax_steps_per_s``, ``jax_steps_per_s_median``, ``compile_s`` per batch size."""
+    runs = _bench_batches(b, b.args.batches)
+    b.results["jax_steps_per_s"] = {k: v["steps_per_s"] for k, v in runs.items()}
+    b.results["jax_steps_per_s_median"] = {k: v["steps_per_s_median"] for k, v in runs.items()}
+    b.results["compile_s"] = {k: v["compile_s"] for k, v in runs.items()}
+    b.results["jax_runs"] = runs
+
+
+def bench_sharded(b: Bench) -> None:
+    """``jax_steps_per_s_sharded``: the batch axis sharded over all devices (when > 1)."""
+    import jax
+    import numpy as np
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+    n_dev = jax.device_count()
+    usable = [n for n in b.args.batches if n % n_dev == 0]
+    b.results["sharding"] = {"devices": n_dev, "batches": usable}
+    b.results["jax_steps_per_s_sharded"] = None
+    if n_dev == 1:
+        b.notes.append("one JAX device: sharded benchmark skipped (try --devices 2)")
+        return
+    if not usable:
+        b.notes.append(f"no batch size divisible by {n_dev} devices: sharded benchmark skipped")
+        return
+    mesh = Mesh(np.array(jax.devices()), ("batch",))
+    sharding = NamedSharding(mesh, PartitionSpec("batch"))
+    runs = _bench_batches(b, usable, sharding_for=lambda n: sharding)
+    sharded = {k: v["steps_per_s"] for k, v in runs.items()}
+    b.results["jax_steps_per_s_sharded"] = sharded
+    b.results["compile_s_sharded"] = {k: v["compile_s"] for k, v in runs.items()}
+    b.results["jax_runs_sharded"] = runs
+    single = b.results.get("jax_steps_per_s", {})
+    gain = {k: sharded[k] / single[k] for k in sharded if k in single}
+    b.results["sharding"]["speedup_vs_one_device"] = gain
+    if gain:
+        best = max(gain, key=lambda k: gain[k])
+        helps = gain[best] > 1.05
+        b.results["sharding"]["helps"] = helps
+        b.notes.append(
+            f"sharding over {n_dev} devices: best x{gain[best]:.2f} at batch {best} "
+            f"({'helps' if helps else 'does not help'} on this machine)"
+        )
+
+
+def bench_numpy(b: Bench) -> None:
+    """``numpy_steps_per_s``: ``reference.ref_step`` robot by robot, on the same work."""
+    import jax
+    from jaxais.envs import reference as ref
+
+    from jaxais import envs
+
+    n_r, n_t = b.args.numpy_robots, b.args.numpy_steps
+    state, obs = initial(b, n_r)
+    # The same draws a JAX step makes, made up front so that only ref_step is timed.
+    keys = jax.random.split(jax.random.key(2), (n_t, n_r))
+    sample = envs.jit(jax.vmap(jax.vmap(envs.sample_step_noise, in_axes=(0, None)), (0, None)))
+    noise = ref.noise_to_numpy(sample(keys, b.world))
+    world_np, params_np = ref.world_to_numpy(b.world), ref.params_to_numpy(b.params)
+    states = ref.state_to_numpy(state)
+    observations = ref.obs_to_numpy(obs)
+
+    t0 = time.perf_counter()
+    for i in range(n_r):
+        s, o = ref.unbatch(states, i), ref.unbatch(observations, i)
+        for t in range(n_t):
+            step_noise = {k: v[t, i] for k, v in noise.items()}
+            s, o = ref.ref_step(s, policy_numpy(o), step_noise, world_np, params_np)
+    seconds = time.perf_counter() - t0
+    b.results["numpy_steps_per_s"] = n_r * n_t / seconds
+    b.results["numpy"] = {"robots": n_r, "steps": n_t, "seconds": seconds}
+
+
+def _cost(compiled: Any) -> dict[str, float]:
+    ca = compiled.cost_analysis()
+    if isinstance(ca, list | tuple):  # older jax: one dict per computation
+        ca = ca[0] if ca else {}
+    return {k: float(v) for k, v in (ca or {}).items()}
+
+
+def bench_flops(b: Bench) -> None:
+    """``flops_per_step``: XLA's cost analysis of the compiled batched single-step program."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxais import envs
+
+    v_step = envs.jit(jax.vmap(envs.step, in_axes=(0, 0, 0, None, None)))
+    per_batch = {}
+    # One batch size (each costs a compilation): the per-robot figure hardly depends on it.
+    for n in [max([x for x in b.args.batches if x <= FLOPS_BATCH] or [1])]:
+        state, _ = initial(b, n)
+        keys = jax.random.split(jax.random.key(3), n)
+        wheels = jnp.full((n, 2), CRUISE, jnp.float32)
+        cost = _cost(v_step.lower(keys, state, wheels, b.world, b.params).compile())
+        per_batch[str(n)] = {
+            k: cost[k] / n for k in ("flops", "transcendentals", "bytes accessed") if k in cost
+        }
+    largest = max(per_batch, key=int)
+    flops = per_batch[largest].get("flops")
+    b.results["flops_per_step"] = flops
+    b.results["cost_analysis_per_step"] = per_batch
+    if not flops:
+        b.notes.append("XLA's cost analysis reported no flops for the step")
+
+
+def bench_peak(b: Bench) -> None:
+    """``peak_flops``: best float32 matmul rate (``jnp.dot``, jitted) on this machine."""
+    import jax
+    import jax.numpy as jnp
+
+    n = b.args.matmul
+    ka, kb = jax.random.split(jax.random.key(4))
+    x = jax.random.normal(ka, (n, n), jnp.float32)
+    y = jax.random.normal(kb, (n, n), jnp.float32)
+    dot = jax.jit(jnp.dot)
+    t = _timed(lambda: dot(x, y), max(b.args.repeats, 3))
+    b.results["peak_flops"] = 2.0 * n**3 / t["best_s"]
+    b.results["peak"] = {"matmul_size": n, "dtype": "float32", **t}
+
+
+BENCHMARKS: list[tuple[str, Callable[[Bench], None]]] = [
+    ("machine", bench_machine),
+    ("jax simulator", bench_jax),
+    ("sharded simulator", bench_sharded),
+    ("numpy reference", bench_numpy),
+    ("flops per step", bench_flops),
+    ("matmul peak", bench_peak),
+]
+"""The benchmarks, run in this order; each adds its figures to ``Bench.results``."""
+
+
+def derive(b: Bench) -> None:
+    """Figures computed from the others: speedup over NumPy and the fraction of peak."""
+    r = b.results
+    jax_rates = {int(k): v for k, v in r.get("jax_steps_per_s", {}).items()}
+    if jax_rates and r.get("numpy_steps_per_s"):
+        batch = min(jax_rates, key=lambda n: (abs(n - SPEEDUP_BATCH), n))
+        r["speedup_vs_numpy"] = jax_rates[batch] / r["numpy_steps_per_s"]
+        r["speedup_batch"] = batch
+    if jax_rates and r.get("flops_per_step") and r.get("peak_flops"):
+        largest = max(jax_rates)
+        r["achieved_flops"] = r["flops_per_step"] * jax_rates[largest]
+        r["achieved_flops_batch"] = largest
+        r["fraction_of_peak"] = r["achieved_flops"] / r["peak_flops"]
+
+
+def summary(b: Bench, seconds: float) -> str:
+    """A few human-readable lines."""
+    r, m = b.results, b.results.get("machine", {})
+    lines = [
+        f"{PROG}: wrote {b.args.out} in {seconds:.0f} s "
+        f"({m.get('backend')} {', '.join(m.get('device_kinds', []))}, "
+        f"{m.get('cpu_count')} CPUs, jax {m.get('jax')}, load {r['load_average_end'][0]:.1f})",
+        f"  JAX robot-steps/s (best of {b.args.repeats}, {b.args.steps}-step scan): "
+        + ", ".join(f"B={k}: {v:,.0f}" for k, v in r.get("jax_steps_per_s", {}).items()),
+        "  compile s: " + ", ".join(f"B={k}: {v:.1f}" for k, v in r.get("compile_s", {}).items()),
+        "  cores busy (CPU time / wall time): "
+        + ", ".join(f"B={k}: {v['cpu_per_wall']:.2f}" for k, v in r.get("jax_runs", {}).items()),
+    ]
+    if r.get("jax_steps_per_s_sharded"):
+        runs = r["jax_runs_sharded"]
+        lines.append(
+            f"  sharded over {r['sharding']['devices']} devices: "
+            + ", ".join(
+                f"B={k}: {v['steps_per_s']:,.0f} ({v['cpu_per_wall']:.2f} cores)"
+                for k, v in runs.items()
+            )
+        )
+    if "numpy_steps_per_s" in r:
+        text = f"  NumPy reference: {r['numpy_steps_per_s']:,.1f} robot-steps/s"
+        if "speedup_vs_numpy" in r:
+            text += f"; JAX at B={r['speedup_batch']} is x{r['speedup_vs_numpy']:,.0f} faster"
+        lines.append(text)
+    if "fraction_of_peak" in r:
+        lines.append(
+            f"  {r['flops_per_step']:,.0f} flops/step x steps/s at B={r['achieved_flops_batch']}"
+            f" = {r['achieved_flops'] / 1e9:.2f} GFLOP/s = {100 * r['fraction_of_peak']:.1f}% of "
+            f"the {r['peak_flops'] / 1e9:.1f} GFLOP/s matmul peak"
+        )
+    lines += [f"  note: {n}" for n in b.notes]
+    return "\n".join(lines)
+
+
+@main_wrapper(PROG)
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(argv)
+    check_args(args)
+    if args.devices is not None:
+        force_host_devices(args.devices)
+
+    from tqdm import tqdm
+
+    from jaxais import envs
+
+    t0 = time.perf_counter()
+    b = Bench(args=args, world=envs.load_world(args.world), params=envs.default_params())
+    b.results.update(
+        schema=SCHEMA,
+        config={
+            "world": b.world.name,
+            "steps": args.steps,
+            "batches": args.batches,
+            "repeats": args.repeats,
+            "quick": args.quick,
+            "numpy_robots": args.numpy_robots,
+            "numpy_steps": args.numpy_steps,
+            "timing": "best of `repeats` timed calls after one warm-up call (median also given)",
+            "policy": f"wheels = {CRUISE:g} -/+ {GAIN:g} * (ir0 + ir1 - ir6 - ir7)",
+        },
+    )
+    bar = tqdm(BENCHMARKS, desc=PROG, unit="bench", file=sys.stderr, leave=False)
+    wall: dict[str, float] = {}
+    for name, fn in bar:
+        bar.set_postfix_str(name)
+        t = time.perf_counter()
+        fn(b)
+        wall[name] = time.perf_counter() - t
+    bar.close()
+    derive(b)
+    b.results["bench_wall_s"] = wall
+    b.results["load_average_end"] = list(os.getloadavg())
+    b.results["notes"] = b.notes
+    atomic_write_json(args.out, b.results)
+    print(summary(b, time.perf_counter() - t0))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,174 @@
+"""Reproduce the paper end to end: every system in every world, Tables 3-5, H1-H4, a report.
+
+    python scripts/reproduce.py --out results/
+    python scripts/reproduce.py --out results/ --trials 1000          # tight intervals
+    python scripts/reproduce.py --out results/ --evolve               # fresh LTL seed first
+
+Runs the paper's protocol (SPEC 9): 30 trials of each system per simulated world and 20 in
+`real`; the unseeded systems with both random sets R1 and R2 in the simulated worlds and R1 only
+in `real`. All systems of a world run as one compiled, vmapped batch. Writes DIR/tables.json,
+DIR/report.md (with figures in DIR/figures/), every trial in DIR/trials/ and DIR/run.json (the
+config, seeds and timings needed to regenerate it all).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from jaxais.cli import UserError, atomic_write_json, check_writable_dir, main_wrapper
+
+WORLDS = ("world1", "world2", "real")
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="reproduce.py", description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", required=True, help="output directory (created if missing)")
+    p.add_argument(
+        "--trials",
+        type=int,
+        default=None,
+        help="trials per system and world (default: the paper's 30, 20 in real)",
+    )
+    src = p.add_mutually_exclusive_group()
+    src.add_argument(
+        "--seeds",
+        default=None,
+        help="LTL seed directory (default: the shipped checkpoints/default)",
+    )
+    src.add_argument(
+        "--evolve",
+        action="store_true",
+        help="run the LTL (scripts/evolve.py, defaults) first and use its seed",
+    )
+    p.add_argument("--seed", type=int, default=0, help="PRNG seed of the trials")
+    p.add_argument("--worlds", default=",".join(WORLDS), help="comma-separated subset of worlds")
+    p.add_argument("--tau-cap", type=float, default=4000.0, help="time cap, s [paper: 4000]")
+    p.add_argument("--collision-cap", type=int, default=100, help="collision cap [paper: 100]")
+    p.add_argument("--generations", type=int, default=30, help="LTL generations with --evolve")
+    return p.parse_args(argv)  # fmt: skip
+
+
+def _ltl_summary(seed_dir: Path) -> dict | None:
+    """The evolve.py summary next to a seed (DIR/seed -> DIR/summary.json), if there is one."""
+    for candidate in (seed_dir / "summary.json", seed_dir.parent / "summary.json"):
+        if candidate.is_file():
+            try:
+                return json.loads(candidate.read_text())
+            except (OSError, ValueError):
+                return None
+    return None
+
+
+@main_wrapper("reproduce.py")
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(argv)
+    worlds = [w for w in args.worlds.split(",") if w]
+    unknown = sorted(set(worlds) - set(WORLDS))
+    if unknown or not worlds:
+        raise UserError(f"--worlds: unknown world(s) {unknown} (choose from {', '.join(WORLDS)})")
+    if args.trials is not None and args.trials < 2:
+        raise UserError(f"--trials must be >= 2 (t-tests need two per group), got {args.trials}")
+    if args.tau_cap <= 0 or args.collision_cap < 1:
+        raise UserError("--tau-cap must be > 0 and --collision-cap >= 1")
+    if args.generations < 1:
+        raise UserError(f"--generations must be >= 1, got {args.generations}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    check_writable_dir(out)
+
+    from tqdm import tqdm
+
+    from jaxais import envs, report, stats
+    from jaxais.episode import EpisodeConfig
+    from jaxais.experiment import (
+        build_systems,
+        paper_trials,
+        protocol,
+        results_document,
+        run_config,
+    )
+    from jaxais.network import NetworkParams
+    from jaxais.plotting import draw_world
+    from jaxais.seed import default_seed_dir, load_seed
+    from jaxais.trials import run_trials
+
+    started = time.perf_counter()
+    timings: dict[str, float] = {}
+    seeds_dir = Path(args.seeds) if args.seeds else default_seed_dir()
+    if args.evolve:
+        ltl_dir = out / "ltl"
+        cmd = [sys.executable, str(Path(__file__).with_name("evolve.py")), "--out", str(ltl_dir),
+               "--generations", str(args.generations)]  # fmt: skip
+        t = time.perf_counter()
+        if subprocess.run(cmd).returncode != 0:
+            raise UserError("the LTL run (scripts/evolve.py) failed; see its message above")
+        timings["ltl_s"] = time.perf_counter() - t
+        seeds_dir = ltl_dir / "seed"
+    load_seed(seeds_dir)  # fail early, before any trial runs, on a missing or corrupt seed
+
+    network = NetworkParams()
+    params = envs.default_params()
+    config = EpisodeConfig(tau_cap=args.tau_cap, collision_cap=args.collision_cap, record=True)
+    results_by_world, trajectories, configs = {}, {}, {}
+    (out / "trials").mkdir(exist_ok=True)
+    for name in worlds:
+        world = envs.load_world(name)
+        labels = list(protocol(name))
+        n = args.trials if args.trials is not None else paper_trials(name)
+        systems, seed_info = build_systems(labels, seeds_dir, network)
+        world_t: dict[str, float] = {}
+        total = config.max_iterations(params.dt)
+        with tqdm(total=total, desc=f"{name}: {len(labels)} systems x {n} trials",
+                  unit="it", file=sys.stderr) as bar:  # fmt: skip
+            results = run_trials(world, systems, n, args.seed, config, params, bar, world_t)
+            bar.update(bar.total - bar.n)
+        for key, value in world_t.items():
+            timings[f"{name}_{key}"] = value
+            timings[key] = timings.get(key, 0.0) + value
+        cfg = run_config(world, name, config, network, params, seed_info)
+        configs[name] = cfg
+        results_by_world[name] = {k: v.records for k, v in results.items()}
+        trajectories[name] = {k: v.trajectories[0][:, :2] for k, v in results.items()}
+        for label, trial_set in results.items():
+            doc = results_document(label, name, args.seed, trial_set, cfg)
+            atomic_write_json(out / "trials" / f"{name}_{label}.json", doc)
+
+    tables = stats.build_tables(results_by_world)
+    atomic_write_json(out / "tables.json", tables)
+    timings["total_s"] = time.perf_counter() - started
+    run = {
+        "command": "reproduce.py " + " ".join(sys.argv[1:] if argv is None else argv),
+        "seed": args.seed,
+        "trials": args.trials,
+        "ltl_seed": str(seeds_dir),
+        "worlds": configs,
+        "timings_s": timings,
+    }
+    atomic_write_json(out / "run.json", run)
+    loaded = {name: envs.load_world(name) for name in worlds}
+    report_path = report.write_report(
+        out,
+        tables,
+        results_by_world,
+        report.load_paper_tables(),
+        _ltl_summary(seeds_dir),
+        {k: v for k, v in run.items() if k != "timings_s"},
+        timings,
+        trajectories,
+        lambda ax, world_name: draw_world(ax, loaded[world_name]),
+    )
+    verdicts = ", ".join(
+        f"{h} {'supported' if v['supported'] else 'not supported'}"
+        for h, v in tables["hypotheses"].items()
+    )
+    print(f"{verdicts}. Total {timings['total_s']:.0f} s (compile {timings.get('compile_s', 0):.0f}"
+          f" s). Report: {report_path}")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()

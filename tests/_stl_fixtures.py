@@ -1,0 +1,247 @@
+"""Shared, compiled-once pieces for the STL, trial and script tests.
+
+Compiling a program that holds the simulator and the controller costs tens of seconds on a small
+CPU, so every test of these files uses the same world, batch size, episode config and systems,
+and gets its jitted functions from the cached builders below (one compilation per session).
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxais import envs
+from jaxais.antibodies import sample_antibodies
+from jaxais.controllers import STL, STLState, System
+from jaxais.episode import EpisodeConfig, Percept, iterate, start
+from jaxais.network import NetworkParams
+from jaxais.reinforcement import PenaltyCounters
+from jaxais.seed import Seed, save_seed
+from jaxais.systems import make_system
+
+WORLD = "world1"
+BATCH = 4
+"""Runs per batched program (every batched test uses exactly this many)."""
+CONFIG = EpisodeConfig(tau_cap=20.0, collision_cap=5, chunk=25, segment=500, record=True)
+"""Short caps: 625 iterations at most, 5 collisions."""
+X, Y = 5, 8
+N_UNIFORM = X * Y + 7 + 1 + 2 * X + 2
+"""Uniforms per iteration of the STL controller for a 5 x 8 network (see ``stl_controller``)."""
+SLICES = {"idiotope": slice(0, 40), "new": slice(40, 47), "new_p": slice(47, 48)}
+
+
+@functools.cache
+def world() -> envs.World:
+    return envs.load_world(WORLD)
+
+
+@functools.cache
+def sim_params() -> envs.SimParams:
+    return envs.default_params()
+
+
+# ---------------------------------------------------------------------------------- systems
+
+
+def random_seed(seed: int = 0, x: int = X) -> Seed:
+    """A made-up LTL seed: random valid sets, plausible tau and c, L in [0, 100]."""
+    k_ab, k_l = jax.random.split(jax.random.key(seed))
+    antibodies = jax.tree.map(np.asarray, sample_antibodies(k_ab, (x, Y)))
+    L = np.asarray(jax.random.uniform(k_l, (x, Y), minval=0.0, maxval=100.0), np.float32)
+    tau = np.linspace(90.0, 400.0, x).astype(np.float32)
+    collisions = (np.arange(x) % 4).astype(np.int32)
+    return Seed(antibodies=antibodies, tau=tau, collisions=collisions, L=L)
+
+
+def write_seed(path: Path, seed: int = 0) -> Path:
+    """A seed directory made with :func:`save_seed` from :func:`random_seed`."""
+    return save_seed(path, random_seed(seed), {"command": "tests", "seed": seed, "version": "t"})
+
+
+@functools.cache
+def systems() -> dict[str, System]:
+    """SIE, SRL (seeded by :func:`random_seed`), UIE-R1, URL-R1 and HDC."""
+    seed = random_seed()
+    return {
+        name: make_system(name, seed if name in ("SIE", "SRL") else None)
+        for name in ("SIE", "SRL", "UIE-R1", "URL-R1", "HDC")
+    }
+
+
+def leaf_array(x) -> np.ndarray:
+    """A pytree leaf as NumPy (PRNG keys as their key data)."""
+    if jnp.issubdtype(jnp.result_type(x), jax.dtypes.prng_key):
+        return np.asarray(jax.random.key_data(x))
+    return np.asarray(x)
+
+
+def tree_equal(a, b) -> bool:
+    la, lb = jax.tree.leaves(a), jax.tree.leaves(b)
+    return len(la) == len(lb) and all(
+        np.array_equal(leaf_array(x), leaf_array(y)) for x, y in zip(la, lb, strict=True)
+    )
+
+
+def stack(items: list) -> object:
+    return jax.tree.map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *items)
+
+
+def unstack(tree: object, i: int) -> object:
+    return jax.tree.map(lambda a: a[i], tree)
+
+
+# ---------------------------------------------------------------------------------- compiling
+
+
+@functools.cache
+def fast_options() -> dict:
+    """XLA options that compile these test programs several times faster (and run them a little
+    slower): the tests check semantics, not speed. Options this XLA lacks are dropped."""
+    for options in (
+        {"xla_backend_optimization_level": 0, "xla_cpu_use_fusion_emitters": False},
+        {"xla_backend_optimization_level": 0},
+    ):
+        try:
+            jax.jit(lambda x: x + 1, compiler_options=options)(jnp.zeros(2))
+        except Exception:  # noqa: BLE001 (an option this XLA does not know)
+            continue
+        return options
+    return {}
+
+
+def jit(fun, **kwargs):
+    return jax.jit(fun, compiler_options=fast_options(), **kwargs)
+
+
+# ---------------------------------------------------------------------------------- controller
+
+
+@functools.cache
+def learn_fn():
+    """``STL.learn`` under one ``jax.jit`` (every unit test calls this one)."""
+    return jit(STL.learn)
+
+
+@functools.cache
+def act_fn():
+    """``STL.act`` under one ``jax.jit``."""
+    return jit(STL.act)
+
+
+def percept(m, m_prev=0, v=0.0, v_prev=0.0, blue_pixels=0, centroid=7.0, t=1) -> Percept:
+    """A hand-made percept with fixed dtypes (so the jitted functions never retrace)."""
+    return Percept(
+        m=jnp.int32(m),
+        m_prev=jnp.int32(m_prev),
+        v=jnp.float32(v),
+        v_prev=jnp.float32(v_prev),
+        blue_pixels=jnp.int32(blue_pixels),
+        centroid=jnp.float32(centroid),
+        t=jnp.int32(t),
+    )
+
+
+def system(
+    *,
+    learning: bool = True,
+    idiotypic: bool = False,
+    replacement: bool = False,
+    base: str = "UIE-R1",
+) -> System:
+    """A system with the given switches over ``base``'s antibodies (default network)."""
+    s = systems()[base]
+    return s.replace(
+        learning=jnp.asarray(learning),
+        idiotypic=jnp.asarray(idiotypic),
+        replacement=jnp.asarray(replacement),
+        network=NetworkParams(),
+    )
+
+
+def state(
+    sys_: System,
+    P,
+    *,
+    sigma0=None,
+    I=None,
+    N=None,
+    acting: int = 0,
+    unseen_run: int = 0,
+    obstacle_run: int = 0,
+    antibodies=None,
+) -> STLState:
+    """A hand-made network state (sigma0 defaults to the column means of P)."""
+    P = jnp.asarray(P, jnp.float32)
+    return STLState(
+        antibodies=sys_.antibodies if antibodies is None else antibodies,
+        P=P,
+        sigma0=jnp.mean(P, axis=0) if sigma0 is None else jnp.asarray(sigma0, jnp.float32),
+        I=jnp.zeros(P.shape, jnp.float32) if I is None else jnp.asarray(I, jnp.float32),
+        N=jnp.full(P.shape, 1000.0, jnp.float32) if N is None else jnp.asarray(N, jnp.float32),
+        counters=PenaltyCounters(
+            unseen_run=jnp.int32(unseen_run), obstacle_run=jnp.int32(obstacle_run)
+        ),
+        acting=jnp.int32(acting),
+        differences=jnp.int32(0),
+        selections=jnp.int32(0),
+        replaced=jnp.int32(0),
+    )
+
+
+def uniforms(seed: int) -> jnp.ndarray:
+    """One iteration's controller uniforms [N_UNIFORM]."""
+    return jnp.asarray(np.random.default_rng(seed).random(N_UNIFORM), jnp.float32)
+
+
+# ---------------------------------------------------------------------------------- episode
+
+
+@functools.cache
+def start_fn():
+    """``vmap(start)`` over BATCH runs, jitted once."""
+    return jit(jax.vmap(start, in_axes=(0, 0, None, None, None, 0)), static_argnums=(4,))
+
+
+@functools.cache
+def iterate_fn():
+    """Unbatched ``iterate`` (STL controller, :data:`CONFIG`), jitted once."""
+    return jit(iterate, static_argnums=(5, 7))
+
+
+@functools.cache
+def iterate_batch_fn():
+    """``vmap(iterate)`` over BATCH runs, jitted once."""
+    return jit(
+        jax.vmap(iterate, in_axes=(0, 0, 0, None, None, None, 0, None)), static_argnums=(5, 7)
+    )
+
+
+@functools.cache
+def noise_fn():
+    """[BATCH] step noises from [BATCH] keys."""
+    w = world()
+    return jit(jax.vmap(lambda k: envs.sample_step_noise(k, w)))
+
+
+BATCH_LABELS = ("SIE", "UIE-R1", "URL-R1", "HDC")
+
+
+def batch_params() -> System:
+    """[BATCH] stacked systems (one of each kind that learns differently)."""
+    return stack([systems()[k] for k in BATCH_LABELS])
+
+
+def start_runs(reset_keys: jax.Array, run_keys: jax.Array, params: System | None = None):
+    """BATCH runs at t = 0 (batched Run)."""
+    params = batch_params() if params is None else params
+    return start_fn()(reset_keys, run_keys, world(), sim_params(), STL, params)
+
+
+def step_one(run, key: jax.Array, u: jnp.ndarray, params: System):
+    """One unbatched iteration with noise drawn from ``key``."""
+    noise = unstack(noise_fn()(jax.random.split(key, BATCH)), 0)
+    return iterate_fn()(run, noise, u, world(), sim_params(), STL, params, CONFIG)

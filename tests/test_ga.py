@@ -1,0 +1,328 @@
+"""The LTL genetic algorithm (SPEC 10): selection, crossover, mutation, elitism, bests, diversity.
+
+Every compiled program is shared: breeding is tested through ``ga.tell`` with one tiny config
+(2 populations x 4 robots), and the GA runs use the same config and a 2 s time cap, so the
+rollout compiles once for the session (``_ga_run`` below is shared with the other GA tests).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from jaxais import envs, ga
+from jaxais.antibodies import (
+    LIMITS_MIN,
+    Antibodies,
+    antibody_distance,
+    sample_antibodies,
+    within_limits,
+)
+from jaxais.checkpointing import state_to_tree
+
+TINY = ga.GAConfig(populations=2, robots=4, generations=2, tau_cap=2.0)
+"""The tests' GA: every test that evaluates robots uses exactly this config (one compile)."""
+
+
+@functools.cache
+def maze() -> envs.World:
+    return envs.load_world("ga_maze")
+
+
+@functools.cache
+def tiny_run(seed: int = 0, generations: int = 2) -> ga.GAState:
+    """A finished tiny GA run (cached: other tests reuse it)."""
+    config = ga.GAConfig(**{**TINY.to_dict(), "generations": generations})
+    return ga.run(jax.random.key(seed), config, maze())
+
+
+def hand_sets(types: list[list[int]], speed: float = 100.0) -> Antibodies:
+    """Canonical sets [K, 8] of the given types, every used attribute at its lower limit, S set.
+
+    Built in NumPy (eager JAX ops would compile one small program each).
+    """
+    t = np.asarray(types, np.int32)
+    x = np.nan_to_num(LIMITS_MIN[t], nan=0.0).astype(np.float32)
+    x[..., 0] = np.where(t == 4, 300.0, np.where(t == 3, min(speed, 100.0), speed))
+    cols = ("speed", "freq", "angle", "direction", "right_freq", "right_angle")
+    fields = {c: x[..., k] for k, c in enumerate(cols)}
+    fields["direction"] = fields["direction"].astype(np.int32)
+    return Antibodies(type=t, **fields)
+
+
+def evaluation(f, tau=None, c=None, L=None) -> ga.Evaluation:
+    f = np.asarray(f, np.float32)
+    tau = 2 * f if tau is None else np.asarray(tau, np.float32)
+    c = np.zeros(f.shape, np.int32) if c is None else np.asarray(c, np.int32)
+    L = np.zeros((*f.shape, 8), np.float32) if L is None else np.asarray(L, np.float32)
+    return ga.Evaluation(fitness=f, tau=tau, collisions=c, L=L, status=np.zeros(f.shape, np.int32))
+
+
+# ------------------------------------------------------------------------------- config
+
+
+def test_lower_is_better_is_declared_once():
+    assert ga.LOWER_IS_BETTER is True
+    assert "LOWER fitness is better" in ga.__doc__
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("populations", 0),
+        ("robots", 1),
+        ("generations", 0),
+        ("mutation", 1.5),
+        ("mutation", -0.1),
+        ("elitism", 4),
+        ("elitism", -1),
+        ("target_f", float("nan")),
+        ("tau_cap", 0.0),
+        ("tau_cap", float("inf")),
+        ("collision_cap", 0),
+        ("robots", 2.5),
+        ("populations", True),
+    ],
+)
+def test_config_rejects_out_of_range_values(field, value):
+    with pytest.raises(ga.ConfigError) as info:
+        ga.GAConfig(**{**TINY.to_dict(), field: value})
+    assert info.value.field == field
+    assert "\n" not in str(info.value) and str(info.value).startswith(field)
+
+
+def test_config_defaults_and_round_trip():
+    c = ga.GAConfig()
+    assert (c.populations, c.robots, c.generations, c.mutation, c.elitism) == (5, 10, 30, 0.05, 1)
+    assert (c.tau_cap, c.collision_cap, c.target_f) == (500.0, 100, None)
+    assert ga.GAConfig.from_dict(c.to_dict()) == c
+    assert c.episode_config().tau_cap == 500.0
+
+
+# ------------------------------------------------------------------------------- selection
+
+_roulette = jax.jit(ga.roulette, static_argnums=2)
+
+
+def test_roulette_frequencies_match_inverse_cost():
+    tau = np.array([100.0, 200.0, 500.0, 50.0, 500.0], np.float32)
+    c = np.array([0, 10, 100, 2, 0], np.int32)
+    w = np.asarray(ga.selection_weights(tau, c))
+    np.testing.assert_allclose(w, 1.0 / (tau + 8.0 * c), rtol=1e-6)
+    n = 200_000
+    idx = np.asarray(_roulette(jax.random.key(1), jnp.asarray(w), n))
+    freq = np.bincount(idx, minlength=5) / n
+    expected = w / w.sum()
+    # Binomial standard error at n = 2e5 is below 0.0012; 5 sigma.
+    np.testing.assert_allclose(freq, expected, atol=0.006)
+
+
+def test_roulette_never_draws_a_zero_weight():
+    w = jnp.array([0.0, 1.0, 0.0, 3.0])
+    idx = np.asarray(_roulette(jax.random.key(2), w, 200_000))
+    assert set(np.unique(idx)) == {1, 3}
+
+
+# ------------------------------------------------------------------------------- crossover
+
+_crossover = jax.jit(ga.crossover)
+
+
+def test_crossover_takes_the_higher_scoring_antibody_per_antigen():
+    sets = hand_sets([[0] * 8, [5] * 8])
+    a = jax.tree.map(lambda x: x[0], sets)
+    b = jax.tree.map(lambda x: x[1], sets)
+    La = jnp.array([5.0, 0.0, 3.0, 1.0, 2.0, 2.0, 9.0, 0.5])
+    Lb = jnp.array([1.0, 4.0, 3.0, 2.0, 2.0, 1.0, 0.0, 7.0])
+    winner_a = np.array([True, False, None, False, None, True, True, False])
+    ties = np.array([w is None for w in winner_a])
+    from_a_counts = np.zeros(8)
+    n = 200
+    for k in range(n):
+        child = _crossover(jax.random.key(k), a, La, b, Lb)
+        from_a = np.asarray(child.type) == 0
+        np.testing.assert_array_equal(from_a[~ties], winner_a[~ties].astype(bool))
+        from_a_counts += from_a
+    # Ties go either way, about half the time each.
+    assert np.all(np.abs(from_a_counts[ties] / n - 0.5) < 0.15)
+
+
+# ------------------------------------------------------------------------------- tell
+
+_within = jax.jit(within_limits)
+MUT0 = ga.GAConfig(**{**TINY.to_dict(), "mutation": 0.0})
+MUT1 = ga.GAConfig(**{**TINY.to_dict(), "mutation": 1.0})
+
+
+def fresh_state(seed: int, config: ga.GAConfig = TINY) -> ga.GAState:
+    return ga.init(jax.random.key(seed), config)
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), rate=st.sampled_from([0.05, 1.0]))
+def test_next_generation_stays_within_table_1(seed, rate):
+    config = TINY if rate == 0.05 else MUT1
+    state = fresh_state(0, config)
+    f = np.random.default_rng(seed).uniform(1, 300, (2, 4))
+    new = ga.tell(jax.random.key(seed), state, evaluation(f), config)
+    assert bool(np.all(np.asarray(_within(new.population))))
+
+
+def test_elite_survives_unchanged_and_children_come_from_parents():
+    state = fresh_state(3, MUT0)
+    f = np.array([[40.0, 10.0, 30.0, 20.0], [5.0, 50.0, 5.0, 60.0]])
+    new = ga.tell(jax.random.key(4), state, evaluation(f), MUT0)
+    pop, old = jax.tree.map(np.asarray, new.population), jax.tree.map(np.asarray, state.population)
+    for p, elite in ((0, 1), (1, 0)):  # population 1: a tie, the lowest index wins
+        for name in ("type", "speed", "freq", "angle", "direction", "right_freq", "right_angle"):
+            np.testing.assert_array_equal(getattr(pop, name)[p, 0], getattr(old, name)[p, elite])
+    # Without mutation every child antibody is some parent's antibody for that antigen.
+    for p in range(2):
+        for r in range(1, 4):
+            for j in range(8):
+                assert any(
+                    pop.type[p, r, j] == old.type[p, q, j]
+                    and pop.speed[p, r, j] == old.speed[p, q, j]
+                    for q in range(4)
+                )
+    assert int(new.generation) == 1
+    np.testing.assert_array_equal(np.asarray(new.fitness), f.astype(np.float32))
+
+
+def test_elite_survives_through_a_real_run():
+    state = tiny_run()
+    state = jax.tree.map(np.asarray, state.replace(key=jax.random.key_data(state.key)))
+    best = np.argmin(state.fitness, axis=1)
+    for p in range(2):
+        for name in ("type", "speed", "freq", "angle", "direction", "right_freq", "right_angle"):
+            np.testing.assert_array_equal(
+                getattr(state.population, name)[p, 0], getattr(state.evaluated, name)[p, best[p]]
+            )
+
+
+def test_best_is_kept_until_strictly_beaten():
+    config = MUT0
+    s0 = fresh_state(5, config)
+    s1 = ga.tell(
+        jax.random.key(1), s0, evaluation([[9.0, 7.0, 8.0, 9.0], [3.0, 4.0, 5.0, 6.0]]), config
+    )
+    np.testing.assert_array_equal(np.asarray(s1.best.fitness), [7.0, 3.0])
+    np.testing.assert_array_equal(np.asarray(s1.best.generation), [0, 0])
+    np.testing.assert_array_equal(np.asarray(s1.best.tau), [14.0, 6.0])
+    s2 = ga.tell(
+        jax.random.key(2), s1, evaluation([[6.0, 9.0, 9.0, 9.0], [3.0, 9.0, 9.0, 9.0]]), config
+    )
+    np.testing.assert_array_equal(np.asarray(s2.best.fitness), [6.0, 3.0])
+    np.testing.assert_array_equal(np.asarray(s2.best.generation), [1, 0])  # a tie keeps the old
+    # Population 0's best is now robot 0 of generation 1 (the elite of generation 0).
+    np.testing.assert_array_equal(
+        np.asarray(s2.best.antibodies.speed[0]), np.asarray(s1.population.speed[0, 0])
+    )
+    seed = ga.best_sets(s2)
+    assert seed.antibodies.type.shape == (2, 8) and seed.tau.dtype == np.float32
+
+
+def test_tell_compiles_once_per_config():
+    before = ga._tell_jit._cache_size()
+    state = fresh_state(6)
+    for k in range(3):
+        state = ga.tell(jax.random.key(k), state, evaluation(np.full((2, 4), 1.0 + k)), TINY)
+    assert ga._tell_jit._cache_size() - before <= 1
+
+
+def test_is_done_and_target():
+    state = tiny_run()
+    assert ga.is_done(state, TINY)
+    more = ga.GAConfig(**{**TINY.to_dict(), "generations": 5})
+    assert not ga.is_done(state, more)
+    best = float(np.max(np.asarray(state.best.fitness)))
+    reach = ga.GAConfig(**{**more.to_dict(), "target_f": best})
+    assert ga.is_done(state, reach) and ga.reached_target(state, reach)
+
+
+# ------------------------------------------------------------------------------- runs
+
+
+def test_run_is_reproducible_and_consistent():
+    a = tiny_run(0)
+    b = ga.run(jax.random.key(0), TINY, maze())
+    ta, tb = state_to_tree(a), state_to_tree(b)
+    assert ta.keys() == tb.keys()
+    for name in ta:
+        np.testing.assert_array_equal(ta[name], tb[name], err_msg=name)
+    f = np.asarray(a.fitness)
+    np.testing.assert_allclose(f, (8 * np.asarray(a.collisions) + np.asarray(a.tau)) / 2)
+    assert np.all(np.asarray(a.tau) <= TINY.tau_cap) and np.all(np.asarray(a.L) >= 0)
+    assert int(a.generation) == 2
+    seed = ga.best_sets(a)
+    np.testing.assert_array_equal(seed.tau, np.asarray(a.best.tau))
+
+
+def test_best_sets_needs_an_evaluation():
+    with pytest.raises(ValueError, match="no generation"):
+        ga.best_sets(fresh_state(0))
+
+
+# ------------------------------------------------------------------------------- diversity
+
+
+def test_diversity_of_hand_made_sets():
+    assert ga.diversity(hand_sets([[0] * 8] * 5)) == 0.0
+    # Every pair differs in type at every antigen.
+    assert ga.diversity(hand_sets([[k] * 8 for k in range(5)])) == pytest.approx(1.0)
+    # Sets 0 and 1 equal, set 2 of other types: pairs (0,1) = 0, (0,2) = (1,2) = 1.
+    assert ga.diversity(hand_sets([[0] * 8, [0] * 8, [1] * 8])) == pytest.approx(2 / 3)
+    # Track markers uses S and A: S 50 vs 400 is a full-range difference, A equal -> 1/2.
+    two = hand_sets([[5] * 8, [5] * 8])
+    two = two.replace(speed=np.asarray([[50.0] * 8, [400.0] * 8], np.float32))
+    assert ga.diversity(two) == pytest.approx(0.5)
+    # Half the antigens differ in type -> 1/2.
+    assert ga.diversity(hand_sets([[0] * 8, [0] * 4 + [2] * 4])) == pytest.approx(0.5)
+
+
+def test_diversity_matches_a_loop_over_pairs():
+    sets = jax.tree.map(
+        np.asarray, jax.jit(sample_antibodies, static_argnums=1)(jax.random.key(7), (5, 8))
+    )
+    distance = jax.jit(antibody_distance)
+    total, n = 0.0, 0
+    for i in range(5):
+        for k in range(i + 1, 5):
+            a = jax.tree.map(lambda x, i=i: x[i], sets)
+            b = jax.tree.map(lambda x, k=k: x[k], sets)
+            total += float(np.mean(np.asarray(distance(a, b))))
+            n += 1
+    assert ga.diversity(sets) == pytest.approx(total / n, rel=1e-6)
+    with pytest.raises(ValueError):
+        ga.diversity(jax.tree.map(lambda x: x[:1], sets))
+
+
+def test_final_sets():
+    state = tiny_run()
+    f = np.asarray(state.fitness)
+    sets = ga.final_sets(state)
+    assert sets.type.shape == (2, 8)
+    np.testing.assert_array_equal(
+        sets.type[1], np.asarray(state.evaluated.type)[1, np.argmin(f[1])]
+    )
+    top = ga.final_sets(state, k=3)
+    order = np.argsort(f[0], kind="stable")[:3]
+    np.testing.assert_array_equal(top.speed, np.asarray(state.evaluated.speed)[0, order])
+
+
+def test_compare_diversity_reports_both_tests():
+    out = ga.compare_diversity([0, 1], TINY, maze(), done={0: tiny_run(0)})
+    assert out["single"]["robots"] == 8 and out["multi"]["populations"] == 2
+    assert len(out["multi"]["diversity"]) == 2 and len(out["single"]["diversity"]) == 2
+    assert all(0.0 <= d <= 1.0 for d in out["multi"]["diversity"] + out["single"]["diversity"])
+    for test in ("welch_t", "mann_whitney_u"):
+        p = out[test]["p_value"]
+        assert p is None or 0.0 <= p <= 1.0
+    with pytest.raises(ValueError):
+        ga.compare_diversity([0], TINY, maze())

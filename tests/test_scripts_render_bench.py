@@ -1,0 +1,193 @@
+"""End-to-end tests of scripts/render.py and scripts/bench.py (run as subprocesses), and of the
+error and atomic-write helpers in jaxais.cli that they share."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from jaxais import cli
+
+REPO = Path(__file__).resolve().parent.parent
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def run_script(name: str, *args: object, timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, str(REPO / "scripts" / name), *map(str, args)],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+def assert_user_error(proc: subprocess.CompletedProcess, prog: str, *words: str) -> None:
+    """Exit status 2, exactly one line on stderr in the ``prog: error: ...`` form."""
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith(f"{prog}: error: "), lines[0]
+    for word in words:
+        assert word in lines[0]
+
+
+# ---------------------------------------------------------------------------------- render.py
+
+
+def test_render_writes_png_and_gif(tmp_path):
+    out, gif = tmp_path / "w.png", tmp_path / "w.gif"
+    args = ("--world", "world1", "--steps", 20, "--robots", 2, "--seed", 3)
+    proc = run_script("render.py", *args, "--out", out, "--gif", gif, "--every", 5)
+    assert proc.returncode == 0, proc.stderr
+    assert out.read_bytes()[:8] == PNG_MAGIC
+    assert gif.read_bytes()[:6] in (b"GIF87a", b"GIF89a")
+    assert proc.stdout.count("\n") == 1 and "wrote" in proc.stdout and "w.gif" in proc.stdout
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["w.gif", "w.png"]  # no temp files left
+
+
+def test_render_bad_world_path(tmp_path):
+    out = tmp_path / "w.png"
+    out.write_bytes(b"old")
+    proc = run_script("render.py", "--world", tmp_path / "nope.toml", "--steps", 5, "--out", out)
+    assert_user_error(proc, "render.py", "nope.toml")
+    assert out.read_bytes() == b"old"  # a failed run leaves an earlier output alone
+
+
+@pytest.mark.parametrize(
+    "text, word",
+    [("name = [unclosed\n", "TOML"), ('name = "x"\n[arena]\nwidth = 1.0\n', "arena.height")],
+)
+def test_render_malformed_world(tmp_path, text, word):
+    world = tmp_path / "bad.toml"
+    world.write_text(text)
+    proc = run_script("render.py", "--world", world, "--steps", 5, "--out", tmp_path / "w.png")
+    assert_user_error(proc, "render.py", word)
+    assert not (tmp_path / "w.png").exists()
+
+
+@pytest.mark.parametrize(
+    "args, word",
+    [
+        (("--steps", 0), "--steps"),
+        (("--robots", -2), "--robots"),
+        (("--every", 0, "--gif", "x.gif"), "--every"),
+        (("--out", "no/such/dir/w.png"), "does not exist"),
+        (("--out", "w.txt"), ".png"),
+        (("--gif", "w.mp4"), ".gif"),
+    ],
+)
+def test_render_bad_values(tmp_path, args, word):
+    base = ["--steps", 5, "--out", tmp_path / "w.png"]
+    proc = run_script("render.py", *base, *args, timeout=60)
+    assert_user_error(proc, "render.py", word)
+
+
+def test_render_bad_flag_is_argparse_usage():
+    proc = run_script("render.py", "--out", "x.png", "--no-such-flag", timeout=60)
+    assert proc.returncode == 2
+    assert "usage:" in proc.stderr and "Traceback" not in proc.stderr
+
+
+# ---------------------------------------------------------------------------------- bench.py
+
+
+def test_bench_quick_json(tmp_path):
+    out = tmp_path / "bench.json"
+    proc = run_script(
+        "bench.py",
+        *("--quick", "--devices", 2, "--batches", 2, "--steps", 3, "--repeats", 1),
+        *("--numpy-robots", 2, "--numpy-steps", 2, "--matmul", 64, "--out", out),
+    )
+    assert proc.returncode == 0, proc.stderr
+    r = json.loads(out.read_text())
+    for key in (
+        "machine",
+        "config",
+        "jax_steps_per_s",
+        "compile_s",
+        "numpy_steps_per_s",
+        "speedup_vs_numpy",
+        "flops_per_step",
+        "peak_flops",
+        "fraction_of_peak",
+        "jax_steps_per_s_sharded",
+    ):
+        assert key in r, key
+    assert set(r["jax_steps_per_s"]) == {"2"} and r["jax_steps_per_s"]["2"] > 0
+    assert r["machine"]["device_count"] == 2  # --devices took effect before JAX was imported
+    assert set(r["jax_steps_per_s_sharded"]) == {"2"}
+    assert r["flops_per_step"] > 0 and 0 < r["fraction_of_peak"] < 1
+    assert {"platform", "cpu_count", "jax", "backend", "device_kinds", "date"} <= set(r["machine"])
+    assert "wrote" in proc.stdout
+
+
+def test_bench_bad_values(tmp_path):
+    proc = run_script("bench.py", "--batches", "1,x", "--out", tmp_path / "b.json", timeout=60)
+    assert_user_error(proc, "bench.py", "--batches")
+    proc = run_script("bench.py", "--world", tmp_path / "nope.toml", "--out", tmp_path / "b.json")
+    assert_user_error(proc, "bench.py", "nope.toml")
+    assert not (tmp_path / "b.json").exists()
+
+
+# ---------------------------------------------------------------------------------- jaxais.cli
+
+
+def test_main_wrapper_exit_codes(capsys):
+    @cli.main_wrapper("prog.py")
+    def bad(exc: BaseException) -> None:
+        raise exc
+
+    for exc, code, text in [
+        (cli.UserError("bad\nthing"), 2, "prog.py: error: bad thing\n"),
+        (ValueError("nope"), 2, "prog.py: error: nope\n"),
+        (FileNotFoundError(2, "No such file or directory", "a.toml"), 2, "a.toml: No such"),
+        (KeyboardInterrupt(), 130, "prog.py: error: interrupted\n"),
+    ]:
+        with pytest.raises(SystemExit) as info:
+            bad(exc)
+        assert info.value.code == code
+        assert text in capsys.readouterr().err
+    with pytest.raises(ZeroDivisionError):  # bugs keep their traceback
+        bad(ZeroDivisionError())
+
+
+def test_atomic_write_leaves_nothing_on_failure(tmp_path):
+    path = tmp_path / "x.json"
+    cli.atomic_write_json(path, {"a": 1})
+    assert json.loads(path.read_text()) == {"a": 1}
+
+    def broken(tmp: Path) -> None:
+        tmp.write_text("half")
+        raise RuntimeError("disk on fire")
+
+    with pytest.raises(RuntimeError):
+        cli.atomic_write(path, broken)
+    assert json.loads(path.read_text()) == {"a": 1}
+    assert [p.name for p in tmp_path.iterdir()] == ["x.json"]
+    with pytest.raises(cli.UserError):
+        cli.check_writable_dir(tmp_path / "missing")
+
+
+# ---------------------------------------------------------------------------------- plotting
+
+
+def test_world_figure_without_state(tmp_path):
+    import numpy as np
+
+    from jaxais import envs, plotting
+
+    world = envs.load_world("real")
+    traj = np.stack([np.linspace(0.2, 1.0, 50), np.full(50, 0.5)], axis=1)
+    fig = plotting.world_figure(world, trajectories=[traj], title="real")
+    path = tmp_path / "real.png"
+    plotting.save_figure(fig, path)
+    assert path.read_bytes()[:8] == PNG_MAGIC
+    ax = fig.axes[0]
+    assert ax.get_aspect() == 1.0
+    assert [t.get_text() for t in ax.get_legend().get_texts()][-1] == "robot 0"

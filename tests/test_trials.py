@@ -1,0 +1,362 @@
+"""The shared task loop (``jaxais.episode``) and the STL trials (``jaxais.trials``), SPEC 9.
+
+Every program here runs world1 with the STL controller, :data:`_stl_fixtures.CONFIG` and batches
+of :data:`_stl_fixtures.BATCH` runs, so each distinct program compiles once per session: the
+jitted ``start`` / ``iterate`` of the fixtures, and ``run_trials``' own cached rollout.
+
+Rules of the loop are checked by driving one run with the jitted ``iterate`` and writing the
+observation it reads (goal pixels, IR) before each iteration.
+"""
+
+from __future__ import annotations
+
+import functools
+from types import SimpleNamespace
+
+import _stl_fixtures as F
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxais import episode
+from jaxais.controllers import STL
+from jaxais.episode import FAILED_COLLISIONS, FAILED_TIME, FINISHED, RUNNING, outcome
+from jaxais.trials import TrialSet, run_trials, summarise, trial_keys
+
+DT = 0.032
+MAX_IT = F.CONFIG.max_iterations(DT)  # 625
+
+# IR vectors that present a given antigen (Vm at the sensor of that side).
+IR = {
+    0: [0.0] * 8,
+    2: [1000.0, 0, 0, 0, 0, 0, 0, 0],
+    3: [0, 0, 0, 1000.0, 0, 0, 0, 0],
+    4: [0, 0, 0, 0, 0, 0, 1000.0, 0],
+    5: [3000.0, 0, 0, 0, 0, 0, 0, 0],
+    6: [0, 0, 0, 3000.0, 0, 0, 0, 0],
+    7: [0, 0, 0, 0, 0, 0, 3000.0, 0],
+}
+
+
+def key_data(keys: jax.Array) -> np.ndarray:
+    return np.asarray(jax.random.key_data(keys))
+
+
+tree_equal = F.tree_equal
+
+
+@functools.cache
+def start_runs():
+    """BATCH runs at t = 0: SIE trials 0-1 and HDC trials 0-1 of seed 0 (their trial keys)."""
+    r_sie, k_sie = trial_keys(0, "SIE", 2)
+    r_hdc, k_hdc = trial_keys(0, "HDC", 2)
+    sys_ = F.systems()
+    params = F.stack([sys_["SIE"], sys_["SIE"], sys_["HDC"], sys_["HDC"]])
+    runs = F.start_runs(jnp.concatenate([r_sie, r_hdc]), jnp.concatenate([k_sie, k_hdc]), params)
+    return runs, params
+
+
+def one_run(i: int = 0):
+    runs, params = start_runs()
+    return F.unstack(runs, i), F.unstack(params, i)
+
+
+def with_obs(run, antigen: int | None = None, goal: int | None = None):
+    """The run with its last observation rewritten: IR presenting ``antigen``, goal pixels."""
+    obs = run.obs
+    if antigen is not None:
+        ir = jnp.asarray(IR[0 if antigen == 1 else antigen], obs.ir.dtype)
+        obs = obs.replace(ir=ir, vm=jnp.max(ir).astype(obs.vm.dtype))
+        obs = obs.replace(blue_pixels=jnp.full_like(obs.blue_pixels, 3 * (antigen == 1)))
+    if goal is not None:
+        obs = obs.replace(
+            goal_pixels=jnp.full_like(obs.goal_pixels, goal),
+            blue_pixels=jnp.full_like(obs.blue_pixels, goal),
+        )
+    return run.replace(obs=obs)
+
+
+def drive(run, params, steps: list[dict], seed: int = 0) -> list:
+    """Apply ``iterate`` once per entry of ``steps`` (each rewrites the observation first)."""
+    out = []
+    for k, mods in enumerate(steps):
+        run = with_obs(run, **mods)
+        run = F.step_one(run, jax.random.key(1000 * seed + k), F.uniforms(seed + k), params)
+        out.append(run)
+    return out
+
+
+def status(run) -> int:
+    return int(run.status)
+
+
+# ---------------------------------------------------------------------------------- the loop
+
+
+def test_finish_rule_three_consecutive_iterations_over_40_goal_pixels():
+    run, params = one_run()
+    runs = drive(run, params, [{"antigen": 0, "goal": 41}] * 3)
+    assert [status(r) for r in runs] == [RUNNING, RUNNING, FINISHED]
+    assert [int(r.streak) for r in runs] == [1, 2, 3]
+    # The iteration that detects the finish records it and moves nothing.
+    assert int(runs[2].t) == int(runs[1].t) == 2
+    assert tree_equal(runs[2].sim, runs[1].sim) and tree_equal(runs[2].ctrl, runs[1].ctrl)
+
+
+def test_finish_rule_needs_more_than_40_pixels_without_a_gap():
+    run, params = one_run()
+    goals = [41, 41, 40, 41, 41, 0, 45, 45, 41]
+    runs = drive(run, params, [{"antigen": 0, "goal": g} for g in goals])
+    assert [int(r.streak) for r in runs] == [1, 2, 0, 1, 2, 0, 1, 2, 3]
+    assert [status(r) for r in runs] == [RUNNING] * 8 + [FINISHED]
+
+
+def test_time_cap_stops_at_exactly_max_iterations():
+    run, params = one_run(1)
+    run = run.replace(t=jnp.asarray(MAX_IT - 2, run.t.dtype))
+    runs = drive(run, params, [{"antigen": 0, "goal": 0}] * 4)
+    assert [int(r.t) for r in runs] == [MAX_IT - 1, MAX_IT, MAX_IT, MAX_IT]
+    assert [status(r) for r in runs] == [RUNNING, RUNNING, FAILED_TIME, FAILED_TIME]
+    res = outcome(jax.tree.map(lambda a: a[None], runs[-1]), F.CONFIG, DT)
+    assert res["tau"][0] == pytest.approx(F.CONFIG.tau_cap)
+    assert res["iterations"][0] == MAX_IT and res["status"][0] == FAILED_TIME
+
+
+def test_collision_cap_stops_when_the_count_reaches_it():
+    run, params = one_run(2)
+    run = run.replace(collisions=jnp.asarray(F.CONFIG.collision_cap - 2, run.collisions.dtype))
+    runs = drive(run, params, [{"antigen": a} for a in (5, 0, 7, 0)])
+    assert [int(r.collisions) for r in runs] == [4, 4, 5, 5]
+    assert [status(r) for r in runs] == [RUNNING, RUNNING, FAILED_COLLISIONS, FAILED_COLLISIONS]
+    assert int(runs[2].t) == int(runs[1].t) == 2
+    assert tree_equal(runs[2].sim, runs[1].sim)
+
+
+def test_collisions_count_entries_into_5_to_7_from_other_antigens():
+    run, params = one_run(3)
+    seq = [5, 6, 7, 5, 2, 6, 0, 7, 7, 1, 3, 4, 6]
+    runs = drive(run, params, [{"antigen": a} for a in seq])
+    assert [int(r.collisions) for r in runs] == [1, 1, 1, 1, 1, 2, 2, 3, 3, 3, 3, 3, 4]
+    assert [int(r.m_prev) for r in runs] == seq
+    assert all(status(r) == RUNNING for r in runs)
+
+
+def test_an_ended_run_never_changes():
+    run, params = one_run()
+    done = drive(run, params, [{"antigen": 0, "goal": 41}] * 3)[-1]
+    assert status(done) == FINISHED
+    for k, mods in enumerate([{"antigen": 5}, {"goal": 45}, {"antigen": 0, "goal": 0}, {}]):
+        before = with_obs(done, **mods)
+        after = F.step_one(before, jax.random.key(77 + k), F.uniforms(77 + k), params)
+        assert tree_equal(after, before)
+
+
+def test_outcome_caps_and_fitness():
+    runs = SimpleNamespace(
+        status=np.array([FINISHED, FAILED_TIME, FAILED_COLLISIONS, FINISHED]),
+        t=np.array([100, 700, 300, 0]),
+        collisions=np.array([3, 2, 9, 0]),
+    )
+    res = outcome(runs, F.CONFIG, DT)
+    np.testing.assert_allclose(res["tau"], [3.2, 20.0, 9.6, 0.0])
+    np.testing.assert_array_equal(res["collisions"], [3, 2, 5, 0])
+    np.testing.assert_allclose(res["fitness"], [13.6, 18.0, 24.8, 0.0])
+    np.testing.assert_array_equal(res["iterations"], [100, 700, 300, 0])
+    assert episode.fitness(10.0, 2) == 13.0 and episode.RHO == 8.0
+
+
+def test_vmapped_iterate_equals_a_loop_of_single_iterations():
+    """jit(vmap(iterate)) over BATCH runs of different systems = jitted iterate run by run, for
+    12 iterations, including a run that hits the time cap and one that hits the collision cap."""
+    runs, _ = start_runs()
+    params = F.batch_params()  # SIE, UIE-R1, URL-R1, HDC
+    runs = runs.replace(
+        t=runs.t.at[3].set(MAX_IT - 4),
+        collisions=runs.collisions.at[2].set(F.CONFIG.collision_cap - 1),
+    )
+    ir = runs.obs.ir.at[2].set(jnp.asarray(IR[6], runs.obs.ir.dtype))
+    runs = runs.replace(obs=runs.obs.replace(ir=ir))  # run 2 collides at once
+    singles = [F.unstack(runs, i) for i in range(F.BATCH)]
+    single_params = [F.unstack(params, i) for i in range(F.BATCH)]
+    w, sp = F.world(), F.sim_params()
+    for k in range(12):
+        noise = F.noise_fn()(jax.random.split(jax.random.key(500 + k), F.BATCH))
+        u = jnp.stack([F.uniforms(100 * k + i) for i in range(F.BATCH)])
+        runs = F.iterate_batch_fn()(runs, noise, u, w, sp, STL, params, F.CONFIG)
+        for i in range(F.BATCH):
+            singles[i] = F.iterate_fn()(
+                singles[i], F.unstack(noise, i), u[i], w, sp, STL, single_params[i], F.CONFIG
+            )
+    for i in range(F.BATCH):
+        batched = F.unstack(runs, i)
+        for path, a in jax.tree_util.tree_leaves_with_path(batched):
+            b = functools.reduce(lambda x, p: getattr(x, p.name), path, singles[i])
+            np.testing.assert_array_equal(
+                F.leaf_array(a), F.leaf_array(b), err_msg=f"run {i} {jax.tree_util.keystr(path)}"
+            )
+    st = np.asarray(runs.status)
+    assert st[2] == FAILED_COLLISIONS and st[3] == FAILED_TIME and st[0] == RUNNING
+    assert int(runs.t[0]) == 12 and int(runs.t[2]) == 0
+
+
+# ---------------------------------------------------------------------------------- trials
+
+
+@functools.cache
+def trials(counts: tuple[tuple[str, int], ...], seed: int) -> dict[str, TrialSet]:
+    """``run_trials`` on BATCH runs in total (so one compiled program serves every call)."""
+    assert sum(n for _, n in counts) == F.BATCH
+    sys_ = F.systems()
+    return run_trials(
+        F.world(),
+        {name: sys_[name] for name, _ in counts},
+        dict(counts),
+        seed,
+        F.CONFIG,
+        F.sim_params(),
+    )
+
+
+SIE_HDC = (("SIE", 2), ("HDC", 2))
+
+
+def same_trials(a: TrialSet, b: TrialSet, n: int | None = None) -> bool:
+    n = len(a.records) if n is None else n
+    return a.records[:n] == b.records[:n] and all(
+        np.array_equal(x, y) for x, y in zip(a.trajectories[:n], b.trajectories[:n], strict=True)
+    )
+
+
+def test_trial_records_are_consistent():
+    res = trials(SIE_HDC, 0)
+    assert list(res) == ["SIE", "HDC"]
+    for name, ts in res.items():
+        assert len(ts.records) == 2 and len(ts.trajectories) == 2
+        for rec, traj in zip(ts.records, ts.trajectories, strict=True):
+            assert set(rec) >= {
+                "tau", "collisions", "fitness", "failed", "failed_by",
+                "idiotypic_difference_rate", "iterations",
+            }  # fmt: skip
+            assert rec["tau"] == pytest.approx(min(rec["iterations"] * DT, F.CONFIG.tau_cap))
+            assert rec["fitness"] == pytest.approx((8 * rec["collisions"] + rec["tau"]) / 2)
+            assert rec["failed"] == (rec["failed_by"] is not None)
+            assert rec["failed_by"] in (None, "time", "collisions")
+            assert 0 <= rec["collisions"] <= F.CONFIG.collision_cap
+            assert rec["iterations"] <= MAX_IT
+            if rec["failed_by"] == "time":
+                assert rec["iterations"] == MAX_IT
+            if rec["failed_by"] == "collisions":
+                assert rec["collisions"] == F.CONFIG.collision_cap
+            rate = rec["idiotypic_difference_rate"]
+            if name == "SIE":
+                assert 0.0 <= rate <= 1.0
+            else:
+                assert rate is None
+            assert traj.ndim == 2 and traj.shape[1] == 3
+            assert traj.shape[0] == rec["iterations"] // F.CONFIG.chunk + 2
+
+
+def test_same_seed_gives_identical_trials():
+    again = run_trials(
+        F.world(), {k: F.systems()[k] for k in ("SIE", "HDC")}, 2, 0, F.CONFIG, F.sim_params()
+    )
+    first = trials(SIE_HDC, 0)
+    for name in first:
+        assert same_trials(first[name], again[name])
+
+
+def test_different_seeds_give_different_trials():
+    a, b = trials(SIE_HDC, 0), trials(SIE_HDC, 1)
+    for name in a:
+        for x, y in zip(a[name].trajectories, b[name].trajectories, strict=True):
+            assert not np.array_equal(x[0], y[0])  # other start placements
+            assert not np.array_equal(x, y)
+
+
+def test_results_do_not_depend_on_batch_mates():
+    """SIE with HDC, SIE alone (4 trials: its first 2 are the same trials) and SIE after HDC in
+    the batch all give SIE identical trials; likewise HDC."""
+    with_hdc = trials(SIE_HDC, 0)
+    alone = trials((("SIE", 4),), 0)
+    hdc_first = trials((("HDC", 2), ("SIE", 2)), 0)
+    assert same_trials(with_hdc["SIE"], alone["SIE"], 2)
+    assert same_trials(with_hdc["SIE"], hdc_first["SIE"])
+    assert same_trials(with_hdc["HDC"], hdc_first["HDC"])
+    # ... while the later trials of SIE alone are other trials.
+    assert not np.array_equal(alone["SIE"].trajectories[2][0], alone["SIE"].trajectories[0][0])
+
+
+def test_all_systems_of_a_world_meet_the_same_start_placements():
+    """Common random numbers: trial i's reset key (hence the world placement) is the same for
+    every system; the dynamics keys differ."""
+    r_sie, k_sie = trial_keys(0, "SIE", 2)
+    r_hdc, k_hdc = trial_keys(0, "HDC", 2)
+    r_uie, _ = trial_keys(0, "UIE-R2", 2)
+    np.testing.assert_array_equal(key_data(r_sie), key_data(r_hdc))
+    np.testing.assert_array_equal(key_data(r_sie), key_data(r_uie))
+    assert not np.array_equal(key_data(k_sie), key_data(k_hdc))
+    assert not np.array_equal(key_data(r_sie[0]), key_data(r_sie[1]))
+    # The reset states from those keys: equal across systems, different across trials.
+    runs, _ = start_runs()  # SIE trials 0, 1 then HDC trials 0, 1
+    sims = [F.unstack(runs.sim, i) for i in range(F.BATCH)]
+    assert tree_equal(sims[0], sims[2]) and tree_equal(sims[1], sims[3])
+    assert not np.array_equal(np.asarray(sims[0].pose), np.asarray(sims[1].pose))
+    # run_trials starts trial i of both systems from one state: those placements (to an ulp,
+    # as the test's programs compile with other XLA options).
+    res = trials(SIE_HDC, 0)
+    for i in range(2):
+        np.testing.assert_array_equal(res["SIE"].trajectories[i][0], res["HDC"].trajectories[i][0])
+        np.testing.assert_allclose(res["SIE"].trajectories[i][0], sims[i].pose, rtol=1e-6)
+
+
+def test_trial_keys_do_not_depend_on_the_number_of_trials():
+    for label in ("SIE", "URL-R2"):
+        r4, k4 = trial_keys(3, label, 4)
+        r2, k2 = trial_keys(3, label, 2)
+        np.testing.assert_array_equal(key_data(r4[:2]), key_data(r2))
+        np.testing.assert_array_equal(key_data(k4[:2]), key_data(k2))
+        assert len({tuple(k) for k in key_data(k4)}) == 4
+
+
+def test_run_trials_rejects_bad_arguments():
+    sys_ = F.systems()
+    with pytest.raises(ValueError, match="unknown system label"):
+        run_trials(F.world(), {"XYZ": sys_["SIE"]}, 2, 0, F.CONFIG)
+    with pytest.raises(ValueError, match="trials must be >= 1"):
+        run_trials(F.world(), {"SIE": sys_["SIE"]}, 0, 0, F.CONFIG)
+
+
+def test_summarise_by_hand():
+    def rec(tau, c, failed_by, rate):
+        return {
+            "tau": tau,
+            "collisions": c,
+            "fitness": (8 * c + tau) / 2,
+            "failed": failed_by is not None,
+            "failed_by": failed_by,
+            "idiotypic_difference_rate": rate,
+            "iterations": int(tau / DT),
+        }
+
+    records = [
+        rec(10.0, 2, None, 0.2),
+        rec(20.0, 5, "collisions", 0.1),
+        rec(20.0, 1, "time", 0.3),
+        rec(6.0, 0, None, 0.0),
+    ]
+    s = summarise(records)
+    assert s == pytest.approx(
+        {
+            "n": 4,
+            "tau": 14.0,
+            "collisions": 2.0,
+            "fitness": 15.0,  # (13 + 30 + 14 + 3) / 4
+            "failure_rate": 0.5,
+            "failed_by_collisions": 0.25,
+            "failed_by_time": 0.25,
+            "idiotypic_difference_rate": 0.15,
+        }
+    )
+    records[0]["idiotypic_difference_rate"] = None
+    assert summarise(records)["idiotypic_difference_rate"] is None

@@ -1,0 +1,264 @@
+"""World files: the built-in worlds load and reset sensibly; malformed files fail clearly."""
+
+from __future__ import annotations
+
+import jax
+import numpy as np
+import pytest
+from jaxais.envs import reference as ref
+from jaxais.envs.sim import PLACEMENT_CLEARANCE
+
+from jaxais import envs
+
+PARAMS_NP = ref.params_to_numpy(envs.default_params())
+
+# name: (wanderers, goal shape, noisy)
+EXPECTED = {
+    "ga_maze": (0, "box", False),
+    "world1": (1, "box", False),
+    "world2": (1, "box", False),
+    "real": (2, "ball", True),
+}
+
+
+def test_expected_builtin_worlds() -> None:
+    assert set(envs.BUILTIN_WORLDS) == set(EXPECTED)
+
+
+@pytest.mark.parametrize("name", envs.BUILTIN_WORLDS)
+def test_builtin_world_loads(name: str) -> None:
+    world = envs.load_world(name)
+    assert world.name == name
+    assert envs.world_path(name).is_file()
+    n_wanderers, shape, noisy = EXPECTED[name]
+    assert world.n_wanderers == n_wanderers
+    assert world.goal_shape == shape
+    assert (world.ir_noise > 0 and world.pixel_flip > 0 and world.wheel_noise > 0) == noisy
+    assert not noisy or (world.ir_noise, world.pixel_flip, world.wheel_noise) == (0.05, 0.02, 0.05)
+    assert int(world.seg_valid.sum()) >= 4  # the outer walls come first
+    arena = np.asarray(world.arena)
+    np.testing.assert_allclose(np.asarray(world.seg[:4]).reshape(4, 2, 2).min(axis=(0, 1)), 0.0)
+    np.testing.assert_allclose(
+        np.asarray(world.seg[:4]).reshape(4, 2, 2).max(axis=(0, 1)), arena[2:], rtol=1e-6
+    )
+    for leaf in jax.tree.leaves(world):
+        assert leaf.dtype in (np.float32, np.int32, np.bool_)
+    if name == "ga_maze":  # the doors are painted
+        assert int((np.asarray(world.seg_material) == envs.MARKER).sum()) == 6
+    if name == "real":
+        np.testing.assert_allclose(arena, [0, 0, 1.26, 1.26], rtol=1e-6)
+        np.testing.assert_allclose(world.seg_height[:4], 0.165, rtol=1e-6)
+
+
+def _overlaps(a: ref.Surface, b: ref.Surface, tol: float = 1e-6) -> bool:
+    """Whether a box or circle ``a`` overlaps surface ``b`` by more than ``tol``."""
+    if a.kind == "circle":
+        gap = ref.disc_gap(a.geom[:2], a.geom[2], b)[0]
+        return gap < -tol
+    lo, hi = np.array(a.geom[:2]) + tol, np.array(a.geom[2:]) - tol  # shrunk a little
+    if b.kind == "box":
+        return bool(np.all(lo < np.array(b.geom[2:])) and np.all(np.array(b.geom[:2]) < hi))
+    if b.kind == "circle":
+        return _overlaps(b, a, tol)
+    # A segment crosses the box when a ray along it hits the box before its end.
+    start, end = np.array(b.geom[:2]), np.array(b.geom[2:])
+    length = float(np.linalg.norm(end - start))
+    d = (end - start) / length
+    shrunk = ref.Surface("box", (*lo, *hi), a.material, a.height)
+    return ref.ray_hit(tuple(start), tuple(d), shrunk) <= length
+
+
+def _inside(p, region, tol: float = 1e-6) -> bool:
+    return bool(np.all(p >= region[:2] - tol) and np.all(p <= region[2:] + tol))
+
+
+@pytest.mark.parametrize("name", envs.BUILTIN_WORLDS)
+def test_reset_places_everything_clear_and_in_its_region(sim, name: str) -> None:
+    world = sim.world(name)
+    wnp = ref.world_to_numpy(world)
+    n_seg, n_box, n_pillar = (int(wnp[f"{k}_valid"].sum()) for k in ("seg", "box", "pillar"))
+    for seed in range(3):
+        state, gaps = sim.reset(world, sim.keys(seed))
+        # Robot and wanderers: clear of everything, with the placement clearance.
+        assert gaps.min() >= PLACEMENT_CLEARANCE - 1e-5, (seed, gaps.min(axis=0))
+        batch = ref.state_to_numpy(state)
+        for i in range(sim.batch):
+            s = ref.unbatch(batch, i)
+            assert _inside(s["pose"][:2], wnp["start_region"])
+            lo, hi = wnp["start_heading"]
+            assert lo - 1e-6 <= s["pose"][2] <= hi + 1e-6
+            for k in range(world.n_wanderers):
+                assert _inside(s["wanderers"][k, :2], wnp["wanderer_region"][k])
+            assert _inside(s["goal"], wnp["goal_region"])
+            for b in np.flatnonzero(wnp["box_valid"]):
+                assert _inside(s["boxes"][b], wnp["box_region"][b])
+            np.testing.assert_array_equal(s["wander_timer"], 0)
+            assert int(s["t"]) == 0
+            # Boxes, goal and robots overlap nothing (walls, pillars, boxes, each other) and
+            # stay inside the arena. The scene lists walls, boxes (+ goal block), pillars,
+            # robots (+ goal ball): everything but the walls and pillars was placed by reset.
+            scene = ref.build_scene(s, wnp, PARAMS_NP, exclude=-1)
+            first_pillar = n_seg + n_box + (world.goal_shape == "box")
+            fixed = set(range(n_seg)) | set(range(first_pillar, first_pillar + n_pillar))
+            for j, a in enumerate(scene):
+                if j in fixed:
+                    continue
+                lo, hi = np.array(a.geom[:2]), np.array(a.geom[2:])
+                if a.kind == "circle":
+                    lo, hi = lo - a.geom[2], lo + a.geom[2]
+                assert np.all(lo >= -1e-6) and np.all(hi <= wnp["arena"][2:] + 1e-6), a
+                for k, b in enumerate(scene):
+                    assert k == j or not _overlaps(a, b), (name, seed, i, a, b)
+
+
+@pytest.mark.parametrize("name", envs.BUILTIN_WORLDS)
+def test_reset_is_reproducible(sim, name: str) -> None:
+    world = sim.world(name)
+    a, _ = sim.reset(world, sim.keys(9))
+    b, _ = sim.reset(world, sim.keys(9))
+    c, _ = sim.reset(world, sim.keys(10))
+    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
+        np.testing.assert_array_equal(x, y)
+    assert not np.array_equal(a.pose, c.pose)
+    assert not np.array_equal(a.pose[0], a.pose[1])  # each key its own draw
+
+
+def test_capacity_pads_to_common_shapes() -> None:
+    cap = envs.Capacity(segments=20, boxes=8, pillars=6)
+    for name in envs.BUILTIN_WORLDS:
+        plain, padded = envs.load_world(name), envs.load_world(name, cap)
+        assert padded.seg.shape == (20, 4) and padded.seg_valid.shape == (20,)
+        assert padded.box_half.shape == (8, 2) and padded.box_region.shape == (8, 4)
+        assert padded.pillar.shape == (6, 3) and padded.pillar_valid.shape == (6,)
+        for field in ("seg", "box", "pillar"):
+            valid = np.asarray(getattr(plain, f"{field}_valid"))
+            assert int(np.asarray(getattr(padded, f"{field}_valid")).sum()) == int(valid.sum())
+        n = int(plain.seg_valid.sum())
+        np.testing.assert_array_equal(padded.seg[:n], plain.seg[:n])
+    w1, w2 = envs.load_world("world1", cap), envs.load_world("world2", cap)
+    shapes = lambda w: [x.shape for x in jax.tree.leaves(w)]
+    assert shapes(w1) == shapes(w2)
+
+
+def test_capacity_worlds_share_compiled_functions() -> None:
+    """Equal shapes from one Capacity; with the static fields matched, one compilation."""
+    cap = envs.Capacity(segments=8, boxes=6, pillars=6)
+    w1, w2 = envs.load_world("world1", cap), envs.load_world("world2", cap)
+    assert jax.tree.structure(w1) != jax.tree.structure(w2)  # the names differ
+    w2 = w2.replace(name=w1.name)
+    assert jax.tree.structure(w1) == jax.tree.structure(w2)
+    f = jax.jit(lambda w: w.seg.sum())
+    f(w1)
+    f(w2)
+    assert f._cache_size() == 1
+
+
+def test_padding_changes_no_reading() -> None:
+    """The reference ignores padding; sensing at the same pose is the same padded or not."""
+    cap = envs.Capacity(segments=20, boxes=8, pillars=6)
+    plain, padded = envs.load_world("world2"), envs.load_world("world2", cap)
+    n_box = plain.box_half.shape[0]
+    state = {
+        "pose": np.array([0.7, 0.2, 1.2]),
+        "wanderers": np.array([[0.8, 0.9, 0.0]]),
+        "wander_timer": np.zeros(1, np.int64),
+        "wander_dir": np.ones(1),
+        "goal": np.array([0.7, 1.35]),
+        "boxes": np.asarray(plain.box_region)[:, :2].astype(np.float64),
+    }
+    state["t"] = np.int64(0)
+    a = ref.ref_sense(state, None, plain, PARAMS_NP)
+    padded_state = dict(
+        state, boxes=np.concatenate([state["boxes"], np.full((8 - n_box, 2), -100.0)])
+    )
+    b = ref.ref_sense(padded_state, None, padded, PARAMS_NP)
+    for key in ref.OBS_FIELDS:
+        np.testing.assert_array_equal(a[key], b[key])
+
+
+# ---------------------------------------------------------------------------------- errors
+
+VALID = """
+name = "tiny"
+
+[arena]
+width = 1.0
+height = 1.0
+wall_height = 0.1
+
+[robot]
+start_region = [0.1, 0.1, 0.4, 0.4]
+
+[goal]
+shape = "box"
+half_size = [0.05, 0.05]
+height = 0.1
+region = [0.6, 0.6, 0.9, 0.9]
+
+[[walls]]
+from = [0.5, 0.0]
+to = [0.5, 0.3]
+material = "marker"
+
+[[pillars]]
+center = [0.7, 0.2]
+radius = 0.04
+
+[[wanderers]]
+region = [0.1, 0.6, 0.4, 0.9]
+"""
+
+
+def test_valid_tiny_world_loads(tmp_path) -> None:
+    path = tmp_path / "tiny.toml"
+    path.write_text(VALID)
+    world = envs.load_world(path)
+    assert world.name == "tiny" and world.n_wanderers == 1
+    assert int(world.seg_material[4]) == envs.MARKER
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "field"),
+    [
+        ("height = 1.0\n", "", "arena.height"),  # missing field
+        ("[goal]", "[goalx]", "goal"),  # missing table
+        ("width = 1.0", 'width = "wide"', "arena.width"),  # wrong type
+        ("width = 1.0", "width = true", "arena.width"),  # a bool is not a number
+        ("[0.1, 0.1, 0.4, 0.4]", "[0.1, 0.1, 0.4]", "robot.start_region"),  # wrong length
+        ("[0.1, 0.1, 0.4, 0.4]", "[0.0, 0.1, 0.4, 0.4]", "robot.start_region"),  # off the arena
+        ("[0.1, 0.1, 0.4, 0.4]", "[0.1, 0.1, 1.4, 0.4]", "robot.start_region"),
+        ("[0.1, 0.6, 0.4, 0.9]", "[0.1, 0.6, 0.4, 2.0]", "wanderers[0].region"),
+        ("radius = 0.04", "radius = -0.04", "pillars[0].radius"),  # negative radius
+        ('material = "marker"', 'material = "glass"', "walls[0].material"),  # unknown material
+        ("half_size = [0.05, 0.05]", "half_size = [0.05, -0.05]", "goal.half_size"),
+        ('shape = "box"', 'shape = "cone"', "goal.shape"),
+        ("to = [0.5, 0.3]", "to = [0.5, 1.3]", "walls[0].to"),
+        ('name = "tiny"', 'name = "tiny"\n[noise]\npixel_flip_prob = 2.0', "noise.pixel_flip_prob"),
+    ],
+)
+def test_malformed_world_fails_naming_file_and_field(tmp_path, old, new, field) -> None:
+    assert old in VALID
+    path = tmp_path / "bad.toml"
+    path.write_text(VALID.replace(old, new, 1))
+    with pytest.raises(envs.WorldError) as err:
+        envs.load_world(path)
+    message = str(err.value)
+    assert "\n" not in message
+    assert str(path) in message and f"'{field}'" in message, message
+
+
+def test_bad_toml_fails_naming_the_file(tmp_path) -> None:
+    path = tmp_path / "broken.toml"
+    path.write_text(VALID.replace("width = 1.0", "width = = 1.0"))
+    with pytest.raises(envs.WorldError, match="TOML") as err:
+        envs.load_world(path)
+    assert str(path) in str(err.value) and "\n" not in str(err.value)
+
+
+def test_missing_file_fails_naming_it(tmp_path) -> None:
+    path = tmp_path / "nowhere.toml"
+    with pytest.raises(envs.WorldError) as err:
+        envs.load_world(path)
+    assert str(path) in str(err.value) and "\n" not in str(err.value)
+    with pytest.raises(envs.WorldError, match="world3"):
+        envs.load_world("world3")

@@ -187,6 +187,26 @@ def _pad(rows: list, n: int, width: int | None, fill: float = 0.0) -> np.ndarray
     return out
 
 
+def _region_has_room(region, radius, segs, pillars, boxes, n: int = 24) -> bool:
+    """Whether some point of an n x n grid over ``region`` has ``radius`` of clearance from the
+    static surfaces (segments, pillars, fixed boxes as (cx, cy, (hx, hy))). Reset draws random
+    candidates and would otherwise fall back to an overlapping start without a word."""
+    xs = np.linspace(region[0], region[2], n)
+    ys = np.linspace(region[1], region[3], n)
+    p = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2)
+    gap = np.full(len(p), np.inf)
+    for x1, y1, x2, y2 in segs:
+        a, e = np.array([x1, y1]), np.array([x2 - x1, y2 - y1])
+        u = np.clip(((p - a) @ e) / max(e @ e, 1e-12), 0.0, 1.0)
+        gap = np.minimum(gap, np.linalg.norm(p - (a + u[:, None] * e), axis=1))
+    for cx, cy, r in pillars:
+        gap = np.minimum(gap, np.linalg.norm(p - [cx, cy], axis=1) - r)
+    for cx, cy, (hx, hy) in boxes:
+        q = np.clip(p, [cx - hx, cy - hy], [cx + hx, cy + hy])
+        gap = np.minimum(gap, np.linalg.norm(p - q, axis=1))
+    return bool(np.any(gap >= radius))
+
+
 def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radius: float = 0.037):
     """Build a :class:`World` from a parsed TOML document; ``src`` names it in errors."""
     rd = _Reader(src)
@@ -280,6 +300,21 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
         hi = 1.0 if key == "pixel_flip_prob" else 10.0
         if not 0.0 <= value <= hi:
             raise _fail(src, f"noise.{key}", f"must lie in [0, {hi:g}], got {value}")
+
+    fixed_boxes = [
+        (r[0], r[1], h) for r, h in zip(box_region, box_half, strict=True) if r[:2] == r[2:]
+    ]
+    checks = [("robot.start_region", start_region, body_radius)]
+    checks += [(f"wanderers[{k}].region", r, body_radius) for k, r in enumerate(wander_regions)]
+    checks.append(("goal.region", goal_region, min(goal_half)))
+    for field, region, radius in checks:
+        if not _region_has_room(region, radius, segs, pillars, fixed_boxes):
+            raise _fail(
+                src,
+                field,
+                f"no point of {region} keeps {radius:g} m clear of the walls, pillars and fixed "
+                "boxes; move or enlarge the region",
+            )
 
     n_s = max(len(segs), capacity.segments)
     n_b = max(len(box_half), capacity.boxes, 1)

@@ -25,6 +25,22 @@ into one results dict, so new ones -- e.g. controllers -- are added by appending
 
 ``--quick`` uses fewer steps, repeats and batch sizes (explicit flags still win). The JSON is
 written atomically; a short summary is printed at the end.
+
+JSON layout (batch sizes are string keys; rates are robot-steps per second)::
+
+    schema, config {world, steps, batches, repeats, quick, numpy_robots, numpy_steps, timing,
+        policy}, machine {platform, machine, processor, cpu_count, cpus_available,
+        memory_bytes, python, numpy, jax, jaxlib, backend, device_count, device_kinds,
+        xla_flags, compiler_options, load_average_start, date},
+    jax_steps_per_s {B: best}, jax_steps_per_s_median {B: ...}, compile_s {B: s},
+    jax_runs {B: {compile_s, steps_per_s, steps_per_s_median, best_s, median_s, times_s,
+        cpu_per_wall}},
+    sharding {devices, batches, speedup_vs_one_device {B: x}, helps},
+    jax_steps_per_s_sharded {B: ...} or null, compile_s_sharded, jax_runs_sharded,
+    numpy_steps_per_s, numpy {robots, steps, seconds}, speedup_vs_numpy, speedup_batch,
+    flops_per_step, cost_analysis_per_step {B: {flops, transcendentals, bytes accessed}},
+    peak_flops, peak {matmul_size, dtype, best_s, ...}, achieved_flops, achieved_flops_batch,
+    fraction_of_peak, bench_wall_s {benchmark: s}, load_average_end, notes [str]
 """
 
 from __future__ import annotations
@@ -55,6 +71,8 @@ SPEEDUP_BATCH = 30
 """The batch size whose JAX rate is compared with NumPy's (a population of 30, as in the GA)."""
 RESET_CHUNK = 1000
 """Robots reset in one compiled call; larger batches repeat these states (same work per step)."""
+SHARDING_HELPS = 1.1
+"""Sharding "helps" when it is this much faster at the largest batch (timings are noisy)."""
 FLOPS_BATCH = 1000
 """Largest batch whose single-step program is cost-analysed."""
 CRUISE, GAIN = 300.0, 0.3
@@ -354,21 +372,25 @@ def bench_sharded(b: Bench) -> None:
     gain = {k: sharded[k] / single[k] for k in sharded if k in single}
     b.results["sharding"]["speedup_vs_one_device"] = gain
     if gain:
-        best = max(gain, key=lambda k: gain[k])
-        helps = gain[best] > 1.05
+        # Judged at the largest batch, where there is most work to split; a busy machine that
+        # gives this process less than the devices' worth of cores cannot show a gain.
+        largest = max(gain, key=int)
+        cores = runs[largest]["cpu_per_wall"]
+        helps = gain[largest] > SHARDING_HELPS
         b.results["sharding"]["helps"] = helps
         b.notes.append(
-            f"sharding over {n_dev} devices: best x{gain[best]:.2f} at batch {best} "
-            f"({'helps' if helps else 'does not help'} on this machine)"
+            f"sharding over {n_dev} devices: x{gain[largest]:.2f} at batch {largest} "
+            f"({'helps' if helps else 'does not help'} here; the sharded run kept "
+            f"{cores:.2f} cores busy)"
         )
 
 
 def bench_numpy(b: Bench) -> None:
     """``numpy_steps_per_s``: ``reference.ref_step`` robot by robot, on the same work."""
     import jax
-    from jaxais.envs import reference as ref
 
     from jaxais import envs
+    from jaxais.envs import reference as ref
 
     n_r, n_t = b.args.numpy_robots, b.args.numpy_steps
     state, obs = initial(b, n_r)

@@ -1,7 +1,7 @@
 """Run n STL trials of one system in one world and write results.json.
 
     python scripts/trials.py --system SIE --world world1 --trials 30 --seed 0 --out results.json
-    python scripts/trials.py --system UIE --random-set R2 --world world2 --out uie.json --plot uie.png
+    python scripts/trials.py --system UIE --random-set R2 --world world2 --out u.json --plot u.png
 
 All trials run as one compiled, vmapped batch; the progress bar counts simulated iterations of
 the longest-running trial (a trial stops when it finishes or hits a cap: 4000 s, 100 collisions).

@@ -29,9 +29,10 @@ BATCH = 4
 CONFIG = EpisodeConfig(tau_cap=20.0, collision_cap=5, chunk=25, segment=500, record=True)
 """Short caps: 625 iterations at most, 5 collisions."""
 X, Y = 5, 8
-N_UNIFORM = X * Y + 7 + 1 + 2 * X + 2
-"""Uniforms per iteration of the STL controller for a 5 x 8 network (see ``stl_controller``)."""
-SLICES = {"idiotope": slice(0, 40), "new": slice(40, 47), "new_p": slice(47, 48)}
+N_UNIFORM = 7 + 1 + 2 * X + 2
+"""Uniforms per iteration of the STL controller for a 5 x 8 network (see ``stl_controller``:
+a replacement antibody, its P, the two tie-breaks, the behaviour)."""
+SLICES = {"new": slice(0, 7), "new_p": slice(7, 8), "behave": slice(N_UNIFORM - 2, N_UNIFORM)}
 
 
 @functools.cache
@@ -132,8 +133,9 @@ def act_fn():
     return jit(STL.act)
 
 
-def percept(m, m_prev=0, v=0.0, v_prev=0.0, blue_pixels=0, centroid=7.0, t=1) -> Percept:
-    """A hand-made percept with fixed dtypes (so the jitted functions never retrace)."""
+def percept(m, m_prev=0, v=0.0, v_prev=0.0, blue_pixels=0, centroid=7.0, t=1, tick=None) -> Percept:
+    """A hand-made percept with fixed dtypes (so the jitted functions never retrace); the batch
+    tick defaults to t (as in a running run)."""
     return Percept(
         m=jnp.int32(m),
         m_prev=jnp.int32(m_prev),
@@ -142,6 +144,7 @@ def percept(m, m_prev=0, v=0.0, v_prev=0.0, blue_pixels=0, centroid=7.0, t=1) ->
         blue_pixels=jnp.int32(blue_pixels),
         centroid=jnp.float32(centroid),
         t=jnp.int32(t),
+        tick=jnp.int32(t if tick is None else tick),
     )
 
 
@@ -173,6 +176,7 @@ def state(
     unseen_run: int = 0,
     obstacle_run: int = 0,
     antibodies=None,
+    key: int = 0,
 ) -> STLState:
     """A hand-made network state (sigma0 defaults to the column means of P)."""
     P = jnp.asarray(P, jnp.float32)
@@ -189,6 +193,7 @@ def state(
         differences=jnp.int32(0),
         selections=jnp.int32(0),
         replaced=jnp.int32(0),
+        key=jax.random.key(key),
     )
 
 
@@ -209,14 +214,15 @@ def start_fn():
 @functools.cache
 def iterate_fn():
     """Unbatched ``iterate`` (STL controller, :data:`CONFIG`), jitted once."""
-    return jit(iterate, static_argnums=(5, 7))
+    return jit(iterate, static_argnums=(6, 8))
 
 
 @functools.cache
 def iterate_batch_fn():
     """``vmap(iterate)`` over BATCH runs, jitted once."""
     return jit(
-        jax.vmap(iterate, in_axes=(0, 0, 0, None, None, None, 0, None)), static_argnums=(5, 7)
+        jax.vmap(iterate, in_axes=(0, 0, 0, None, None, None, None, 0, None)),
+        static_argnums=(6, 8),
     )
 
 
@@ -241,7 +247,8 @@ def start_runs(reset_keys: jax.Array, run_keys: jax.Array, params: System | None
     return start_fn()(reset_keys, run_keys, world(), sim_params(), STL, params)
 
 
-def step_one(run, key: jax.Array, u: jnp.ndarray, params: System):
-    """One unbatched iteration with noise drawn from ``key``."""
+def step_one(run, key: jax.Array, u: jnp.ndarray, params: System, tick=None):
+    """One unbatched iteration with noise drawn from ``key`` (the tick defaults to run.t)."""
     noise = unstack(noise_fn()(jax.random.split(key, BATCH)), 0)
-    return iterate_fn()(run, noise, u, world(), sim_params(), STL, params, CONFIG)
+    tick = run.t if tick is None else jnp.int32(tick)
+    return iterate_fn()(run, noise, u, tick, world(), sim_params(), STL, params, CONFIG)

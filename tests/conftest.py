@@ -12,9 +12,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from jaxais.envs import reference as ref
 
 from jaxais import envs
+from jaxais.envs import reference as ref
 
 BATCH = 8
 """Robots per batched call (a fixed size, so that no test triggers a new compilation)."""

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from jaxais.envs import Observation
 
 from jaxais.antigens import (
     ANTIGEN_NAMES,
@@ -21,6 +20,7 @@ from jaxais.antigens import (
     is_obstacle_or_collision,
     severity,
 )
+from jaxais.envs import Observation
 
 _antigen = jax.jit(antigen)
 _batched = jax.jit(jax.vmap(antigen))

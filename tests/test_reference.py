@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
+from jaxais import envs
 from jaxais.envs import geometry as env_geometry
 from jaxais.envs import params as env_params
 from jaxais.envs import reference as ref
 from jaxais.envs import sim as env_sim
-
-from jaxais import envs
 
 PARAMS_NP = ref.params_to_numpy(envs.default_params())
 REL_T = 2e-5

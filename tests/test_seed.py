@@ -13,6 +13,10 @@ import pytest
 
 from jaxais.seed import ARRAYS_DIR, SEED_JSON, Seed, SeedError, load_seed, save_seed
 
+# After a failed restore, orbax's background threads post to a closed asyncio loop; pytest then
+# reports "Exception ignored" warnings that say nothing about the seed.
+pytestmark = pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
+
 PROVENANCE = {"command": "test_seed.py", "seed": 7, "version": "0.0-test"}
 
 
@@ -49,6 +53,12 @@ def test_round_trip_is_bit_identical(tmp_path: Path):
     assert [s["tau"] for s in meta["sets"]] == [float(t) for t in seed.tau]
     assert [s["collisions"] for s in meta["sets"]] == [int(c) for c in seed.collisions]
     assert meta["sets"][3]["L"] == [float(x) for x in seed.L[3]]
+
+
+def test_shipped_default_seed_loads():
+    seed, meta = load_seed()
+    assert seed.antibodies.type.shape == (5, 8) and seed.L.shape == (5, 8)
+    assert meta["format"] == "jaxais-seed/1"
 
 
 def test_saving_over_a_seed_replaces_it(tmp_path: Path):

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from jaxais.envs import reference as ref
 
 from jaxais import envs
+from jaxais.envs import reference as ref
 
 K = 0.00683 * 0.0205
 """Wheel rim speed per speed unit, m/s (speed unit x wheel radius)."""

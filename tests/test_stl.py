@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 
 from jaxais.antibodies import antibodies_from_uniform, take, within_limits
 from jaxais.behaviours import wheel_speeds_from_uniform
-from jaxais.network import idiotopes_from_uniform
+from jaxais.network import idiotopes
 from jaxais.reinforcement import rl_score
 
 hyp = settings(max_examples=25, deadline=None)
@@ -271,7 +271,9 @@ def test_replacement_one_weak_antibody_per_iteration():
             assert bool(within_limits(new))
             assert tree_close(new, antibodies_from_uniform(jnp.asarray(u[F.SLICES["new"]])))
             assert 0.25 <= P_of(out)[i, j] <= 0.75
-            np.testing.assert_allclose(P_of(out)[i, j], 0.25 + 0.5 * u[47], rtol=1e-6)
+            np.testing.assert_allclose(
+                P_of(out)[i, j], 0.25 + 0.5 * u[F.SLICES["new_p"]][0], rtol=1e-6
+            )
         assert int(out.replaced) == min(step + 1, 2)
         s = out
     assert seen == [[[1, 3]], [[4, 6]], []]
@@ -341,7 +343,7 @@ def test_non_idiotypic_selection_acts_with_alpha(seed, m, blue, centroid):
     np.testing.assert_array_equal(out.N, s.N)
     assert int(out.differences) == 0 and int(out.selections) == 1
     # The winner's behaviour drives the wheels.
-    u = F.uniforms(seed % 101)[-2:]
+    u = F.uniforms(seed % 101)[F.SLICES["behave"]]
     expected = wheel_speeds_from_uniform(u, take(sys_.antibodies, (alpha, m)), blue, centroid)
     np.testing.assert_allclose(np.asarray(wheels), np.asarray(expected), rtol=1e-6)
 
@@ -430,6 +432,8 @@ def test_clone_counts_are_floored_at_zero_under_sustained_suppression():
 
 
 def test_idiotope_is_recomputed_only_every_period():
+    """Eq (3) is redrawn when the batch tick is a positive multiple of the period, from the
+    state's key folded with the tick, on the paratopes after this iteration's learning."""
     sys_ = F.system()
     period = sys_.network.idiotope_period
     assert period == 120
@@ -439,12 +443,25 @@ def test_idiotope_is_recomputed_only_every_period():
     for t in (0, 1, 60, 119, 121, 239, 241, 359):
         out = learn(F.state(sys_, P, I=stale), F.percept(m=0, m_prev=0, t=t), sys_, t)
         np.testing.assert_array_equal(out.I, stale, err_msg=f"t={t}")
+    draws = set()
     for t in (120, 240, 360):
-        out = learn(F.state(sys_, P, I=stale), F.percept(m=0, m_prev=0, t=t), sys_, t)
+        s = F.state(sys_, P, I=stale, key=9)
+        out = learn(s, F.percept(m=0, m_prev=0, t=t), sys_, t)
         I = np.asarray(out.I)
         assert np.all(I.sum(axis=1) <= 1), t
-        u = F.uniforms(t)[F.SLICES["idiotope"]]
-        np.testing.assert_array_equal(I, idiotopes_from_uniform(u, out.P))
+        np.testing.assert_array_equal(I, idiotopes(jax.random.fold_in(s.key, t), out.P))
+        draws.add(I.tobytes())
+    assert len(draws) > 1  # a fresh draw each period
+
+
+def test_idiotope_follows_the_batch_tick():
+    sys_ = F.system()
+    P = np.random.default_rng(4).random((F.X, F.Y))
+    stale = np.ones((F.X, F.Y))
+    due = learn(F.state(sys_, P, I=stale), F.percept(m=0, m_prev=0, t=7, tick=240), sys_)
+    assert not np.array_equal(due.I, stale)
+    not_due = learn(F.state(sys_, P, I=stale), F.percept(m=0, m_prev=0, t=240, tick=7), sys_)
+    np.testing.assert_array_equal(not_due.I, stale)
 
 
 @hyp

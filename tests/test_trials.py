@@ -168,11 +168,13 @@ def test_outcome_caps_and_fitness():
 
 def test_vmapped_iterate_equals_a_loop_of_single_iterations():
     """jit(vmap(iterate)) over BATCH runs of different systems = jitted iterate run by run, for
-    12 iterations, including a run that hits the time cap and one that hits the collision cap."""
+    12 iterations crossing an idiotope redraw (tick 120), including a run that hits the time
+    cap and one that hits the collision cap."""
     runs, _ = start_runs()
     params = F.batch_params()  # SIE, UIE-R1, URL-R1, HDC
+    first_tick = 115
     runs = runs.replace(
-        t=runs.t.at[3].set(MAX_IT - 4),
+        t=jnp.asarray([first_tick, first_tick, first_tick, MAX_IT - 4], runs.t.dtype),
         collisions=runs.collisions.at[2].set(F.CONFIG.collision_cap - 1),
     )
     ir = runs.obs.ir.at[2].set(jnp.asarray(IR[6], runs.obs.ir.dtype))
@@ -180,13 +182,15 @@ def test_vmapped_iterate_equals_a_loop_of_single_iterations():
     singles = [F.unstack(runs, i) for i in range(F.BATCH)]
     single_params = [F.unstack(params, i) for i in range(F.BATCH)]
     w, sp = F.world(), F.sim_params()
+    idiotopes_before = np.asarray(runs.ctrl.I)
     for k in range(12):
+        tick = jnp.int32(first_tick + k)
         noise = F.noise_fn()(jax.random.split(jax.random.key(500 + k), F.BATCH))
         u = jnp.stack([F.uniforms(100 * k + i) for i in range(F.BATCH)])
-        runs = F.iterate_batch_fn()(runs, noise, u, w, sp, STL, params, F.CONFIG)
+        runs = F.iterate_batch_fn()(runs, noise, u, tick, w, sp, STL, params, F.CONFIG)
         for i in range(F.BATCH):
             singles[i] = F.iterate_fn()(
-                singles[i], F.unstack(noise, i), u[i], w, sp, STL, single_params[i], F.CONFIG
+                singles[i], F.unstack(noise, i), u[i], tick, w, sp, STL, single_params[i], F.CONFIG
             )
     for i in range(F.BATCH):
         batched = F.unstack(runs, i)
@@ -197,7 +201,11 @@ def test_vmapped_iterate_equals_a_loop_of_single_iterations():
             )
     st = np.asarray(runs.status)
     assert st[2] == FAILED_COLLISIONS and st[3] == FAILED_TIME and st[0] == RUNNING
-    assert int(runs.t[0]) == 12 and int(runs.t[2]) == 0
+    assert int(runs.t[0]) == first_tick + 12 and int(runs.t[2]) == first_tick
+    # The learning runs redrew their idiotope at tick 120; the run stopped at tick 115 did not.
+    I = np.asarray(runs.ctrl.I)
+    assert not np.array_equal(I[0], idiotopes_before[0])
+    np.testing.assert_array_equal(I[2], idiotopes_before[2])
 
 
 # ---------------------------------------------------------------------------------- trials

@@ -5,10 +5,10 @@ from __future__ import annotations
 import jax
 import numpy as np
 import pytest
-from jaxais.envs import reference as ref
-from jaxais.envs.sim import PLACEMENT_CLEARANCE
 
 from jaxais import envs
+from jaxais.envs import reference as ref
+from jaxais.envs.sim import PLACEMENT_CLEARANCE
 
 PARAMS_NP = ref.params_to_numpy(envs.default_params())
 
@@ -234,6 +234,12 @@ def test_valid_tiny_world_loads(tmp_path) -> None:
         ('shape = "box"', 'shape = "cone"', "goal.shape"),
         ("to = [0.5, 0.3]", "to = [0.5, 1.3]", "walls[0].to"),
         ('name = "tiny"', 'name = "tiny"\n[noise]\npixel_flip_prob = 2.0', "noise.pixel_flip_prob"),
+        # A start region filled by a pillar: reset could never place the robot clear of it.
+        (
+            "center = [0.7, 0.2]\nradius = 0.04",
+            "center = [0.25, 0.25]\nradius = 0.3",
+            "robot.start_region",
+        ),
     ],
 )
 def test_malformed_world_fails_naming_file_and_field(tmp_path, old, new, field) -> None:

@@ -35,6 +35,7 @@ propagate with their full traceback instead.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import json
 import os
@@ -45,6 +46,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 __all__ = [
+    "ArgumentParser",
     "EXIT_INTERRUPTED",
     "EXIT_USAGE",
     "UserError",
@@ -94,6 +96,17 @@ def fail(prog: str, message: str, status: int = EXIT_USAGE) -> NoReturn:
     sys.stderr.write(f"{prog}: error: {_one_line(message)}\n")
     sys.stderr.flush()
     raise SystemExit(status)
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """``argparse.ArgumentParser`` whose errors are one line, like every other error here.
+
+    argparse prints a usage block before its error; a bad flag instead gives
+    ``"{prog}: error: {message} (see --help)"`` and exit status 2.
+    """
+
+    def error(self, message: str) -> NoReturn:
+        fail(self.prog, f"{message} (see --help)")
 
 
 def _debug() -> bool:

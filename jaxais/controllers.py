@@ -187,7 +187,10 @@ def stl_controller() -> Controller:
         scored = _scored(s.P.shape, (s.acting, pc.m_prev)) & (pc.t > 0) & on
         r = rl_score(pc.m_prev, pc.m, pc.v_prev, pc.v, pc.centroid)
         P = jnp.where(scored, jnp.clip(s.P + r, 0.0, 1.0), s.P)
-        P = jnp.where(on, rescale_paratopes(P, s.sigma0), P)
+        # Eq (4), then the paper's bounds: "the maximum P allowed is 1.00, the minimum 0.00"
+        # (the rescale alone can lift an entry above 1; column means then fall a little short
+        # of sigma0, and only while the bound binds).
+        P = jnp.where(on, jnp.clip(rescale_paratopes(P, s.sigma0), 0.0, 1.0), P)
         counters, fire = update_penalty(s.counters, pc.m)
         P = jnp.where(scored & fire, jnp.clip(P - penalty_size(system.idiotypic), 0.0, 1.0), P)
 

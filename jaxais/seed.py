@@ -16,7 +16,14 @@ from typing import Any
 
 import numpy as np
 
-from jaxais.antibodies import Antibodies, from_dicts, to_dicts, within_limits
+from jaxais.antibodies import (
+    Antibodies,
+    attribute_matrix,
+    from_dicts,
+    take,
+    to_dicts,
+    within_limits,
+)
 from jaxais.envs.struct import pytree_dataclass
 
 SEED_JSON = "seed.json"
@@ -142,14 +149,27 @@ def load_seed(path: str | Path | None = None) -> tuple[Seed, dict[str, Any]]:
         raise SeedError(f"{path}: seed arrays have inconsistent shapes ({hint})")
     if not bool(np.all(np.asarray(within_limits(antibodies)))):
         raise SeedError(f"{path}: seed antibodies break Table 1's limits ({hint})")
-    # The readable file must describe the same sets as the arrays.
+    # The readable file must describe the same sets as the arrays, number for number (the JSON
+    # holds each float32 as its shortest round-tripping decimal, so equality is exact).
     try:
-        readable = [from_dicts(s["antibodies"]) for s in meta["sets"]]
+        sets = meta["sets"]
+        readable = [from_dicts(s["antibodies"]) for s in sets]
+        json_tau = np.asarray([s["tau"] for s in sets], np.float32)
+        json_c = np.asarray([s["collisions"] for s in sets], np.int32)
+        json_L = np.asarray([s["L"] for s in sets], np.float32)
     except (KeyError, TypeError, ValueError) as err:
         raise SeedError(f"{path}: {SEED_JSON} is malformed ({err}); {hint}") from None
-    if len(readable) != x or any(
-        not np.array_equal(np.asarray(r.type), np.asarray(seed.antibodies.type[i]))
+    same = len(readable) == x and json_L.shape == seed.L.shape
+    same = same and all(
+        np.array_equal(
+            np.asarray(attribute_matrix(r)), np.asarray(attribute_matrix(take(antibodies, i)))
+        )
+        and np.array_equal(np.asarray(r.type), np.asarray(seed.antibodies.type[i]))
         for i, r in enumerate(readable)
-    ):
+    )
+    same = same and np.array_equal(json_tau, seed.tau.astype(np.float32))
+    same = same and np.array_equal(json_c, seed.collisions.astype(np.int32))
+    same = same and np.array_equal(json_L, seed.L.astype(np.float32))
+    if not same:
         raise SeedError(f"{path}: {SEED_JSON} disagrees with {ARRAYS_DIR}/ ({hint})")
     return seed, meta

@@ -57,7 +57,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from jaxais.cli import UserError, atomic_write_json, check_output_file, main_wrapper
+from jaxais.cli import ArgumentParser, UserError, atomic_write_json, check_output_file, main_wrapper
 
 PROG = "bench.py"
 SCHEMA = "jaxais-bench/1"
@@ -83,7 +83,7 @@ CRUISE, GAIN = 300.0, 0.3
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog=PROG, description="Benchmark the JAX e-puck simulator.")
+    p = ArgumentParser(prog=PROG, description="Benchmark the JAX e-puck simulator.")
     p.add_argument("--out", default="bench.json", help="output JSON file (default bench.json)")
     p.add_argument("--world", default="world1", help="built-in world name or .toml path")
     p.add_argument("--steps", type=int, help="scan length per timed call (200; quick 50)")

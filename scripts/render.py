@@ -17,7 +17,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from jaxais.cli import UserError, check_output_file, main_wrapper
+from jaxais.cli import ArgumentParser, UserError, check_output_file, main_wrapper
 
 PROG = "render.py"
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg")
@@ -39,7 +39,7 @@ MAX_GIF_FRAMES = 1000
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(
+    p = ArgumentParser(
         prog=PROG,
         description="Render a world and demo-controller trajectories to a PNG (and a GIF).",
     )

@@ -20,13 +20,19 @@ import sys
 import time
 from pathlib import Path
 
-from jaxais.cli import UserError, atomic_write_json, check_writable_dir, main_wrapper
+from jaxais.cli import (
+    ArgumentParser,
+    UserError,
+    atomic_write_json,
+    check_writable_dir,
+    main_wrapper,
+)
 
 WORLDS = ("world1", "world2", "real")
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="reproduce.py", description=__doc__.split("\n\n")[0])
+    p = ArgumentParser(prog="reproduce.py", description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, help="output directory (created if missing)")
     p.add_argument(
         "--trials",
@@ -71,6 +77,8 @@ def main(argv: list[str] | None = None) -> None:
     unknown = sorted(set(worlds) - set(WORLDS))
     if unknown or not worlds:
         raise UserError(f"--worlds: unknown world(s) {unknown} (choose from {', '.join(WORLDS)})")
+    if not 0 <= args.seed < 2**32:
+        raise UserError(f"--seed must be in [0, 2**32), got {args.seed}")
     if args.trials is not None and args.trials < 2:
         raise UserError(f"--trials must be >= 2 (t-tests need two per group), got {args.trials}")
     if args.tau_cap <= 0 or args.collision_cap < 1:

@@ -14,14 +14,14 @@ import argparse
 import sys
 import time
 
-from jaxais.cli import UserError, atomic_write_json, check_output_file, main_wrapper
+from jaxais.cli import ArgumentParser, UserError, atomic_write_json, check_output_file, main_wrapper
 
 SYSTEMS = ("SIE", "SRL", "UIE", "URL", "HDC")
 WORLDS = ("world1", "world2", "real")
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="trials.py", description=__doc__.split("\n\n")[0])
+    p = ArgumentParser(prog="trials.py", description=__doc__.split("\n\n")[0])
     p.add_argument("--system", required=True, choices=SYSTEMS)
     p.add_argument("--world", default="world1", help="world1, world2, real or a .toml path")
     p.add_argument("--trials", type=int, default=30)
@@ -47,6 +47,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 @main_wrapper("trials.py")
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
+    if not 0 <= args.seed < 2**32:
+        raise UserError(f"--seed must be in [0, 2**32), got {args.seed}")
     if args.trials < 1:
         raise UserError(f"--trials must be >= 1, got {args.trials}")
     if args.random_set and args.system not in ("UIE", "URL"):

@@ -175,12 +175,6 @@ def test_trials_script_user_errors(tmp_path: Path):
     assert not out.exists() and not (tmp_path / "r.txt").exists()
 
 
-@pytest.mark.xfail(
-    reason="trials.py and reproduce.py use a plain argparse.ArgumentParser: a bad flag value "
-    "(an unknown choice, a non-integer) prints the multi-line usage before the error line "
-    "(evolve.py's _Parser prints one line)",
-    strict=True,
-)
 @pytest.mark.parametrize(
     ("script", "args"),
     [

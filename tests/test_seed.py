@@ -158,11 +158,6 @@ def test_seed_breaking_table_1_or_with_bad_shapes_is_refused(tmp_path: Path):
         load_seed(tmp_path / "short")
 
 
-@pytest.mark.xfail(
-    reason="load_seed compares only the behaviour types of seed.json with arrays/; an edited "
-    "tau, c, L or attribute in seed.json loads silently (the arrays win)",
-    strict=True,
-)
 @pytest.mark.parametrize(
     "edit",
     [

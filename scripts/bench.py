@@ -64,9 +64,25 @@ SCHEMA = "jaxais-bench/1"
 DEVICE_FLAG = "--xla_force_host_platform_device_count"
 
 FULL = dict(
-    steps=200, repeats=5, batches="1,30,1000,10000", numpy_robots=30, numpy_steps=20, matmul=2048
+    steps=200,
+    repeats=5,
+    batches="1,30,1000,10000",
+    numpy_robots=30,
+    numpy_steps=20,
+    matmul=2048,
+    controller_batches="30,1000",
+    controller_steps=500,
 )
-QUICK = dict(steps=50, repeats=2, batches="1,30,1000", numpy_robots=4, numpy_steps=5, matmul=512)
+QUICK = dict(
+    steps=50,
+    repeats=2,
+    batches="1,30,1000",
+    numpy_robots=4,
+    numpy_steps=5,
+    matmul=512,
+    controller_batches="30",
+    controller_steps=50,
+)
 SPEEDUP_BATCH = 30
 """The batch size whose JAX rate is compared with NumPy's (a population of 30, as in the GA)."""
 RESET_CHUNK = 1000
@@ -95,6 +111,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--numpy-robots", type=int, help="robots for the NumPy reference (30; quick 4)")
     p.add_argument("--numpy-steps", type=int, help="steps per NumPy robot (20; quick 5)")
     p.add_argument("--matmul", type=int, help="matrix size of the peak benchmark (2048; quick 512)")
+    p.add_argument("--controller-batches", help="STL controller batch sizes (30,1000; quick 30)")
+    p.add_argument("--controller-steps", type=int, help="iterations per timed call (500; quick 50)")
     p.add_argument(
         "--devices", type=int, help=f"force N host devices ({DEVICE_FLAG}=N; set before JAX loads)"
     )
@@ -107,7 +125,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def check_args(args: argparse.Namespace) -> None:
     """Validate flags (before JAX is imported); turns ``--batches`` into a sorted int list."""
-    for name in ("steps", "repeats", "numpy_robots", "numpy_steps", "matmul"):
+    for name in ("steps", "repeats", "numpy_robots", "numpy_steps", "matmul", "controller_steps"):
         value = getattr(args, name)
         if value <= 0:
             flag = "--" + name.replace("_", "-")
@@ -123,6 +141,13 @@ def check_args(args: argparse.Namespace) -> None:
     if not batches or batches[0] <= 0:
         raise UserError(f"--batches must be positive integers, got {args.batches!r}")
     args.batches = batches
+    try:
+        args.controller_batches = sorted({int(x) for x in args.controller_batches.split(",") if x})
+    except ValueError:
+        msg = f"--controller-batches must be integers, got {args.controller_batches!r}"
+        raise UserError(msg) from None
+    if not args.controller_batches or args.controller_batches[0] <= 0:
+        raise UserError("--controller-batches must be positive integers")
     check_output_file(args.out, (".json",))
 
 
@@ -461,11 +486,53 @@ def bench_peak(b: Bench) -> None:
     b.results["peak"] = {"matmul_size": n, "dtype": "float32", **t}
 
 
+def bench_controller(b: Bench) -> None:
+    """``controller_iterations_per_s``: the full STL controller (SIE: RL, eq 4, penalties,
+    idiotypic selection, behaviours) plus the simulator, in robot-iterations per second, through
+    the same compiled task loop the trials use (``jaxais.episode.advance``, caps off so no run
+    ends), at ``--controller-batches``; compile time reported separately."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxais import envs
+    from jaxais.controllers import STL
+    from jaxais.episode import EpisodeConfig, advance, start_batch
+    from jaxais.seed import load_seed
+    from jaxais.systems import make_system
+    from jaxais.trials import trial_keys
+
+    steps = b.args.controller_steps
+    config = EpisodeConfig(tau_cap=1e6, collision_cap=10**9, segment=steps, chunk=25)
+    system = make_system("SIE", load_seed()[0])
+    rates, compile_s = {}, {}
+    for n in b.args.controller_batches:
+        params = jax.tree.map(lambda a, n=n: jnp.broadcast_to(a, (n, *jnp.shape(a))), system)
+        reset_keys, run_keys = trial_keys(0, "SIE", n)
+        t0 = time.perf_counter()
+        start_c = (
+            envs.jit(start_batch, static_argnums=(4, 6))
+            .lower(reset_keys, run_keys, b.world, b.params, STL, params, config)
+            .compile()
+        )
+        batch = start_c(reset_keys, run_keys, b.world, b.params, params)
+        adv = (
+            envs.jit(advance, static_argnums=(3, 5))
+            .lower(batch, b.world, b.params, STL, params, config)
+            .compile()
+        )
+        compile_s[str(n)] = time.perf_counter() - t0
+        t = _timed(lambda a=adv, bt=batch, p=params: a(bt, b.world, b.params, p), b.args.repeats)
+        rates[str(n)] = n * steps / t["best_s"]
+    b.results["controller_iterations_per_s"] = rates
+    b.results["controller_compile_s"] = compile_s
+
+
 BENCHMARKS: list[tuple[str, Callable[[Bench], None]]] = [
     ("machine", bench_machine),
     ("jax simulator", bench_jax),
     ("sharded simulator", bench_sharded),
     ("numpy reference", bench_numpy),
+    ("STL controller + simulator", bench_controller),
     ("flops per step", bench_flops),
     ("matmul peak", bench_peak),
 ]
@@ -508,6 +575,14 @@ def summary(b: Bench, seconds: float) -> str:
                 f"B={k}: {v['steps_per_s']:,.0f} ({v['cpu_per_wall']:.2f} cores)"
                 for k, v in runs.items()
             )
+        )
+    if r.get("controller_iterations_per_s"):
+        lines.append(
+            "  STL controller + simulator, robot-iterations/s: "
+            + ", ".join(f"B={k}: {v:,.0f}" for k, v in r["controller_iterations_per_s"].items())
+            + " (compile s: "
+            + ", ".join(f"B={k}: {v:.1f}" for k, v in r["controller_compile_s"].items())
+            + ")"
         )
     if "numpy_steps_per_s" in r:
         text = f"  NumPy reference: {r['numpy_steps_per_s']:,.1f} robot-steps/s"

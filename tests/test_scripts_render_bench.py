@@ -88,10 +88,12 @@ def test_render_bad_values(tmp_path, args, word):
     assert_user_error(proc, "render.py", word)
 
 
-def test_render_bad_flag_is_argparse_usage():
+def test_render_bad_flag_is_one_line():
     proc = run_script("render.py", "--out", "x.png", "--no-such-flag", timeout=60)
     assert proc.returncode == 2
-    assert "usage:" in proc.stderr and "Traceback" not in proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("render.py: error:"), proc.stderr
+    assert "--no-such-flag" in lines[0] and "Traceback" not in proc.stderr
 
 
 # ---------------------------------------------------------------------------------- bench.py

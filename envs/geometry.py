@@ -95,18 +95,6 @@ def _per_kind_hits(origins: jnp.ndarray, dirs: jnp.ndarray, scene: Scene):
     )
 
 
-def ray_distances(origins: jnp.ndarray, dirs: jnp.ndarray, scene: Scene) -> jnp.ndarray:
-    """Distance [R] to the first surface along each ray (inf when nothing is hit).
-
-    Args:
-        origins: [R, 2] ray origins. dirs: [R, 2] unit directions.
-    """
-    ts, tb, tc = _per_kind_hits(origins, dirs, scene)
-    # One reduction per kind and an elementwise min: no concatenated [S+B+C, R] array, which on
-    # a CPU costs more than the intersection tests themselves.
-    return jnp.minimum(jnp.minimum(ts.min(axis=0), tb.min(axis=0)), tc.min(axis=0))
-
-
 _INDEX_BITS = 6
 _INDEX_MASK = (1 << _INDEX_BITS) - 1
 

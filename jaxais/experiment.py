@@ -7,7 +7,6 @@ every parameter it used recorded, so a run can be regenerated from its JSON.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -21,9 +20,6 @@ from jaxais.network import NetworkParams
 from jaxais.seed import Seed, default_seed_dir, load_seed
 from jaxais.systems import LABELS, make_system, parse_label
 from jaxais.trials import TrialSet, summarise
-
-SIMULATED_WORLDS = ("world1", "world2")
-STL_WORLDS = ("world1", "world2", "real")
 
 
 def protocol(world: str) -> tuple[str, ...]:
@@ -99,8 +95,3 @@ def results_document(
         "trials": trials.records,
         "summary": summarise(trials.records),
     }
-
-
-def trajectories_by_label(results: Mapping[str, TrialSet]) -> dict[str, list[np.ndarray]]:
-    """label -> list of [T, 3] pose arrays (only for results run with recording)."""
-    return {k: v.trajectories for k, v in results.items() if v.trajectories is not None}

@@ -301,7 +301,15 @@ def test_h1_fails_when_sie_not_significantly_better():
     res["world1"]["UIE-R1"] = trials_with_f(103)  # above SIE's 100, but not significantly
     h = stats.hypotheses(res)
     assert not h["H1"]["supported"]
-    assert "SIE vs UIE-R1 not significantly lower" in h["H1"]["evidence"]
+    assert "SIE vs UIE-R1 lower but not significantly" in h["H1"]["evidence"]
+
+
+def test_h1_evidence_says_when_sie_is_worse():
+    res = paper_like()
+    res["world1"]["URL-R1"] = trials_with_f(50)  # well below SIE's 100
+    h = stats.hypotheses(res)
+    assert not h["H1"]["supported"]
+    assert "world1: SIE f 100 >= URL-R1 50" in h["H1"]["evidence"]
 
 
 def test_h2_needs_a_strict_majority_of_significant_worlds():

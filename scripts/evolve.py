@@ -192,11 +192,12 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
     from tqdm import tqdm
 
     import jaxais
-    from jaxais import envs, ga
+    from jaxais import compilation_cache, envs, ga
     from jaxais.checkpointing import GACheckpointer
     from jaxais.seed import save_seed
 
     logging.getLogger("absl").setLevel(logging.ERROR)  # orbax's info/warnings are not for users
+    cache_dir = compilation_cache.enable()
     world = envs.load_world(args.world)
     sim_params = envs.default_params()
     command = shlex.join([PROG, *argv])
@@ -310,6 +311,7 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
         "ga_wall_time_s": round(ga_wall, 3),
         "compile_time_s": round(compile_s, 3),
         "ga_compile_time_s": round(ga_compile, 3),
+        "compilation_cache": cache_dir,
         "wall_time_total_s": round(earlier_wall + wall, 3),
     }
     save_seed(out / "seed", seed, provenance)

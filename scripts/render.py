@@ -164,8 +164,9 @@ def main(argv: list[str] | None = None) -> None:
     import jax
     import numpy as np
 
-    from jaxais import envs, plotting
+    from jaxais import compilation_cache, envs, plotting
 
+    compilation_cache.enable()
     world = envs.load_world(args.world)
     params = envs.default_params()
     run = make_run(world, params, args.robots, args.steps)

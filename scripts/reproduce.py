@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> None:
 
     from tqdm import tqdm
 
-    from jaxais import envs, report, stats
+    from jaxais import compilation_cache, envs, report, stats
     from jaxais.episode import EpisodeConfig
     from jaxais.experiment import (
         build_systems,
@@ -105,6 +105,7 @@ def main(argv: list[str] | None = None) -> None:
     from jaxais.seed import default_seed_dir, load_seed
     from jaxais.trials import run_trials
 
+    cache_dir = compilation_cache.enable()
     started = time.perf_counter()
     timings: dict[str, float] = {}
     seeds_dir = Path(args.seeds) if args.seeds else default_seed_dir()
@@ -155,6 +156,7 @@ def main(argv: list[str] | None = None) -> None:
         "trials": args.trials,
         "ltl_seed": str(seeds_dir),
         "worlds": configs,
+        "compilation_cache": cache_dir,
         "timings_s": timings,
     }
     atomic_write_json(out / "run.json", run)

@@ -62,13 +62,14 @@ def main(argv: list[str] | None = None) -> None:
     # Imported after the flags are checked: a bad flag answers at once, without loading JAX.
     from tqdm import tqdm
 
-    from jaxais import envs
+    from jaxais import compilation_cache, envs
     from jaxais.episode import EpisodeConfig
     from jaxais.experiment import build_systems, results_document, run_config
     from jaxais.network import NetworkParams
     from jaxais.systems import label
     from jaxais.trials import run_trials
 
+    compilation_cache.enable()
     name = label(args.system, args.random_set or "R1")
     world = envs.load_world(args.world)
     config = EpisodeConfig(

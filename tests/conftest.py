@@ -6,6 +6,7 @@ the same batch size: one compilation per world for the session.
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import jax
@@ -15,6 +16,10 @@ import pytest
 
 from jaxais import envs
 from jaxais.envs import reference as ref
+
+# Scripts keep a persistent compilation cache in the user's home by default; tests must not write
+# there (a test that wants a cache names its own directory).
+os.environ["JAXAIS_CACHE_DIR"] = "off"
 
 BATCH = 8
 """Robots per batched call (a fixed size, so that no test triggers a new compilation)."""

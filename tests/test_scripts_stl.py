@@ -2,8 +2,9 @@
 
 Each real run pays JAX's start-up and a full compile, so the module starts the few runs it needs
 at once (in a module fixture) and the tests read their outputs: one tiny ``trials.py`` run with
-``--plot``, the same command again (byte-identical JSON expected; it reuses the first run's
-compiled programs through a persistent compilation cache of its own) and one tiny
+``--plot``, the same command again (byte-identical JSON expected; it loads the first run's
+compiled programs from the scripts' persistent compilation cache, in a directory of its own) and
+one tiny
 ``reproduce.py`` run. Flag errors that answer before JAX loads are cheap and run in parallel.
 """
 
@@ -85,11 +86,7 @@ def assert_user_error(proc: subprocess.CompletedProcess, prog: str, *words: str)
 def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     base = tmp_path_factory.mktemp("scripts")
     seeds = F.write_seed(base / "ltl" / "seed", seed=11)
-    cache = {
-        "JAX_COMPILATION_CACHE_DIR": str(base / "jax_cache"),
-        "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
-        "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "0",
-    }
+    cache = {"JAXAIS_CACHE_DIR": str(base / "jax_cache")}
     out = base / "trials"
     out.mkdir()
     trials_args = (
@@ -103,12 +100,14 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     )  # fmt: skip
     first = _finish(_start("trials.py", *trials_args, **cache))
     _ok(first)
+    cached = sorted(p.name.split("-")[0] for p in (base / "jax_cache").iterdir())
     shutil.move(out / "results.json", out / "first.json")
     shutil.move(out / "plot.png", out / "first.png")
     second = _finish(_start("trials.py", *trials_args, **cache))
     return {
         "trials_dir": out,
         "first": first,
+        "cached": cached,
         "second": second,
         "reproduce": _finish(rep),
         "reproduce_dir": rep_dir,
@@ -149,6 +148,12 @@ def test_trials_script_same_arguments_same_bytes(runs):
     first = (runs["trials_dir"] / "first.json").read_bytes()
     second = (runs["trials_dir"] / "results.json").read_bytes()
     assert first == second
+
+
+def test_trials_script_fills_its_compilation_cache(runs):
+    # JAXAIS_CACHE_DIR: the first run stored its task-loop programs, which the second one loaded
+    # (and, above, gave the same bytes with).
+    assert {"jit_start_batch", "jit_advance"} <= set(runs["cached"])
 
 
 def test_trials_script_plot_is_a_png(runs):

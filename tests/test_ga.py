@@ -326,3 +326,31 @@ def test_compare_diversity_reports_both_tests():
         assert p is None or 0.0 <= p <= 1.0
     with pytest.raises(ValueError):
         ga.compare_diversity([0], TINY, maze())
+
+
+def test_rollout_programs_are_specialised_per_world(tmp_path):
+    # The task loop bakes the world into its compiled programs: a world with the same shapes but
+    # other values must get programs of its own, and the same world must reuse its programs.
+    from pathlib import Path
+
+    from jaxais.controllers import LTL
+    from jaxais.episode import EpisodeConfig, rollout
+
+    source = (Path(envs.__file__).parent / "worlds" / "ga_maze.toml").read_text()
+    assert "start_region = [0.08, 0.15, 0.3, 0.85]" in source
+    moved = tmp_path / "moved.toml"
+    moved.write_text(source.replace("[0.08, 0.15, 0.3, 0.85]", "[1.6, 0.15, 1.75, 0.85]"))
+    a, b = maze(), envs.load_world(moved)
+    assert jax.tree.map(jnp.shape, a) == jax.tree.map(jnp.shape, b)
+
+    params, config, cache = envs.default_params(), EpisodeConfig(tau_cap=0.2), {}
+    sets = sample_antibodies(jax.random.key(0), (2, 8))
+    reset_keys = jax.random.split(jax.random.key(1), 2)
+    run_keys = jax.random.split(jax.random.key(2), 2)
+    go = lambda world: rollout(reset_keys, run_keys, world, params, LTL, sets, config, None, cache)
+    x_a = np.asarray(go(a).runs.sim.pose[:, 0])
+    x_b = np.asarray(go(b).runs.sim.pose[:, 0])
+    assert len(cache) == 2
+    assert np.all(x_a < 0.5) and np.all(x_b > 1.5)  # each ran in its own world
+    np.testing.assert_array_equal(np.asarray(go(a).runs.sim.pose[:, 0]), x_a)
+    assert len(cache) == 2

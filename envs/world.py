@@ -87,9 +87,10 @@ class World:
 class Capacity:
     """Minimum padded sizes.
 
-    Worlds loaded with one Capacity have arrays of equal shapes. They share compiled functions
-    when their static fields match too: the name (``world.replace(name=...)``), the goal shape
-    and the noise levels.
+    Worlds loaded with one Capacity have arrays of equal shapes. Functions jitted with the world
+    as an argument (``reset``, ``step``) are then shared when their static fields match too: the
+    name (``world.replace(name=...)``), the goal shape and the noise levels. (jaxais's task loop
+    instead compiles its programs with the world's values built in, one set per world.)
     """
 
     segments: int = 1

@@ -153,7 +153,7 @@ def test_trials_script_same_arguments_same_bytes(runs):
 def test_trials_script_fills_its_compilation_cache(runs):
     # JAXAIS_CACHE_DIR: the first run stored its task-loop programs, which the second one loaded
     # (and, above, gave the same bytes with).
-    assert {"jit_start_batch", "jit_advance"} <= set(runs["cached"])
+    assert {"jit_task_start", "jit_task_advance"} <= set(runs["cached"])
 
 
 def test_trials_script_plot_is_a_png(runs):

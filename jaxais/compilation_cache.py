@@ -1,11 +1,12 @@
 """A persistent XLA compilation cache for the command-line scripts.
 
 Compiling the task loop takes 5-15 s on a CPU, which is most of a short run's wall time. The
-scripts (``evolve.py``, ``trials.py``, ``reproduce.py``) therefore keep JAX's persistent
-compilation cache on disk, so a program compiled once is loaded (well under a second) by every
-later run with the same shapes, world sizes, jax version and machine. A cached program is the
-same XLA executable, so results are bit-for-bit those of a fresh compile; XLA's CPU loader
-rejects an entry made on a machine with other CPU features, which is then compiled afresh.
+scripts (``evolve.py``, ``trials.py``, ``reproduce.py``, ``render.py``) therefore keep JAX's
+persistent compilation cache on disk, so a program compiled once is loaded (well under a second)
+by every later run with the same batch shapes, world, jax version and machine. A cached program
+is the same XLA executable, so results are bit-for-bit those of a fresh compile; XLA's CPU
+loader rejects an entry made on a machine with other CPU features, which is then compiled
+afresh.
 
 Where the cache lives, first match wins:
 

@@ -89,8 +89,8 @@ class Capacity:
 
     Worlds loaded with one Capacity have arrays of equal shapes. Functions jitted with the world
     as an argument (``reset``, ``step``) are then shared when their static fields match too: the
-    name (``world.replace(name=...)``), the goal shape and the noise levels. (jaxais's task loop
-    instead compiles its programs with the world's values built in, one set per world.)
+    name (``world.replace(name=...)``), the goal shape and the noise levels. (A program compiled
+    with the world's values built in, as jaxais's GA does, serves that one world only.)
     """
 
     segments: int = 1

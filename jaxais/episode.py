@@ -316,7 +316,9 @@ def _fingerprint(tree: Any) -> tuple:
 class Programs(NamedTuple):
     """The compiled task loop of one world, controller and batch shape (:func:`compile_rollout`).
 
-    start(reset_keys, run_keys, ctrl_params) -> Batch; advance(batch, ctrl_params) -> Batch.
+    start(reset_keys, run_keys, world, sim_params, ctrl_params) -> Batch;
+    advance(batch, world, sim_params, ctrl_params) -> Batch. A specialised program ignores the
+    ``world`` it is given and uses the one it was compiled for.
     """
 
     start: Callable[..., Batch]
@@ -331,31 +333,30 @@ def compile_rollout(
     controller: Controller,
     ctrl_params: Any,
     config: EpisodeConfig,
+    specialise: bool = False,
 ) -> Programs:
-    """Compile :func:`start_batch` and :func:`advance` for these shapes, specialised to ``world``.
+    """Compile :func:`start_batch` and :func:`advance` for these shapes (and this world).
 
-    The world is built into the programs as constants rather than passed as an argument: its
-    geometry is fixed for the whole batch, and XLA then folds the walls' per-surface terms of
-    the ray and collision tests at compile time. Measured on a 2-core CPU: the GA's loop in
-    ``ga_maze`` (16 walls) runs about 3x faster, world1-2 and ``real`` (4-5 walls, mostly moving
-    surfaces) as fast as before; the GA's seed, the trials and the reproduction's tables came
-    out bitwise the same. A different world therefore compiles its own programs. The arguments
-    may be arrays or ``jax.ShapeDtypeStruct``s except ``world``, whose values are needed.
+    With ``specialise`` the world is built into the programs as constants instead of being an
+    argument, so XLA folds the walls' per-surface terms of the ray and collision tests at compile
+    time, and a world with other values compiles programs of its own. Whether that pays depends
+    on the world (measured on a 2-core CPU, same results bit for bit): the GA's loop in
+    ``ga_maze``, 16 fixed walls, runs about 2.7x faster; world1 and ``real`` run as fast as
+    without, and world2's trials about 25 % slower. The GA specialises; the trials do not.
+    The arguments may be arrays or ``jax.ShapeDtypeStruct``s, except a specialised ``world``.
     """
 
-    def task_start(rk, uk, sp, cp):
-        return start_batch(rk, uk, world, sp, controller, cp, config)
+    def task_start(rk, uk, w, sp, cp):
+        return start_batch(rk, uk, world if specialise else w, sp, controller, cp, config)
 
-    def task_advance(batch, sp, cp):
-        return advance(batch, world, sp, controller, cp, config)
+    def task_advance(batch, w, sp, cp):
+        return advance(batch, world if specialise else w, sp, controller, cp, config)
 
-    start_c = envs.jit(task_start).lower(reset_keys, run_keys, sim_params, ctrl_params).compile()
-    shapes = jax.eval_shape(task_start, reset_keys, run_keys, sim_params, ctrl_params)
-    advance_c = envs.jit(task_advance).lower(shapes, sim_params, ctrl_params).compile()
-    return Programs(
-        start=lambda rk, uk, cp: start_c(rk, uk, sim_params, cp),
-        advance=lambda b, cp: advance_c(b, sim_params, cp),
-    )
+    args = (reset_keys, run_keys, world, sim_params, ctrl_params)
+    start_c = envs.jit(task_start).lower(*args).compile()
+    shapes = jax.eval_shape(task_start, *args)
+    advance_c = envs.jit(task_advance).lower(shapes, world, sim_params, ctrl_params).compile()
+    return Programs(start=start_c, advance=advance_c)
 
 
 def rollout(
@@ -369,6 +370,7 @@ def rollout(
     progress: Callable[[int], None] | None = None,
     compiled: dict | None = None,
     timings: dict[str, float] | None = None,
+    specialise: bool = False,
 ) -> Batch:
     """Run a batch to the end: every run finished or stopped by a cap.
 
@@ -379,27 +381,28 @@ def rollout(
         compiled: optional cache dict, so repeated calls with the same controller, world and
             batch shapes reuse the compiled programs (:func:`compile_rollout`).
         timings: optional dict; ``compile_s`` and ``run_s`` are added to it.
+        specialise: compile the world's values into the programs (see :func:`compile_rollout`).
 
     Returns:
         The final :class:`Batch`.
     """
     cache = compiled if compiled is not None else {}
     signature = (
-        (controller, config),
-        _fingerprint(world),
+        (controller, config, specialise),
+        _fingerprint(world) if specialise else _signature(world),
         _signature((reset_keys, run_keys, sim_params, ctrl_params)),
     )
     t0 = time.perf_counter()
     if signature not in cache:
         cache[signature] = compile_rollout(
-            reset_keys, run_keys, world, sim_params, controller, ctrl_params, config
+            reset_keys, run_keys, world, sim_params, controller, ctrl_params, config, specialise
         )
     programs = cache[signature]
     t1 = time.perf_counter()
-    batch = programs.start(reset_keys, run_keys, ctrl_params)
+    batch = programs.start(reset_keys, run_keys, world, sim_params, ctrl_params)
     done_before = 0
     while True:
-        batch = programs.advance(batch, ctrl_params)
+        batch = programs.advance(batch, world, sim_params, ctrl_params)
         t = int(np.max(np.asarray(batch.runs.t)))
         if progress is not None:
             progress(t - done_before)

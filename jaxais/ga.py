@@ -340,6 +340,8 @@ def evaluate(
         episode,
         progress=progress,
         compiled=_COMPILED,
+        # The maze's 16 fixed walls fold into the program: about 2.7x faster (compile_rollout).
+        specialise=True,
     )
     out = outcome(batch.runs, episode, float(sim_params.dt))
     # τ and c are stored in float32 / int32; f is recomputed from exactly those values so that

@@ -11,8 +11,7 @@ into one results dict, so new ones -- e.g. controllers -- are added by appending
   ``lax.scan`` of ``--steps`` steps, per batch size (best of ``--repeats`` timed calls after a
   warm-up call; the median is reported too), and ``compile_s``, the time to lower and compile
   that program. The robots are driven by a cheap IR-reading policy (so that no sensing is dead
-  code), with a fresh key per robot per step split inside the scan. The world is built into
-  the program as constants, as in the engine's task loop (``jaxais.episode.compile_rollout``).
+  code), with a fresh key per robot per step split inside the scan.
 - ``numpy_steps_per_s``: the plain NumPy reference (``envs/reference.py``, ``ref_step``) on the
   same world and policy, one robot-step at a time, and ``speedup_vs_numpy`` (JAX at batch 30, or
   the nearest batch measured, over NumPy).
@@ -225,13 +224,11 @@ def policy_numpy(obs: dict[str, Any]):
     return np.array([CRUISE - turn, CRUISE + turn])
 
 
-def make_rollout(n_steps: int, world: Any, sharding: Any = None) -> Callable[..., Any]:
-    """``rollout(key, state, obs, params) -> (state, obs)``: ``n_steps`` batched steps.
+def make_rollout(n_steps: int, sharding: Any = None) -> Callable[..., Any]:
+    """``rollout(key, state, obs, world, params) -> (state, obs)``: ``n_steps`` batched steps.
 
     Args:
         n_steps: scan length.
-        world: the world, built into the program as constants, as the engine's task loop does
-            (``jaxais.episode.compile_rollout``).
         sharding: a ``NamedSharding`` for the batch axis of the per-step keys and wheel speeds
             (the states carry theirs in), or None for one device.
     """
@@ -243,7 +240,7 @@ def make_rollout(n_steps: int, world: Any, sharding: Any = None) -> Callable[...
     v_step = jax.vmap(envs.step, in_axes=(0, 0, 0, None, None))
     v_policy = jax.vmap(policy)
 
-    def rollout(key, state, obs, params):
+    def rollout(key, state, obs, world, params):
         n = state.t.shape[0]
 
         def body(carry, k):
@@ -348,11 +345,13 @@ def _bench_batches(b: Bench, batches: list[int], sharding_for=None) -> dict[str,
         sharding = sharding_for(n) if sharding_for is not None else None
         # On the device(s) before timing: no host-to-device copy inside the timed calls.
         state, obs = jax.device_put((state, obs), sharding)
-        rollout = make_rollout(steps, b.world, sharding)
+        rollout = make_rollout(steps, sharding)
         t0 = time.perf_counter()
-        compiled = rollout.lower(key, state, obs, b.params).compile()
+        compiled = rollout.lower(key, state, obs, b.world, b.params).compile()
         compile_s = time.perf_counter() - t0
-        t = _timed(lambda c=compiled, s=state, o=obs: c(key, s, o, b.params), b.args.repeats)
+        t = _timed(
+            lambda c=compiled, s=state, o=obs: c(key, s, o, b.world, b.params), b.args.repeats
+        )
         out[str(n)] = {
             "compile_s": compile_s,
             "steps_per_s": n * steps / t["best_s"],
@@ -453,16 +452,14 @@ def bench_flops(b: Bench) -> None:
 
     from jaxais import envs
 
-    v_step = envs.jit(
-        lambda k, s, w, p: jax.vmap(envs.step, in_axes=(0, 0, 0, None, None))(k, s, w, b.world, p)
-    )
+    v_step = envs.jit(jax.vmap(envs.step, in_axes=(0, 0, 0, None, None)))
     per_batch = {}
     # One batch size (each costs a compilation): the per-robot figure hardly depends on it.
     for n in [max([x for x in b.args.batches if x <= FLOPS_BATCH] or [1])]:
         state, _ = initial(b, n)
         keys = jax.random.split(jax.random.key(3), n)
         wheels = jnp.full((n, 2), CRUISE, jnp.float32)
-        cost = _cost(v_step.lower(keys, state, wheels, b.params).compile())
+        cost = _cost(v_step.lower(keys, state, wheels, b.world, b.params).compile())
         per_batch[str(n)] = {
             k: cost[k] / n for k in ("flops", "transcendentals", "bytes accessed") if k in cost
         }
@@ -492,9 +489,8 @@ def bench_peak(b: Bench) -> None:
 def bench_controller(b: Bench) -> None:
     """``controller_iterations_per_s``: the full STL controller (SIE: RL, eq 4, penalties,
     idiotypic selection, behaviours) plus the simulator, in robot-iterations per second, through
-    the same compiled task loop the trials use (``jaxais.episode.compile_rollout``, specialised
-    to the world; caps off so no run ends), at ``--controller-batches``; compile time reported
-    separately."""
+    the same compiled task loop the trials use (``jaxais.episode.compile_rollout``; caps off so
+    no run ends), at ``--controller-batches``; compile time reported separately."""
     import jax
     import jax.numpy as jnp
 
@@ -514,8 +510,11 @@ def bench_controller(b: Bench) -> None:
         t0 = time.perf_counter()
         programs = compile_rollout(reset_keys, run_keys, b.world, b.params, STL, params, config)
         compile_s[str(n)] = time.perf_counter() - t0
-        batch = programs.start(reset_keys, run_keys, params)
-        t = _timed(lambda pr=programs, bt=batch, p=params: pr.advance(bt, p), b.args.repeats)
+        batch = programs.start(reset_keys, run_keys, b.world, b.params, params)
+        t = _timed(
+            lambda pr=programs, bt=batch, p=params: pr.advance(bt, b.world, b.params, p),
+            b.args.repeats,
+        )
         rates[str(n)] = n * steps / t["best_s"]
     b.results["controller_iterations_per_s"] = rates
     b.results["controller_compile_s"] = compile_s

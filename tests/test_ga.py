@@ -328,9 +328,10 @@ def test_compare_diversity_reports_both_tests():
         ga.compare_diversity([0], TINY, maze())
 
 
-def test_rollout_programs_are_specialised_per_world(tmp_path):
-    # The task loop bakes the world into its compiled programs: a world with the same shapes but
-    # other values must get programs of its own, and the same world must reuse its programs.
+def test_rollout_programs_per_world(tmp_path):
+    # Specialised (the GA's way), the task loop bakes the world into its programs: a world with
+    # the same shapes but other values must get programs of its own, and the same world must
+    # reuse its programs. Unspecialised, both worlds share one program, the world an argument.
     from pathlib import Path
 
     from jaxais.controllers import LTL
@@ -343,14 +344,23 @@ def test_rollout_programs_are_specialised_per_world(tmp_path):
     a, b = maze(), envs.load_world(moved)
     assert jax.tree.map(jnp.shape, a) == jax.tree.map(jnp.shape, b)
 
-    params, config, cache = envs.default_params(), EpisodeConfig(tau_cap=0.2), {}
+    params, config = envs.default_params(), EpisodeConfig(tau_cap=0.2)
     sets = sample_antibodies(jax.random.key(0), (2, 8))
     reset_keys = jax.random.split(jax.random.key(1), 2)
     run_keys = jax.random.split(jax.random.key(2), 2)
-    go = lambda world: rollout(reset_keys, run_keys, world, params, LTL, sets, config, None, cache)
-    x_a = np.asarray(go(a).runs.sim.pose[:, 0])
-    x_b = np.asarray(go(b).runs.sim.pose[:, 0])
-    assert len(cache) == 2
+
+    def final_x(world, cache, specialise):
+        batch = rollout(
+            reset_keys, run_keys, world, params, LTL, sets, config, None, cache, None, specialise
+        )
+        return np.asarray(batch.runs.sim.pose[:, 0])
+
+    special, shared = {}, {}
+    x_a, x_b = final_x(a, special, True), final_x(b, special, True)
+    assert len(special) == 2
     assert np.all(x_a < 0.5) and np.all(x_b > 1.5)  # each ran in its own world
-    np.testing.assert_array_equal(np.asarray(go(a).runs.sim.pose[:, 0]), x_a)
-    assert len(cache) == 2
+    np.testing.assert_array_equal(final_x(a, special, True), x_a)
+    assert len(special) == 2
+    np.testing.assert_array_equal(final_x(a, shared, False), x_a)
+    np.testing.assert_array_equal(final_x(b, shared, False), x_b)
+    assert len(shared) == 1

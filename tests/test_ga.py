@@ -8,6 +8,7 @@ rollout compiles once for the session (``_ga_run`` below is shared with the othe
 from __future__ import annotations
 
 import functools
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -25,6 +26,8 @@ from jaxais.antibodies import (
     within_limits,
 )
 from jaxais.checkpointing import state_to_tree
+from jaxais.controllers import LTL
+from jaxais.episode import EpisodeConfig, rollout
 
 TINY = ga.GAConfig(populations=2, robots=4, generations=2, tau_cap=2.0)
 """The tests' GA: every test that evaluates robots uses exactly this config (one compile)."""
@@ -332,11 +335,6 @@ def test_rollout_programs_per_world(tmp_path):
     # Specialised (the GA's way), the task loop bakes the world into its programs: a world with
     # the same shapes but other values must get programs of its own, and the same world must
     # reuse its programs. Unspecialised, both worlds share one program, the world an argument.
-    from pathlib import Path
-
-    from jaxais.controllers import LTL
-    from jaxais.episode import EpisodeConfig, rollout
-
     source = (Path(envs.__file__).parent / "worlds" / "ga_maze.toml").read_text()
     assert "start_region = [0.08, 0.15, 0.3, 0.85]" in source
     moved = tmp_path / "moved.toml"

@@ -199,13 +199,18 @@ def iterate(
     ctrl = controller.learn(u, run.ctrl, percept, ctrl_params)
     ctrl, wheels = controller.act(u, ctrl, percept, ctrl_params)
     sim, new_obs = envs.step_with_noise(run.sim, wheels, sim_noise, world, sim_params)
-    # The iteration that detects the end records the counts and status and moves nothing.
-    counted = run.replace(collisions=collisions, streak=streak, status=status)
+    # The iteration that detects the end records the counts and status and moves nothing; a run
+    # that ended earlier keeps everything. One select over the whole run, three over the counts.
+    live = run.status == RUNNING
+    counted = run.replace(
+        collisions=jnp.where(live, collisions, run.collisions),
+        streak=jnp.where(live, streak, run.streak),
+        status=jnp.where(live, status, run.status),
+    )
     moved = counted.replace(
         sim=sim, obs=new_obs, ctrl=ctrl, m_prev=m, v_prev=percept.v, t=run.t + 1
     )
-    new = jax.tree.map(lambda a, b: jnp.where(status == RUNNING, a, b), moved, counted)
-    return jax.tree.map(lambda a, b: jnp.where(run.status == RUNNING, a, b), new, run)
+    return jax.tree.map(lambda a, b: jnp.where(live & (status == RUNNING), a, b), moved, counted)
 
 
 @pytree_dataclass

@@ -34,10 +34,24 @@ def paper_trials(world: str) -> int:
     return 20 if world == "real" else 30
 
 
+def load_ltl_seed(seeds_dir: str | Path | None) -> tuple[Seed, dict[str, Any]]:
+    """The LTL seed (default: the shipped one) and a description of it: path and provenance."""
+    path = default_seed_dir() if seeds_dir is None else Path(seeds_dir)
+    seed, meta = load_seed(path)
+    made_by = {k: meta.get(k) for k in ("command", "seed", "version") if k in meta}
+    return seed, {"path": str(path), "made_by": made_by}
+
+
 def build_systems(
-    labels: list[str], seeds_dir: str | Path | None, network: NetworkParams | None = None
+    labels: list[str],
+    seeds_dir: str | Path | None,
+    network: NetworkParams | None = None,
+    loaded: tuple[Seed, dict[str, Any]] | None = None,
 ) -> tuple[dict[str, System], dict[str, Any]]:
     """Systems by label, loading the LTL seed only when a seeded system needs it.
+
+    Args:
+        loaded: a seed already read by :func:`load_ltl_seed` (then ``seeds_dir`` is not read).
 
     Returns:
         (label -> System, a description of the seed used: path and provenance, or None).
@@ -45,12 +59,7 @@ def build_systems(
     seed: Seed | None = None
     seed_info: dict[str, Any] | None = None
     if any(parse_label(name)[0] in ("SIE", "SRL") for name in labels):
-        path = default_seed_dir() if seeds_dir is None else Path(seeds_dir)
-        seed, meta = load_seed(path)
-        seed_info = {
-            "path": str(path),
-            "made_by": {k: meta.get(k) for k in ("command", "seed", "version") if k in meta},
-        }
+        seed, seed_info = loaded if loaded is not None else load_ltl_seed(seeds_dir)
     return {name: make_system(name, seed, network=network) for name in labels}, seed_info
 
 

@@ -95,6 +95,7 @@ def main(argv: list[str] | None = None) -> None:
     from jaxais.episode import EpisodeConfig
     from jaxais.experiment import (
         build_systems,
+        load_ltl_seed,
         paper_trials,
         protocol,
         results_document,
@@ -102,7 +103,7 @@ def main(argv: list[str] | None = None) -> None:
     )
     from jaxais.network import NetworkParams
     from jaxais.plotting import draw_world
-    from jaxais.seed import default_seed_dir, load_seed
+    from jaxais.seed import default_seed_dir
     from jaxais.trials import run_trials
 
     cache_dir = compilation_cache.enable()
@@ -118,7 +119,8 @@ def main(argv: list[str] | None = None) -> None:
             raise UserError("the LTL run (scripts/evolve.py) failed; see its message above")
         timings["ltl_s"] = time.perf_counter() - t
         seeds_dir = ltl_dir / "seed"
-    load_seed(seeds_dir)  # fail early, before any trial runs, on a missing or corrupt seed
+    # Read once, and early: a missing or corrupt seed fails before any trial runs.
+    loaded = load_ltl_seed(seeds_dir)
 
     network = NetworkParams()
     params = envs.default_params()
@@ -129,7 +131,7 @@ def main(argv: list[str] | None = None) -> None:
         world = envs.load_world(name)
         labels = list(protocol(name))
         n = args.trials if args.trials is not None else paper_trials(name)
-        systems, seed_info = build_systems(labels, seeds_dir, network)
+        systems, seed_info = build_systems(labels, seeds_dir, network, loaded)
         world_t: dict[str, float] = {}
         total = config.max_iterations(params.dt)
         with tqdm(total=total, desc=f"{name}: {len(labels)} systems x {n} trials",

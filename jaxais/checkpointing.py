@@ -10,10 +10,11 @@ A checkpoint directory holds:
   caller's extra data, e.g. the per-generation history of a script).
 
 Orbax writes each checkpoint into a temporary directory and renames it when complete, and the
-manager only lists complete ones; saving is synchronous here (``wait_until_finished`` returns
-after the rename) and keeps the last ``max_to_keep`` (>= 2) checkpoints, so the previous one is
-deleted only after the new one is complete. A run interrupted at any moment therefore leaves its
-last complete checkpoint valid.
+manager only lists complete ones. Saving runs in the background while the next generation is
+evaluated (each save, read and close first waits for the one in flight, so at most one is) and
+keeps the last ``max_to_keep`` (>= 2) checkpoints, so the previous one is deleted only after the
+new one is complete. A run interrupted at any moment therefore leaves its last complete
+checkpoint valid.
 
 All failures (nothing to resume, a different run, a corrupt checkpoint) raise
 :class:`CheckpointError` with a one-line message.
@@ -185,8 +186,10 @@ class GACheckpointer:
         options = ocp.CheckpointManagerOptions(
             max_to_keep=max_to_keep,
             create=True,
-            # Synchronous saves: a checkpoint is complete (renamed into place) when save returns.
-            enable_async_checkpointing=False,
+            # Background saves: a checkpoint is written to a temporary directory and renamed into
+            # place (complete) while the next generation runs; the next save and close() wait
+            # for it, so at most one is in flight and an interruption never leaves a half one.
+            enable_async_checkpointing=True,
             # Remove what an interrupted save left behind (never a complete checkpoint).
             cleanup_tmp_directories=True,
         )
@@ -214,11 +217,15 @@ class GACheckpointer:
 
     def latest_generation(self) -> int | None:
         """The generation of the newest complete checkpoint (None if there is none)."""
+        self._manager.wait_until_finished()
         self._manager.reload()
         return self._manager.latest_step()
 
     def save(self, state: GAState, config: GAConfig, extra: dict[str, Any] | None = None) -> None:
-        """Save ``state`` as checkpoint ``state.generation`` and wait until it is complete.
+        """Start saving ``state`` as checkpoint ``state.generation`` (finished in the background).
+
+        The previous save is waited for first; :meth:`close` (or leaving the ``with`` block) waits
+        for the last one. Until a checkpoint is complete the newest complete one stays valid.
 
         Args:
             state: the state after a generation.
@@ -240,7 +247,6 @@ class GACheckpointer:
                 state=ocp.args.StandardSave(state_to_tree(state)), meta=ocp.args.JsonSave(meta)
             ),
         )
-        self._manager.wait_until_finished()
 
     def restore(
         self, config: GAConfig, generation: int | None = None
@@ -258,6 +264,7 @@ class GACheckpointer:
             CheckpointError: none to restore, or it is corrupt or does not fit ``config``.
         """
         ocp = self._ocp
+        self._manager.wait_until_finished()
         step = self.latest_generation() if generation is None else generation
         if step is None:
             raise CheckpointError(f"{self.directory}: no complete checkpoint to resume")

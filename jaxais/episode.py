@@ -10,6 +10,7 @@ Controllers are (init, learn, act) triples of pure functions, like optax's trans
 
 from __future__ import annotations
 
+import concurrent.futures
 import math
 import time
 from collections.abc import Callable
@@ -330,6 +331,33 @@ class Programs(NamedTuple):
     advance: Callable[..., Batch]
 
 
+def batch_sharding(n: int, devices: list | None = None) -> jax.sharding.NamedSharding | None:
+    """The sharding of a batch of ``n`` runs along its first axis over ``devices``.
+
+    Args:
+        n: batch size; it must be a multiple of the device count (:func:`rollout` pads to one).
+        devices: default ``jax.local_devices()``.
+
+    Returns:
+        A ``NamedSharding`` over a 1-D ``("batch",)`` mesh, or None for a single device.
+    """
+    devices = jax.local_devices() if devices is None else list(devices)
+    if len(devices) < 2:
+        return None
+    if n % len(devices):
+        raise ValueError(f"a batch of {n} runs does not split over {len(devices)} devices")
+    mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
+    return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
+
+
+def _batch_shardings(sharding: jax.sharding.NamedSharding | None) -> Batch | None:
+    """Shardings of a :class:`Batch`: runs and poses split along the batch, the count replicated."""
+    if sharding is None:
+        return None
+    replicated = jax.sharding.NamedSharding(sharding.mesh, jax.sharding.PartitionSpec())
+    return Batch(runs=sharding, poses=sharding, chunks=replicated)
+
+
 def compile_rollout(
     reset_keys: jax.Array,
     run_keys: jax.Array,
@@ -339,6 +367,7 @@ def compile_rollout(
     ctrl_params: Any,
     config: EpisodeConfig,
     specialise: bool = False,
+    sharding: jax.sharding.NamedSharding | None = None,
 ) -> Programs:
     """Compile :func:`start_batch` and :func:`advance` for these shapes (and this world).
 
@@ -349,7 +378,15 @@ def compile_rollout(
     ``ga_maze``, 16 fixed walls, runs about 2.7x faster; world1 and ``real`` run as fast as
     without, and world2's trials about 25 % slower. The GA specialises; the trials do not.
     The arguments may be arrays or ``jax.ShapeDtypeStruct``s, except a specialised ``world``.
+
+    With a ``sharding`` (:func:`batch_sharding`) both programs keep every run on the device that
+    holds it; the runs never exchange data, so the partitioned programs compute the same numbers.
+    The two programs are lowered one after the other and compiled at the same time, in two
+    threads (XLA compiles outside Python's lock; measured on a 2-core CPU, the GA's pair took
+    5.1 s instead of 5.9 s one after the other). The start program runs once per batch, so it
+    is compiled for compile speed (``envs.jit(..., run_once=True)``).
     """
+    shardings = _batch_shardings(sharding)
 
     def task_start(rk, uk, w, sp, cp):
         return start_batch(rk, uk, world if specialise else w, sp, controller, cp, config)
@@ -357,11 +394,34 @@ def compile_rollout(
     def task_advance(batch, w, sp, cp):
         return advance(batch, world if specialise else w, sp, controller, cp, config)
 
-    args = (reset_keys, run_keys, world, sim_params, ctrl_params)
-    start_c = envs.jit(task_start).lower(*args).compile()
-    shapes = jax.eval_shape(task_start, *args)
-    advance_c = envs.jit(task_advance).lower(shapes, world, sim_params, ctrl_params).compile()
+    placement = {} if shardings is None else {"out_shardings": shardings}
+    start_lowered = envs.jit(task_start, run_once=True, **placement).lower(
+        reset_keys, run_keys, world, sim_params, ctrl_params
+    )
+    batch_in = start_lowered.out_info
+    if shardings is not None:
+
+        def placed(tree, sh):
+            return jax.tree.map(lambda s: jax.ShapeDtypeStruct(s.shape, s.dtype, sharding=sh), tree)
+
+        batch_in = Batch(
+            runs=placed(batch_in.runs, shardings.runs),
+            poses=placed(batch_in.poses, shardings.poses),
+            chunks=placed(batch_in.chunks, shardings.chunks),
+        )
+    advance_lowered = envs.jit(task_advance, **placement).lower(
+        batch_in, world, sim_params, ctrl_params
+    )
+    with concurrent.futures.ThreadPoolExecutor(2) as pool:
+        start_c, advance_c = pool.map(
+            lambda lowered: lowered.compile(), [start_lowered, advance_lowered]
+        )
     return Programs(start=start_c, advance=advance_c)
+
+
+def _pad_batch(tree: Any, pad: int) -> Any:
+    """``tree`` with ``pad`` copies of its first run appended along the batch axis."""
+    return jax.tree.map(lambda x: jnp.concatenate([x, jnp.repeat(x[:1], pad, axis=0)]), tree)
 
 
 def rollout(
@@ -376,8 +436,14 @@ def rollout(
     compiled: dict | None = None,
     timings: dict[str, float] | None = None,
     specialise: bool = False,
+    devices: list | None = None,
 ) -> Batch:
     """Run a batch to the end: every run finished or stopped by a cap.
+
+    With several devices (``devices``, default ``jax.local_devices()``; the scripts make one CPU
+    device per core, see :mod:`jaxais.host_devices`) the batch is sharded over them, padded with
+    copies of its first run to a multiple of the device count; the copies are dropped from the
+    result. Every run's numbers are the same as on one device.
 
     Args:
         reset_keys, run_keys: [n] PRNG keys (world placement; everything else).
@@ -387,20 +453,39 @@ def rollout(
             batch shapes reuse the compiled programs (:func:`compile_rollout`).
         timings: optional dict; ``compile_s`` and ``run_s`` are added to it.
         specialise: compile the world's values into the programs (see :func:`compile_rollout`).
+        devices: the devices to shard the batch over (default: all local devices).
 
     Returns:
-        The final :class:`Batch`.
+        The final :class:`Batch` of the n runs.
     """
     cache = compiled if compiled is not None else {}
+    devices = jax.local_devices() if devices is None else list(devices)
+    n = reset_keys.shape[0]
+    pad = -n % len(devices)
+    if pad:
+        reset_keys, run_keys, ctrl_params = _pad_batch((reset_keys, run_keys, ctrl_params), pad)
+    sharding = batch_sharding(n + pad, devices)
+    if sharding is not None:
+        reset_keys, run_keys, ctrl_params = jax.device_put(
+            (reset_keys, run_keys, ctrl_params), sharding
+        )
     signature = (
-        (controller, config, specialise),
+        (controller, config, specialise, sharding),
         _fingerprint(world) if specialise else _signature(world),
         _signature((reset_keys, run_keys, sim_params, ctrl_params)),
     )
     t0 = time.perf_counter()
     if signature not in cache:
         cache[signature] = compile_rollout(
-            reset_keys, run_keys, world, sim_params, controller, ctrl_params, config, specialise
+            reset_keys,
+            run_keys,
+            world,
+            sim_params,
+            controller,
+            ctrl_params,
+            config,
+            specialise,
+            sharding,
         )
     programs = cache[signature]
     t1 = time.perf_counter()
@@ -414,6 +499,8 @@ def rollout(
         done_before = t
         if not np.any(np.asarray(batch.runs.status) == RUNNING):
             break
+    if pad:
+        batch = batch.replace(runs=jax.tree.map(lambda x: x[:n], batch.runs), poses=batch.poses[:n])
     if timings is not None:
         timings["compile_s"] = timings.get("compile_s", 0.0) + (t1 - t0)
         timings["run_s"] = timings.get("run_s", 0.0) + (time.perf_counter() - t1)

@@ -20,7 +20,8 @@ into one results dict, so new ones -- e.g. controllers -- are added by appending
   ``flops_per_step`` x the steps/s at the largest batch over that peak.
 - ``jax_steps_per_s_sharded``: with more than one JAX device (``--devices N`` makes N host
   devices by setting ``XLA_FLAGS=--xla_force_host_platform_device_count=N`` before JAX is
-  imported), the same programs with the batch axis sharded over a 1-D mesh.
+  imported; the default is one per core), the same programs with the batch axis sharded over a
+  1-D mesh. ``--devices 1`` skips it.
 - ``machine``: platform, processor, CPUs, memory, versions, backend, devices, load, date.
 
 ``--quick`` uses fewer steps, repeats and batch sizes (explicit flags still win). The JSON is
@@ -40,7 +41,8 @@ JSON layout (batch sizes are string keys; rates are robot-steps per second)::
     numpy_steps_per_s, numpy {robots, steps, seconds}, speedup_vs_numpy, speedup_batch,
     flops_per_step, cost_analysis_per_step {B: {flops, transcendentals, bytes accessed}},
     peak_flops, peak {matmul_size, dtype, best_s, ...}, achieved_flops, achieved_flops_batch,
-    fraction_of_peak, bench_wall_s {benchmark: s}, load_average_end, notes [str]
+    fraction_of_peak, controller_iterations_per_s {B}, controller_compile_s {B} (and
+    their ``_sharded`` twins), bench_wall_s {benchmark: s}, load_average_end, notes [str]
 """
 
 from __future__ import annotations
@@ -58,6 +60,7 @@ from pathlib import Path
 from typing import Any
 
 from jaxais.cli import ArgumentParser, UserError, atomic_write_json, check_output_file, main_wrapper
+from jaxais.host_devices import usable_cores
 
 PROG = "bench.py"
 SCHEMA = "jaxais-bench/1"
@@ -114,7 +117,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--controller-batches", help="STL controller batch sizes (30,1000; quick 30)")
     p.add_argument("--controller-steps", type=int, help="iterations per timed call (500; quick 50)")
     p.add_argument(
-        "--devices", type=int, help=f"force N host devices ({DEVICE_FLAG}=N; set before JAX loads)"
+        "--devices", type=int, help=f"N host devices ({DEVICE_FLAG}=N; default: one per core)"
     )
     args = p.parse_args(argv)
     for name, value in (QUICK if args.quick else FULL).items():
@@ -490,12 +493,14 @@ def bench_controller(b: Bench) -> None:
     """``controller_iterations_per_s``: the full STL controller (SIE: RL, eq 4, penalties,
     idiotypic selection, behaviours) plus the simulator, in robot-iterations per second, through
     the same compiled task loop the trials use (``jaxais.episode.compile_rollout``; caps off so
-    no run ends), at ``--controller-batches``; compile time reported separately."""
+    no run ends), at ``--controller-batches``; compile time reported separately. With several
+    devices, ``controller_iterations_per_s_sharded`` is the same loop with the batch sharded
+    over all of them, as ``scripts/trials.py`` runs it."""
     import jax
     import jax.numpy as jnp
 
     from jaxais.controllers import STL
-    from jaxais.episode import EpisodeConfig, compile_rollout
+    from jaxais.episode import EpisodeConfig, batch_sharding, compile_rollout
     from jaxais.seed import load_seed
     from jaxais.systems import make_system
     from jaxais.trials import trial_keys
@@ -503,21 +508,34 @@ def bench_controller(b: Bench) -> None:
     steps = b.args.controller_steps
     config = EpisodeConfig(tau_cap=1e6, collision_cap=10**9, segment=steps, chunk=25)
     system = make_system("SIE", load_seed()[0])
-    rates, compile_s = {}, {}
-    for n in b.args.controller_batches:
-        params = jax.tree.map(lambda a, n=n: jnp.broadcast_to(a, (n, *jnp.shape(a))), system)
-        reset_keys, run_keys = trial_keys(0, "SIE", n)
-        t0 = time.perf_counter()
-        programs = compile_rollout(reset_keys, run_keys, b.world, b.params, STL, params, config)
-        compile_s[str(n)] = time.perf_counter() - t0
-        batch = programs.start(reset_keys, run_keys, b.world, b.params, params)
-        t = _timed(
-            lambda pr=programs, bt=batch, p=params: pr.advance(bt, b.world, b.params, p),
-            b.args.repeats,
-        )
-        rates[str(n)] = n * steps / t["best_s"]
-    b.results["controller_iterations_per_s"] = rates
-    b.results["controller_compile_s"] = compile_s
+    layouts = [("", jax.local_devices()[:1])]
+    if jax.local_device_count() > 1:
+        layouts.append(("_sharded", jax.local_devices()))
+    for suffix, devices in layouts:
+        rates, compile_s = {}, {}
+        for n in b.args.controller_batches:
+            if n % len(devices):
+                continue
+            params = jax.tree.map(lambda a, n=n: jnp.broadcast_to(a, (n, *jnp.shape(a))), system)
+            reset_keys, run_keys = trial_keys(0, "SIE", n)
+            sharding = batch_sharding(n, devices)
+            if sharding is not None:
+                reset_keys, run_keys, params = jax.device_put(
+                    (reset_keys, run_keys, params), sharding
+                )
+            t0 = time.perf_counter()
+            programs = compile_rollout(
+                reset_keys, run_keys, b.world, b.params, STL, params, config, sharding=sharding
+            )
+            compile_s[str(n)] = time.perf_counter() - t0
+            batch = programs.start(reset_keys, run_keys, b.world, b.params, params)
+            t = _timed(
+                lambda pr=programs, bt=batch, p=params: pr.advance(bt, b.world, b.params, p),
+                b.args.repeats,
+            )
+            rates[str(n)] = n * steps / t["best_s"]
+        b.results[f"controller_iterations_per_s{suffix}"] = rates
+        b.results[f"controller_compile_s{suffix}"] = compile_s
 
 
 BENCHMARKS: list[tuple[str, Callable[[Bench], None]]] = [
@@ -569,14 +587,18 @@ def summary(b: Bench, seconds: float) -> str:
                 for k, v in runs.items()
             )
         )
-    if r.get("controller_iterations_per_s"):
-        lines.append(
-            "  STL controller + simulator, robot-iterations/s: "
-            + ", ".join(f"B={k}: {v:,.0f}" for k, v in r["controller_iterations_per_s"].items())
-            + " (compile s: "
-            + ", ".join(f"B={k}: {v:.1f}" for k, v in r["controller_compile_s"].items())
-            + ")"
-        )
+    for suffix, where in (("", ""), ("_sharded", " sharded")):
+        if r.get(f"controller_iterations_per_s{suffix}"):
+            rates = r[f"controller_iterations_per_s{suffix}"]
+            lines.append(
+                f"  STL controller + simulator{where}, robot-iterations/s: "
+                + ", ".join(f"B={k}: {v:,.0f}" for k, v in rates.items())
+                + " (compile s: "
+                + ", ".join(
+                    f"B={k}: {v:.1f}" for k, v in r[f"controller_compile_s{suffix}"].items()
+                )
+                + ")"
+            )
     if "numpy_steps_per_s" in r:
         text = f"  NumPy reference: {r['numpy_steps_per_s']:,.1f} robot-steps/s"
         if "speedup_vs_numpy" in r:
@@ -596,8 +618,9 @@ def summary(b: Bench, seconds: float) -> str:
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     check_args(args)
-    if args.devices is not None:
-        force_host_devices(args.devices)
+    # One CPU device per core by default, so the sharded figures (every core busy) are measured
+    # beside the one-device ones; --devices 1 measures one device only.
+    force_host_devices(usable_cores() if args.devices is None else args.devices)
 
     from tqdm import tqdm
 

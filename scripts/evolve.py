@@ -82,7 +82,11 @@ def _sigterm(signum: int, frame: Any) -> None:
 
 
 class _CompileClock:
-    """Sums JAX's tracing, lowering and XLA compile durations (jax.monitoring events)."""
+    """Sums JAX's tracing, lowering and XLA compile durations (jax.monitoring events).
+
+    Programs compiled at the same time (``jaxais.episode.compile_rollout``) each count in full,
+    so the sum can exceed the wall time they took.
+    """
 
     EVENTS = frozenset(
         {
@@ -192,12 +196,13 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
     from tqdm import tqdm
 
     import jaxais
-    from jaxais import compilation_cache, envs, ga
+    from jaxais import compilation_cache, envs, ga, host_devices
     from jaxais.checkpointing import GACheckpointer
     from jaxais.seed import save_seed
 
     logging.getLogger("absl").setLevel(logging.ERROR)  # orbax's info/warnings are not for users
     cache_dir = compilation_cache.enable()
+    n_devices = host_devices.enable()
     world = envs.load_world(args.world)
     sim_params = envs.default_params()
     command = shlex.join([PROG, *argv])
@@ -312,6 +317,7 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
         "compile_time_s": round(compile_s, 3),
         "ga_compile_time_s": round(ga_compile, 3),
         "compilation_cache": cache_dir,
+        "devices": n_devices,
         "wall_time_total_s": round(earlier_wall + wall, 3),
     }
     save_seed(out / "seed", seed, provenance)

@@ -164,9 +164,10 @@ def main(argv: list[str] | None = None) -> None:
     import jax
     import numpy as np
 
-    from jaxais import compilation_cache, envs, plotting
+    from jaxais import compilation_cache, envs, host_devices, plotting
 
     compilation_cache.enable()
+    host_devices.enable()
     world = envs.load_world(args.world)
     params = envs.default_params()
     run = make_run(world, params, args.robots, args.steps)

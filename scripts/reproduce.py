@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> None:
 
     from tqdm import tqdm
 
-    from jaxais import compilation_cache, envs, report, stats
+    from jaxais import compilation_cache, envs, host_devices, report, stats
     from jaxais.episode import EpisodeConfig
     from jaxais.experiment import (
         build_systems,
@@ -107,6 +107,7 @@ def main(argv: list[str] | None = None) -> None:
     from jaxais.trials import run_trials
 
     cache_dir = compilation_cache.enable()
+    n_devices = host_devices.enable()
     started = time.perf_counter()
     timings: dict[str, float] = {}
     seeds_dir = Path(args.seeds) if args.seeds else default_seed_dir()
@@ -159,6 +160,7 @@ def main(argv: list[str] | None = None) -> None:
         "ltl_seed": str(seeds_dir),
         "worlds": configs,
         "compilation_cache": cache_dir,
+        "devices": n_devices,
         "timings_s": timings,
     }
     atomic_write_json(out / "run.json", run)

@@ -62,7 +62,7 @@ def main(argv: list[str] | None = None) -> None:
     # Imported after the flags are checked: a bad flag answers at once, without loading JAX.
     from tqdm import tqdm
 
-    from jaxais import compilation_cache, envs
+    from jaxais import compilation_cache, envs, host_devices
     from jaxais.episode import EpisodeConfig
     from jaxais.experiment import build_systems, results_document, run_config
     from jaxais.network import NetworkParams
@@ -70,6 +70,7 @@ def main(argv: list[str] | None = None) -> None:
     from jaxais.trials import run_trials
 
     compilation_cache.enable()
+    host_devices.enable()
     name = label(args.system, args.random_set or "R1")
     world = envs.load_world(args.world)
     config = EpisodeConfig(

@@ -89,22 +89,29 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     cache = {"JAXAIS_CACHE_DIR": str(base / "jax_cache")}
     out = base / "trials"
     out.mkdir()
+    # 3 trials on 2 CPU devices: the batch is padded to 4 and sharded (jaxais.host_devices).
     trials_args = (
-        "--system", "HDC", "--world", "world1", "--trials", 2, "--tau-cap", 10,
+        "--system", "HDC", "--world", "world1", "--trials", 3, "--tau-cap", 10,
         "--out", out / "results.json", "--plot", out / "plot.png",
     )  # fmt: skip
+    one_device = out / "one_device"
+    one_device.mkdir()
+    one_args = (*trials_args[:-4], "--out", one_device / "results.json")
     rep_dir = base / "reproduce"
     rep = _start(
         "reproduce.py", "--trials", 2, "--tau-cap", 10, "--worlds", "world1",
         "--seeds", seeds, "--out", rep_dir,
     )  # fmt: skip
-    first = _finish(_start("trials.py", *trials_args, **cache))
+    first = _finish(_start("trials.py", *trials_args, **cache, JAXAIS_CPU_DEVICES="2"))
     _ok(first)
+    single = _start("trials.py", *one_args, JAXAIS_CPU_DEVICES="1", JAXAIS_CACHE_DIR="off")
     cached = sorted(p.name.split("-")[0] for p in (base / "jax_cache").iterdir())
     shutil.move(out / "results.json", out / "first.json")
     shutil.move(out / "plot.png", out / "first.png")
-    second = _finish(_start("trials.py", *trials_args, **cache))
+    second = _finish(_start("trials.py", *trials_args, **cache, JAXAIS_CPU_DEVICES="2"))
     return {
+        "one_device": _finish(single),
+        "one_device_json": one_device / "results.json",
         "trials_dir": out,
         "first": first,
         "cached": cached,
@@ -131,7 +138,7 @@ def test_trials_script_writes_results_json(runs):
     assert doc["config"]["episode"]["tau_cap"] == 10.0
     assert doc["config"]["episode"]["collision_cap"] == 100
     assert doc["config"]["network"]["idiotope_period"] == 120
-    assert len(doc["trials"]) == 2
+    assert len(doc["trials"]) == 3
     for rec in doc["trials"]:
         assert set(rec) >= RECORD_KEYS
         assert 0 < rec["tau"] <= 10.0 and rec["iterations"] <= 313
@@ -140,7 +147,7 @@ def test_trials_script_writes_results_json(runs):
         assert rec["idiotypic_difference_rate"] is None  # HDC is not idiotypic
     assert set(doc["summary"]) == SUMMARY_KEYS
     assert doc["summary"] == pytest.approx(summarise(doc["trials"]))
-    assert "HDC in world1: 2 trials" in proc.stdout
+    assert "HDC in world1: 3 trials" in proc.stdout
 
 
 def test_trials_script_same_arguments_same_bytes(runs):
@@ -148,6 +155,16 @@ def test_trials_script_same_arguments_same_bytes(runs):
     first = (runs["trials_dir"] / "first.json").read_bytes()
     second = (runs["trials_dir"] / "results.json").read_bytes()
     assert first == second
+
+
+def test_trials_script_same_results_on_one_and_two_devices(runs):
+    # Sharded over 2 CPU devices (padded from 3 runs to 4) or on one: the same numbers.
+    _ok(runs["one_device"])
+    sharded = json.loads((runs["trials_dir"] / "first.json").read_text())
+    single = json.loads(runs["one_device_json"].read_text())
+    assert single["trials"] == sharded["trials"]
+    assert single["summary"] == sharded["summary"]
+    assert len(single["trials"]) == 3
 
 
 def test_trials_script_fills_its_compilation_cache(runs):
@@ -177,6 +194,8 @@ def test_trials_script_user_errors(tmp_path: Path):
     for (_, words), proc in zip(cases, procs, strict=True):
         assert_user_error(_finish(proc), "trials.py", *words)
     assert_user_error(_finish(bad_suffix), "trials.py", ".json")
+    bad_devices = _start("trials.py", "--system", "HDC", "--out", out, JAXAIS_CPU_DEVICES="two")
+    assert_user_error(_finish(bad_devices), "trials.py", "JAXAIS_CPU_DEVICES", "positive integer")
     assert not out.exists() and not (tmp_path / "r.txt").exists()
 
 

@@ -15,14 +15,11 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-CPU_COMPILER_OPTIONS = {
-    "xla_cpu_experimental_ynn_fusion_type": "",
-    "xla_cpu_use_fusion_emitters": True,
-}
+CPU_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
 
 
 @functools.cache
-def compiler_options() -> dict[str, str | bool] | None:
+def compiler_options() -> dict[str, Any] | None:
     """Options for the default backend (None where none apply or this XLA lacks them)."""
     if jax.default_backend() != "cpu":
         return None
@@ -35,7 +32,9 @@ def compiler_options() -> dict[str, str | bool] | None:
 
 RUN_ONCE_OPTIONS = {"xla_backend_optimization_level": 1}
 """Extra CPU options for a program that runs once per batch (a reset): LLVM's cheaper pipeline
-compiles it about a third faster; its run time does not matter."""
+compiles it about a third faster (world1's batched reset: 1.6 s instead of 2.3 s on a 2-core
+CPU), and its run time does not matter. No fast-math is involved, so the numbers are unchanged
+(checked: the shipped LTL seed and world1's SIE trials came out bit for bit the same)."""
 
 
 class _Jit:
@@ -68,6 +67,6 @@ def jit(fun: Callable[..., Any], run_once: bool = False, **kwargs: Any) -> Calla
 
     Args:
         run_once: the program runs once per batch (e.g. a reset): compile it for compile speed
-            (:data:`RUN_ONCE_OPTIONS` on CPU). Its results are the same.
+            (:data:`RUN_ONCE_OPTIONS` on CPU).
     """
     return _Jit(fun, run_once, kwargs)

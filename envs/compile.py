@@ -30,11 +30,12 @@ def compiler_options() -> dict[str, Any] | None:
     return CPU_COMPILER_OPTIONS
 
 
-RUN_ONCE_OPTIONS = {"xla_backend_optimization_level": 1}
-"""Extra CPU options for a program that runs once per batch (a reset): LLVM's cheaper pipeline
-compiles it about a third faster (world1's batched reset: 1.6 s instead of 2.3 s on a 2-core
-CPU), and its run time does not matter. No fast-math is involved, so the numbers are unchanged
-(checked: the shipped LTL seed and world1's SIE trials came out bit for bit the same)."""
+QUICK_COMPILE_OPTIONS = {"xla_backend_optimization_level": 1}
+"""Extra CPU options for a program whose run time does not matter (a reset, which runs once per
+batch; a GA breeding step): LLVM's cheaper pipeline compiles it about a third faster (world1's
+batched reset: 1.6 s instead of 2.3 s on a 2-core CPU). No fast-math is involved, so the numbers
+are unchanged (checked: the shipped LTL seed and world1's SIE trials came out bit for bit the
+same). Not for the task loop itself: at -O1 it runs up to 2x slower."""
 
 
 class _Jit:
@@ -44,15 +45,15 @@ class _Jit:
     time, so a script can still choose its devices (``jaxais.host_devices``) after imports.
     """
 
-    def __init__(self, fun: Callable[..., Any], run_once: bool, kwargs: dict[str, Any]):
+    def __init__(self, fun: Callable[..., Any], quick_compile: bool, kwargs: dict[str, Any]):
         functools.update_wrapper(self, fun)
-        self._fun, self._run_once, self._kwargs = fun, run_once, kwargs
+        self._fun, self._quick_compile, self._kwargs = fun, quick_compile, kwargs
 
     @functools.cached_property
     def _jitted(self) -> Any:
         options = compiler_options()
-        if options is not None and self._run_once:
-            options = {**options, **RUN_ONCE_OPTIONS}
+        if options is not None and self._quick_compile:
+            options = {**options, **QUICK_COMPILE_OPTIONS}
         return jax.jit(self._fun, compiler_options=options, **self._kwargs)
 
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
@@ -62,11 +63,11 @@ class _Jit:
         return getattr(self._jitted, name)
 
 
-def jit(fun: Callable[..., Any], run_once: bool = False, **kwargs: Any) -> Callable[..., Any]:
+def jit(fun: Callable[..., Any], quick_compile: bool = False, **kwargs: Any) -> Callable[..., Any]:
     """``jax.jit`` with :func:`compiler_options` for the default backend (resolved on first use).
 
     Args:
-        run_once: the program runs once per batch (e.g. a reset): compile it for compile speed
-            (:data:`RUN_ONCE_OPTIONS` on CPU).
+        quick_compile: the program's run time does not matter (it runs once per batch, or does
+            little work): compile it for compile speed (:data:`QUICK_COMPILE_OPTIONS` on CPU).
     """
-    return _Jit(fun, run_once, kwargs)
+    return _Jit(fun, quick_compile, kwargs)

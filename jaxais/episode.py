@@ -131,6 +131,11 @@ class Run:
     status: jnp.ndarray
 
 
+def _carried(obs: envs.Observation) -> envs.Observation:
+    """The part of an observation the loop reads next iteration (the pixel maps are dropped)."""
+    return obs.replace(blue=None, materials=None, depth=None)
+
+
 def start(
     reset_key: jax.Array,
     run_key: jax.Array,
@@ -144,7 +149,7 @@ def start(
     sim = envs.reset(reset_key, world, sim_params)
     return Run(
         sim=sim,
-        obs=envs.observe(k_obs, sim, world, sim_params),
+        obs=_carried(envs.observe(k_obs, sim, world, sim_params)),
         ctrl=controller.init(k_ctrl, ctrl_params),
         key=k_run,
         m_prev=jnp.int32(0),
@@ -200,6 +205,7 @@ def iterate(
     ctrl = controller.learn(u, run.ctrl, percept, ctrl_params)
     ctrl, wheels = controller.act(u, ctrl, percept, ctrl_params)
     sim, new_obs = envs.step_with_noise(run.sim, wheels, sim_noise, world, sim_params)
+    new_obs = _carried(new_obs)
     # The iteration that detects the end records the counts and status and moves nothing; a run
     # that ended earlier keeps everything. One select over the whole run, three over the counts.
     live = run.status == RUNNING
@@ -384,7 +390,7 @@ def compile_rollout(
     The two programs are lowered one after the other and compiled at the same time, in two
     threads (XLA compiles outside Python's lock; measured on a 2-core CPU, the GA's pair took
     5.1 s instead of 5.9 s one after the other). The start program runs once per batch, so it
-    is compiled for compile speed (``envs.jit(..., run_once=True)``).
+    is compiled for compile speed (``envs.jit(..., quick_compile=True)``).
     """
     shardings = _batch_shardings(sharding)
 
@@ -395,7 +401,7 @@ def compile_rollout(
         return advance(batch, world if specialise else w, sp, controller, cp, config)
 
     placement = {} if shardings is None else {"out_shardings": shardings}
-    start_lowered = envs.jit(task_start, run_once=True, **placement).lower(
+    start_lowered = envs.jit(task_start, quick_compile=True, **placement).lower(
         reset_keys, run_keys, world, sim_params, ctrl_params
     )
     batch_in = start_lowered.out_info

@@ -40,6 +40,7 @@ time cap can out-score a quick finisher on some antigens, and crossover then tak
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, fields
@@ -268,7 +269,8 @@ def _init(key: jax.Array, P: int, R: int) -> GAState:
     )
 
 
-_init_jit = envs.jit(_init, static_argnums=(1, 2))
+# Breeding and set-up do little work: compiled for compile speed (envs.jit's quick_compile).
+_init_jit = envs.jit(_init, quick_compile=True, static_argnums=(1, 2))
 
 
 def init(key: jax.Array, config: GAConfig) -> GAState:
@@ -297,7 +299,7 @@ _COMPILED: dict = {}
 """Compiled rollout programs shared by every call (one per batch size, world and caps)."""
 
 
-@envs.jit
+@functools.partial(envs.jit, quick_compile=True)
 def _rollout_inputs(key: jax.Array, population: Antibodies):
     """(reset keys [n], run keys [n], sets [n, 8]) of the P × R = n robots, in row-major order."""
     n = population.shape[0] * population.shape[1]
@@ -524,7 +526,7 @@ def _tell(
 
 
 # The mutation rate is traced, so configs that differ only in it share one compiled program.
-_tell_jit = envs.jit(_tell, static_argnames="elitism")
+_tell_jit = envs.jit(_tell, quick_compile=True, static_argnames="elitism")
 
 
 def tell(key: jax.Array, state: GAState, evaluation: Evaluation, config: GAConfig) -> GAState:

@@ -11,10 +11,13 @@
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxais import envs
 from jaxais.antibodies import Antibodies, from_dicts, sample_antibodies
 from jaxais.controllers import System
 from jaxais.network import NetworkParams, relative_fitness, seed_paratopes
@@ -80,6 +83,12 @@ def hand_designed_sets(x: int = N_SETS) -> tuple[Antibodies, np.ndarray]:
     return antibodies, P
 
 
+@functools.partial(envs.jit, quick_compile=True)
+def _seeded_paratopes(tau, collisions, L, rho, phi):
+    """Eqs (1)-(2) as one compiled program (rather than op by op at every script's start)."""
+    return seed_paratopes(L, relative_fitness(tau, collisions, rho), phi)
+
+
 def make_system(
     name: str,
     seed: Seed | None = None,
@@ -100,8 +109,8 @@ def make_system(
     if name in ("SIE", "SRL"):
         if seed is None:
             raise ValueError(f"{name} needs an LTL seed")
-        mu = relative_fitness(seed.tau, seed.collisions, network.rho)
-        antibodies, P = seed.antibodies, seed_paratopes(seed.L, mu, network.phi)
+        antibodies = seed.antibodies
+        P = _seeded_paratopes(seed.tau, seed.collisions, seed.L, network.rho, network.phi)
     elif name in ("UIE", "URL"):
         antibodies, P = random_sets(random_set or "")
     elif name == "HDC":

@@ -7,6 +7,7 @@ random numbers), and its dynamics from (seed, system label, i).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -42,12 +43,25 @@ class TrialSet:
 
 def trial_keys(seed: int, system_label: str, n: int) -> tuple[jax.Array, jax.Array]:
     """(reset keys, run keys), each [n], of a system's trials."""
+    return batch_keys(seed, ((system_label, n),))
+
+
+@functools.partial(envs.jit, quick_compile=True, static_argnums=(0, 1))
+def batch_keys(seed: int, plan: tuple[tuple[str, int], ...]) -> tuple[jax.Array, jax.Array]:
+    """(reset keys, run keys) of several systems' trials, in ``plan``'s (label, n) order.
+
+    Trial i of every system meets the same world (its reset key depends on i alone); each label
+    has its own stream of run keys. One compiled program for the whole plan.
+    """
     base = jax.random.key(seed)
-    trials = jnp.arange(n)
-    reset = jax.vmap(lambda i: jax.random.fold_in(jax.random.fold_in(base, 0), i))(trials)
-    stream = jax.random.fold_in(base, 1 + LABELS.index(system_label))
-    run = jax.vmap(lambda i: jax.random.fold_in(stream, i))(trials)
-    return reset, run
+    worlds = jax.random.fold_in(base, 0)
+    resets, runs = [], []
+    for system_label, n in plan:
+        trials = jnp.arange(n)
+        resets.append(jax.vmap(lambda i: jax.random.fold_in(worlds, i))(trials))
+        stream = jax.random.fold_in(base, 1 + LABELS.index(system_label))
+        runs.append(jax.vmap(lambda i, s=stream: jax.random.fold_in(s, i))(trials))
+    return jnp.concatenate(resets), jnp.concatenate(runs)
 
 
 def run_trials(
@@ -81,13 +95,12 @@ def run_trials(
             raise ValueError(f"unknown system label {name!r} (one of {', '.join(LABELS)})")
         if n < 1:
             raise ValueError(f"trials must be >= 1, got {n} for {name}")
-    keys = [trial_keys(seed, name, counts[name]) for name in systems]
-    reset_keys = jnp.concatenate([k[0] for k in keys])
-    run_keys = jnp.concatenate([k[1] for k in keys])
+    reset_keys, run_keys = batch_keys(seed, tuple((name, counts[name]) for name in systems))
+    # Each system's parameters repeated for its trials, assembled on the host (no device work).
     params = jax.tree.map(
-        lambda *xs: jnp.concatenate(xs),
+        lambda *xs: np.concatenate(xs),
         *[
-            jax.tree.map(lambda a, n=counts[name]: jnp.broadcast_to(a, (n, *jnp.shape(a))), s)
+            jax.tree.map(lambda a, n=counts[name]: np.repeat(np.asarray(a)[None], n, 0), s)
             for name, s in systems.items()
         ],
     )

@@ -40,8 +40,10 @@ time cap can out-score a quick finisher on some antigens, and crossover then tak
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, fields
 from typing import Any, Final
@@ -546,7 +548,49 @@ def tell(key: jax.Array, state: GAState, evaluation: Evaluation, config: GAConfi
     Returns:
         The state of the next generation.
     """
+    warming = _TELL_WARMING.get(_tell_signature(state, config))
+    if warming is not None:
+        warming.join()
     return _tell_jit(key, state, evaluation, config.elitism, float(config.mutation))
+
+
+_TELL_WARMING: dict[tuple, threading.Thread] = {}
+"""Background compilations of :func:`tell`'s program, one per signature (:func:`_warm_tell`)."""
+
+
+def _tell_signature(state: GAState, config: GAConfig) -> tuple:
+    return (state.population.shape[:2], config.elitism)
+
+
+def _warm_tell(key: jax.Array, state: GAState, config: GAConfig) -> None:
+    """Start compiling :func:`tell`'s program in a background thread, once per signature.
+
+    Breeding is first needed after the first evaluation; compiling it meanwhile (XLA compiles
+    outside Python's lock) takes its compilation off a run's critical path. The program lands in
+    JAX's compilation cache, where :func:`tell`'s call finds it.
+    """
+    signature = _tell_signature(state, config)
+    if signature in _TELL_WARMING:
+        return
+    P, R = signature[0]
+    f32, i32 = jnp.float32, jnp.int32
+    evaluation = Evaluation(
+        fitness=jax.ShapeDtypeStruct((P, R), f32),
+        tau=jax.ShapeDtypeStruct((P, R), f32),
+        collisions=jax.ShapeDtypeStruct((P, R), i32),
+        L=jax.ShapeDtypeStruct((P, R, N_ANTIGENS), f32),
+        status=jax.ShapeDtypeStruct((P, R), i32),
+    )
+
+    def compile_tell() -> None:
+        # Any failure here shows up again, with its message, in tell's own call.
+        with contextlib.suppress(Exception):
+            rate = float(config.mutation)
+            _tell_jit.lower(key, state, evaluation, config.elitism, rate).compile()
+
+    thread = threading.Thread(target=compile_tell, name="jaxais-compile-tell", daemon=True)
+    _TELL_WARMING[signature] = thread
+    thread.start()
 
 
 def step(
@@ -565,6 +609,7 @@ def step(
         (the next state, this generation's evaluation).
     """
     key, k_eval, k_tell = jax.random.split(state.key, 3)
+    _warm_tell(k_tell, state, config)
     evaluation = evaluate(k_eval, state.population, world, sim_params, config, progress)
     return tell(k_tell, state.replace(key=key), evaluation, config), evaluation
 

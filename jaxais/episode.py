@@ -405,15 +405,13 @@ def compile_rollout(
         reset_keys, run_keys, world, sim_params, ctrl_params
     )
     batch_in = start_lowered.out_info
-    if shardings is not None:
-
-        def placed(tree, sh):
-            return jax.tree.map(lambda s: jax.ShapeDtypeStruct(s.shape, s.dtype, sharding=sh), tree)
-
-        batch_in = Batch(
-            runs=placed(batch_in.runs, shardings.runs),
-            poses=placed(batch_in.poses, shardings.poses),
-            chunks=placed(batch_in.chunks, shardings.chunks),
+    if shardings is not None:  # each field's sharding onto every array of that field
+        batch_in = jax.tree.map(
+            lambda sh, field: jax.tree.map(
+                lambda s: jax.ShapeDtypeStruct(s.shape, s.dtype, sharding=sh), field
+            ),
+            shardings,
+            batch_in,
         )
     advance_lowered = envs.jit(task_advance, **placement).lower(
         batch_in, world, sim_params, ctrl_params

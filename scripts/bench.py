@@ -376,8 +376,8 @@ def bench_jax(b: Bench) -> None:
 def bench_sharded(b: Bench) -> None:
     """``jax_steps_per_s_sharded``: the batch axis sharded over all devices (when > 1)."""
     import jax
-    import numpy as np
-    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+    from jaxais.episode import batch_sharding
 
     n_dev = jax.device_count()
     usable = [n for n in b.args.batches if n % n_dev == 0]
@@ -389,9 +389,8 @@ def bench_sharded(b: Bench) -> None:
     if not usable:
         b.notes.append(f"no batch size divisible by {n_dev} devices: sharded benchmark skipped")
         return
-    mesh = Mesh(np.array(jax.devices()), ("batch",))
-    sharding = NamedSharding(mesh, PartitionSpec("batch"))
-    runs = _bench_batches(b, usable, sharding_for=lambda n: sharding)
+    # The task loop's own batch sharding (jaxais.episode.rollout shards the same way).
+    runs = _bench_batches(b, usable, sharding_for=batch_sharding)
     sharded = {k: v["steps_per_s"] for k, v in runs.items()}
     b.results["jax_steps_per_s_sharded"] = sharded
     b.results["compile_s_sharded"] = {k: v["compile_s"] for k, v in runs.items()}

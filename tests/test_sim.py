@@ -330,3 +330,36 @@ def test_same_key_same_trajectory(sim) -> None:
     np.testing.assert_array_equal(runs[0], runs[1])  # reproducible
     np.testing.assert_array_equal(runs[0][:, 0], runs[0][:, 1])  # same key, same trajectory
     assert np.abs(runs[0][:, 0] - runs[0][:, 2]).max() > 1e-4  # different key, different one
+
+
+def test_padded_ray_cast_equals_one_ray_at_a_time() -> None:
+    """cast_rays pads 23 rays to 24 (see geometry.cast_rays): no ray's answer may change."""
+    seg = jnp.array([[0.0, 0.0, 1.0, 0.0], [1.0, 0.0, 1.0, 1.0], [0.0, 1.0, 0.0, 0.0]])
+    box = jnp.array([[0.6, 0.6, 0.8, 0.8]])
+    circ = jnp.array([[0.3, 0.7, 0.05], [0.7, 0.3, 0.1]])
+    scene = envs.Scene(
+        seg=seg,
+        seg_material=jnp.array([1, 2, 1]),
+        seg_height=jnp.array([0.1, 0.2, 0.1]),
+        seg_valid=jnp.array([True, True, False]),  # the west wall is padding: never hit
+        box=box,
+        box_material=jnp.array([3]),
+        box_height=jnp.array([0.3]),
+        box_valid=jnp.array([True]),
+        circ=circ,
+        circ_material=jnp.array([1, 1]),
+        circ_height=jnp.array([0.05, 0.06]),
+        circ_valid=jnp.array([True, True]),
+    )
+    rng = np.random.default_rng(7)
+    angles = rng.uniform(-np.pi, np.pi, 23)
+    origins = jnp.asarray(rng.uniform(0.05, 0.95, (23, 2)), jnp.float32)
+    dirs = jnp.asarray(np.stack([np.cos(angles), np.sin(angles)], 1), jnp.float32)
+    together = jax.jit(envs.cast_rays)(origins, dirs, scene)
+    alone = jax.jit(jax.vmap(lambda o, d: envs.cast_rays(o[None], d[None], scene)))(origins, dirs)
+    for got, want in zip(together, alone, strict=True):
+        assert got.shape == (23,)
+        np.testing.assert_array_equal(got, np.asarray(want)[:, 0])
+    t, material, _ = together
+    assert np.isfinite(t).any() and not np.isin(np.asarray(material)[np.isfinite(t)], [0]).any()
+    assert np.all(np.asarray(material)[np.isinf(t)] == 0)

@@ -20,7 +20,6 @@ from jaxais import envs
 from jaxais.antibodies import (
     Antibodies,
     from_dicts,
-    take,
     to_dicts,
     within_limits,
 )
@@ -118,11 +117,6 @@ def save_seed(path: str | Path, seed: Seed, provenance: dict[str, Any]) -> Path:
 _within_limits = envs.jit(within_limits, quick_compile=True)
 
 
-def _host_attributes(ab: Antibodies) -> np.ndarray:
-    """:func:`jaxais.antibodies.attribute_matrix` in NumPy: [..., N_ATTRIBUTES] float32."""
-    return np.stack([np.asarray(getattr(ab, f), np.float32) for f in _FIELDS[1:]], axis=-1)
-
-
 def load_seed(path: str | Path | None = None) -> tuple[Seed, dict[str, Any]]:
     """Read a seed directory (default: the shipped seed).
 
@@ -170,10 +164,12 @@ def load_seed(path: str | Path | None = None) -> tuple[Seed, dict[str, Any]]:
     except (KeyError, TypeError, ValueError) as err:
         raise SeedError(f"{path}: {SEED_JSON} is malformed ({err}); {hint}") from None
     same = len(readable) == x and json_L.shape == seed.L.shape
-    same = same and all(
-        np.array_equal(_host_attributes(r), _host_attributes(take(antibodies, i)))
-        and np.array_equal(np.asarray(r.type), np.asarray(seed.antibodies.type[i]))
+    same = same and all(  # every field as float32 (direction as 0/1), set by set
+        np.array_equal(
+            np.asarray(getattr(r, f), np.float32), np.asarray(getattr(antibodies, f)[i], np.float32)
+        )
         for i, r in enumerate(readable)
+        for f in _FIELDS
     )
     same = same and np.array_equal(json_tau, seed.tau.astype(np.float32))
     same = same and np.array_equal(json_c, seed.collisions.astype(np.int32))

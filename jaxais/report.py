@@ -332,14 +332,22 @@ def _idiotypic_section(rates: Mapping[str, Any], paper: Mapping[str, Any]) -> li
 
 
 def _ltl_populations(ltl: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """Per-population best f (generation 0, final generation, any generation) of a summary."""
     if "populations" in ltl:
-        return list(ltl["populations"])
+        return [
+            {
+                "first": p.get("best_f_generation_0"),
+                "final": p.get("best_f_final_generation"),
+                "overall": p.get("best_f_overall"),
+            }
+            for p in ltl["populations"]
+        ]
     gens = sorted(ltl.get("generations", []), key=lambda g: g["generation"])
     if not gens:
         return []
     first, last = gens[0]["populations"], gens[-1]["populations"]
     return [
-        {"best_f_initial": a.get("best_f"), "best_f_final": b.get("best_f")}
+        {"first": a.get("best_f"), "final": b.get("best_f"), "overall": None}
         for a, b in zip(first, last, strict=False)
     ]
 
@@ -350,11 +358,14 @@ def _ltl_section(ltl: Mapping[str, Any] | None, figure: str | None) -> list[str]
         return lines + ["No LTL summary was given.", ""]
     pops = _ltl_populations(ltl)
     if pops:
+        head = ["Population", "best f, generation 0", "best f, final generation"]
+        overall = any(p["overall"] is not None for p in pops)
         body = [
-            [str(i), _num(p.get("best_f_initial"), 1), _num(p.get("best_f_final"), 1)]
+            [str(i), _num(p["first"], 1), _num(p["final"], 1)]
+            + ([_num(p["overall"], 1)] if overall else [])
             for i, p in enumerate(pops)
         ]
-        lines += _table(["Population", "best f, generation 0", "best f, final"], body)
+        lines += _table(head + (["best f, any generation (the seed)"] if overall else []), body)
     extra = {k: v for k, v in ltl.items() if k not in ("populations", "generations") and _scalar(v)}
     if extra:
         lines += _table(["Quantity", "Value"], [[k, _value(v)] for k, v in extra.items()], "lr")
@@ -496,9 +507,10 @@ def write_report(
         results_by_world: ``{world: {system: [trial record]}}`` (for the robustness tests, trial
             counts and box plots).
         paper: :func:`load_paper_tables`.
-        ltl_summary: ``None`` or ``{"populations": [{"best_f_initial", "best_f_final"}],
+        ltl_summary: ``None`` or an ``evolve.py`` ``summary.json``: ``{"populations":
+            [{"best_f_generation_0", "best_f_final_generation", "best_f_overall"}],
             "generations": [{"generation": g, "populations": [{"best_f", "mean_f"}]}],
-            **scalars}`` (each part optional; per-population initial/final best f are taken from
+            **scalars}`` (each part optional; per-population first/final best f are taken from
             ``generations`` when ``populations`` is absent; other scalar entries such as
             ``wall_time_s`` are listed).
         config: the run configuration (shown as JSON).

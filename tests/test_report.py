@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from jaxais import report, stats
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def trial(tau: float, c: int = 0, failed_by: str | None = None, rate: float | None = None):
@@ -145,6 +150,19 @@ def test_write_report_full(tmp_path, paper):
     assert not (tmp_path / "figures" / "traj_world2.png").exists()
     assert (tmp_path / "figures" / "ltl_fitness.png").exists()
     assert drawn.count("world1") == len(stats.SYSTEMS)
+
+
+def test_ltl_section_reads_the_evolve_summary_format():
+    # The real evolve.py summary (the shipped seed's): its per-population keys must reach the table.
+    summary = json.loads((ROOT / "checkpoints" / "default" / "summary.json").read_text())
+    text = "\n".join(report._ltl_section(summary, None))
+    for i, p in enumerate(summary["populations"]):
+        row = (
+            f"| {i} | {p['best_f_generation_0']:.1f} | {p['best_f_final_generation']:.1f} "
+            f"| {p['best_f_overall']:.1f} |"
+        )
+        assert row in text, row
+    assert "| 0 | – |" not in text
 
 
 def test_write_report_minimal(tmp_path, paper):

@@ -142,6 +142,24 @@ def cast_rays(
     return t, jnp.where(hit, material[index], 0), jnp.where(hit, height[index], 0.0)
 
 
+def reduce_pair(a, b, op_a, op_b, init_a, init_b) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """Two reductions of two [N] vectors in one pass: (op_a over a, op_b over b), as scalars.
+
+    XLA's CPU backend fuses a plain reduction into each consumer and evaluates it once per
+    element of that consumer's output: a reduction feeding an (x, y) pair, or anything stacked
+    with one, is computed once per component, and so are the per-surface terms it reads. A
+    reduction with two outputs is never fused into its consumers: it runs once, in a kernel of
+    its own, computing those terms once. XLA compiles its arithmetic differently from a plain
+    ``jnp.sum`` (e.g. where it fuses a multiply into an add), so a sum can differ in the last bit.
+
+    Args:
+        a, b: [N] arrays. op_a, op_b: associative binary ops (e.g. ``jnp.add``).
+        init_a, init_b: their identities (e.g. 0.0, False).
+    """
+    init = (jnp.asarray(init_a, a.dtype), jnp.asarray(init_b, b.dtype))
+    return jax.lax.reduce((a, b), init, lambda x, y: (op_a(x[0], y[0]), op_b(x[1], y[1])), (0,))
+
+
 def kind_gaps(p: jnp.ndarray, radius: jnp.ndarray, scene: Scene):
     """Per kind of surface: (gap [P] = surface distance minus radius, inf where invalid;
     nx [P], ny [P]: the unit vector from the surface's closest point towards p).
@@ -222,6 +240,10 @@ def resolve_disc(
     clear start. One pass suffices for the worlds' walls, boxes and pillars (a step moves at most
     4.5 mm); more passes cost compile and run time in every step.
 
+    Each kind's pushes along x and y are summed in one two-output reduction
+    (:func:`reduce_pair`): with two plain sums XLA's CPU backend computed every push twice,
+    and the simulator stepped about 1.3x slower at batch 10000 (world1, 2-core CPU).
+
     Returns:
         [2] the resolved centre.
     """
@@ -230,6 +252,7 @@ def resolve_disc(
         dx = dy = 0.0
         for gap, nx, ny in kind_gaps(p, radius, scene):
             depth = jnp.where(gap < skin, skin - gap, 0.0)
-            dx, dy = dx + jnp.sum(depth * nx), dy + jnp.sum(depth * ny)
+            sx, sy = reduce_pair(depth * nx, depth * ny, jnp.add, jnp.add, 0.0, 0.0)
+            dx, dy = dx + sx, dy + sy
         p = p + jnp.stack([dx, dy])
     return jnp.where(min_gap(p, radius, scene) >= 0.0, p, p_old)

@@ -16,6 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxais import envs
+from jaxais.envs import geometry
 from jaxais.envs import reference as ref
 
 K = 0.00683 * 0.0205
@@ -364,3 +365,47 @@ def test_padded_ray_cast_equals_one_ray_at_a_time() -> None:
     hit = np.isfinite(t)
     assert hit.any() and not hit.all()  # both cases are exercised
     assert np.all(material[hit] != 0) and np.all(material[~hit] == 0)
+
+
+def test_reduce_pair_equals_two_reductions() -> None:
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(64, 19)).astype(np.float32)
+    b = rng.uniform(-1, 1, (64, 19)).astype(np.float32)
+    pair = jax.jit(
+        jax.vmap(lambda x, y: geometry.reduce_pair(x, y, jnp.add, jnp.minimum, 0, np.inf))
+    )
+    sums, mins = pair(a, b)
+    np.testing.assert_allclose(sums, a.astype(np.float64).sum(1), rtol=0, atol=1e-5)
+    np.testing.assert_array_equal(mins, b.min(1))  # a min is exact whatever the order
+    flags = jax.jit(
+        jax.vmap(lambda x, y: geometry.reduce_pair(x > 1.5, y, jnp.logical_or, jnp.add, 0, 0))
+    )(a, b)[0]
+    np.testing.assert_array_equal(flags, (a > 1.5).any(1))
+    assert flags.any() and not flags.all()
+
+
+def test_push_out_matches_the_numpy_reference(sim) -> None:
+    """resolve_disc (x and y pushes summed by reduce_pair) against the reference's plain loops."""
+    world, params = sim.world("world1"), sim.params
+    state = jax.tree.map(lambda x: x[0], sim.reset(world, sim.keys(5))[0])
+    rng = np.random.default_rng(11)
+    n = 256  # centres all over the arena, each moved up to 5 mm
+    old = rng.uniform(world.arena[:2], world.arena[2:], (n, 2)).astype(np.float32)
+    new = old + rng.uniform(-0.005, 0.005, (n, 2)).astype(np.float32)
+
+    @jax.jit
+    def moved(state, old, new):
+        scene = envs.build_scene(state, world, params)
+        return jax.vmap(lambda o, p: geometry.resolve_disc(o, p, params.body_radius, scene))(
+            old, new
+        )
+
+    got = np.asarray(moved(state, old, new))
+    scene = ref.build_scene(
+        ref.state_to_numpy(state), ref.world_to_numpy(world), sim.params_np, exclude=-1
+    )
+    radius = float(params.body_radius)
+    want = np.array([ref.resolve_disc(o, p, radius, scene) for o, p in zip(old, new, strict=True)])
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-5)  # float32 vs float64, as for steps
+    pushed = np.linalg.norm(want - new, axis=1) > 1e-6
+    assert pushed.any() and not pushed.all()  # some discs were pushed out, some moved freely

@@ -14,7 +14,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from .geometry import Scene, cast_rays, kind_gaps, min_gap, resolve_disc
+from .geometry import Scene, cast_rays, kind_gaps, min_gap, reduce_pair, resolve_disc
 from .params import CAMERA_COLUMNS, CAMERA_ROWS, GOAL, MARKER, N_IR, WALL, SimParams
 from .struct import pytree_dataclass
 from .world import World
@@ -189,9 +189,10 @@ def _wander_wheels(k: int, state: State, u: jnp.ndarray, scene: Scene, params: S
     near, push_left = False, 0.0
     for gap, nx, ny in kind_gaps(pose[:2], params.body_radius, scene):
         close = (nx * c + ny * s < 0.0) & (gap < WANDER_AVOID_GAP)
-        near = near | jnp.any(close)
-        lateral = (WANDER_AVOID_GAP - gap) * (c * ny - s * nx)
-        push_left = push_left + jnp.sum(jnp.where(close, lateral, 0.0))
+        lateral = jnp.where(close, (WANDER_AVOID_GAP - gap) * (c * ny - s * nx), 0.0)
+        # One two-output reduction: plain ones would be computed once per wheel (reduce_pair).
+        any_close, push = reduce_pair(close, lateral, jnp.logical_or, jnp.add, False, 0.0)
+        near, push_left = near | any_close, push_left + push
     away = jnp.where(push_left >= 0.0, 1.0, -1.0)
     timer, turn = state.wander_timer[k], state.wander_dir[k]
     lo, hi = WANDER_TURN_STEPS

@@ -245,12 +245,16 @@ def sense(state: State, noise: StepNoise, world: World, params: SimParams) -> Ob
     pix = params.camera_fov / CAMERA_COLUMNS
     cols = jnp.arange(CAMERA_COLUMNS)
     cam_offsets = 0.5 * params.camera_fov - (cols + 0.5) * pix
-    dirs = _rotate(_unit(jnp.concatenate([params.ir_bearings, cam_offsets])), c, s)
+    # cast_rays pads 23 rays to 24 for the CPU's vector lanes; a 24th ray (a copy of the last
+    # camera ray, dropped below) added here, before the rays are rotated per robot, spares it
+    # a copy of every robot's rays (about 1.07x faster at batch 10000; same numbers).
+    units = _unit(jnp.concatenate([params.ir_bearings, cam_offsets]))
+    dirs = _rotate(jnp.concatenate([units, units[-1:]]), c, s)
     lens = centre + params.body_radius * jnp.stack([c, s])
     origins = jnp.concatenate(
-        [jnp.broadcast_to(centre, (N_IR, 2)), jnp.broadcast_to(lens, (CAMERA_COLUMNS, 2))]
+        [jnp.broadcast_to(centre, (N_IR, 2)), jnp.broadcast_to(lens, (CAMERA_COLUMNS + 1, 2))]
     )
-    t, mat, height = cast_rays(origins, dirs, scene)
+    t, mat, height = (v[: N_IR + CAMERA_COLUMNS] for v in cast_rays(origins, dirs, scene))
 
     rim = jnp.maximum(t[:N_IR] - params.body_radius, 0.0)
     ir = ir_reading(rim, params)

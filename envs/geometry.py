@@ -148,9 +148,10 @@ def reduce_pair(a, b, op_a, op_b, init_a, init_b) -> tuple[jnp.ndarray, jnp.ndar
     XLA's CPU backend fuses a plain reduction into each consumer and evaluates it once per
     element of that consumer's output: a reduction feeding an (x, y) pair, or anything stacked
     with one, is computed once per component, and so are the per-surface terms it reads. A
-    reduction with two outputs is never fused into its consumers: it runs once, in a kernel of
-    its own, computing those terms once. XLA compiles its arithmetic differently from a plain
-    ``jnp.sum`` (e.g. where it fuses a multiply into an add), so a sum can differ in the last bit.
+    reduction with two outputs is not fused into its consumers (jax 0.10): it runs once, in a
+    kernel of its own, computing those terms once. XLA compiles its arithmetic differently from
+    a plain ``jnp.sum`` (e.g. where it fuses a multiply into an add), so a sum can differ in the
+    last bit.
 
     Args:
         a, b: [N] arrays. op_a, op_b: associative binary ops (e.g. ``jnp.add``).

@@ -100,6 +100,11 @@ _INDEX_MASK = (1 << _INDEX_BITS) - 1
 _RAY_LANES = 8
 
 
+def ray_padding(n_rays: int) -> int:
+    """How many rays :func:`cast_rays` adds to ``n_rays`` to fill the CPU's vector lanes."""
+    return -n_rays % _RAY_LANES
+
+
 def cast_rays(
     origins: jnp.ndarray, dirs: jnp.ndarray, scene: Scene
 ) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
@@ -119,7 +124,7 @@ def cast_rays(
     # 8-lane (AVX2) chunks: 23 rays leave a scalar remainder loop that halves the speed of the
     # whole cast, so the ray count is padded with copies of the last ray (dropped at the end).
     n_r = origins.shape[0]
-    pad = -n_r % _RAY_LANES
+    pad = ray_padding(n_r)
     if pad:
         origins = jnp.concatenate([origins, jnp.broadcast_to(origins[-1:], (pad, 2))])
         dirs = jnp.concatenate([dirs, jnp.broadcast_to(dirs[-1:], (pad, 2))])

@@ -222,8 +222,8 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
         "config": {k: v for k, v in config.to_dict().items() if k != "generations"},
     }
 
-    # The fitness plot's matplotlib import (about 0.6 s) overlaps the GA, which spends its time
-    # in XLA, outside Python's lock; _plot's own import then finds the modules loaded.
+    # The fitness plot's matplotlib import (about 0.6 s) runs in the background while the
+    # checkpoints open and the GA compiles and runs; _plot's own import then finds it done.
     threading.Thread(target=_import_matplotlib, daemon=True).start()
     start = time.perf_counter()
     with _CompileClock() as clock, GACheckpointer(out / "checkpoints", run_info, args.resume) as ck:

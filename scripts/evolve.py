@@ -205,12 +205,13 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
     from tqdm import tqdm
 
     import jaxais
-    from jaxais import compilation_cache, envs, ga, host_devices
+    from jaxais import compilation_cache, envs, ga, host_devices, loop_kernels
     from jaxais.checkpointing import GACheckpointer
     from jaxais.seed import save_seed
 
     logging.getLogger("absl").setLevel(logging.ERROR)  # orbax's info/warnings are not for users
     cache_dir = compilation_cache.enable()
+    loop_kernel_bytes = loop_kernels.enable()  # before JAX's backend starts and reads XLA_FLAGS
     n_devices = host_devices.enable()
     world = envs.load_world(args.world)
     sim_params = envs.default_params()
@@ -330,6 +331,7 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
         "ga_compile_time_s": round(ga_compile, 3),
         "compilation_cache": cache_dir,
         "devices": n_devices,
+        "loop_kernel_bytes": loop_kernel_bytes,
         "wall_time_total_s": round(earlier_wall + wall, 3),
     }
     save_seed(out / "seed", seed, provenance)

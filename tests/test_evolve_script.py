@@ -113,6 +113,7 @@ def test_outputs(full_run: Path):
         assert {"best_f_generation_0", "best_f_final_generation", "best_f_overall"} <= p.keys()
         assert p["best_f_overall"] <= p["best_f_generation_0"]
     assert summary["wall_time_s"] > 0 and summary["compile_time_s"] >= 0
+    assert summary["loop_kernel_bytes"] is None  # off in the tests (conftest)
     assert (full_run / "fitness.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     seed, meta = load_seed(full_run / "seed")
     assert seed.antibodies.type.shape == (2, 8)
@@ -244,6 +245,23 @@ def test_bad_flags_subprocess(tmp_path: Path):
         assert lines[0].startswith("evolve.py: error: "), (case, err)
         assert case[1 if case[0] == "--world" else 0] in lines[0], (case, err)
     assert _digest(keep) == before
+
+
+def test_bad_loop_kernel_setting_subprocess(tmp_path: Path):
+    """A malformed JAXAIS_LOOP_KERNEL_BYTES: one line naming it, status 2, nothing written."""
+    out = tmp_path / "run"
+    env = {**os.environ, "JAXAIS_DEBUG": "", "JAXAIS_LOOP_KERNEL_BYTES": "lots"}
+    proc = subprocess.run(
+        [sys.executable, str(SCRIPT), "--out", str(out)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+    assert lines[0].startswith("evolve.py: error: JAXAIS_LOOP_KERNEL_BYTES='lots'"), lines
+    assert not (out / "summary.json").exists() and not (out / "seed").exists()
 
 
 @pytest.mark.parametrize(

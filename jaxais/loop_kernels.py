@@ -10,14 +10,19 @@ the GA's chunk loop and its driver loop at the default 50 robots (about 0.16 MB 
 25 robots per device), up to 50 robots per device.
 
 Measured on a 2-core CPU (separate processes, interleaved): a generation's evaluation 0.58-0.64 s
--> 0.47-0.53 s, ``scripts/evolve.py`` 34.6 / 33.9 s -> 27.6 / 28.1 s wall, and the same seed bit
-for bit (checked against ``checkpoints/default``).
+-> 0.47-0.53 s; ``scripts/evolve.py``, five pairs: 32.0-35.5 s -> 27.6-31.7 s wall; the same seed
+bit for bit (checked against ``checkpoints/default``).
 
-Only ``scripts/evolve.py`` uses it. In the STL's task loop the one-function form rounds a few
-operations differently (LLVM fuses multiply-adds across what were separate kernels): 3 of world1's
-30 SIE trials drift apart after a few thousand iterations. Its threshold test also depends on
-the batch per device, so ``trials.py`` (30 runs) would then disagree in the last bits with
-``reproduce.py`` (150 runs per world, above the threshold) and with a one-device run.
+Only ``scripts/evolve.py`` uses it, for two reasons measured on the STL's task loop:
+
+- the one-function form rounds some rare step differently in the last bit (probably multiply-adds
+  that LLVM now contracts across what were separate kernels): 3 of world1's 30 SIE trials drift
+  apart after a few thousand iterations. Whether a loop qualifies depends on the batch per
+  device, so ``trials.py`` (15 runs per device) would disagree with ``reproduce.py`` (75 and
+  more, above the threshold) and with a one-device run;
+- XLA compiles a one-function loop on one thread. For 30 SIE trials the run drops from 6.7-8.5 s
+  to 5.6-6.0 s but the compile grows by 1-2 s; with every loop of ``reproduce.py`` hoisted
+  (threshold 1 GB) its compile went from 40 s to 70 s for a run 96 s -> 88 s (154 s -> 175 s).
 
 XLA reads the setting from ``XLA_FLAGS`` once per process, when its CPU backend starts; it
 cannot be set per program. First match wins:

@@ -20,7 +20,8 @@ import numpy as np
 import pytest
 
 from jaxais import episode
-from jaxais.controllers import STL
+from jaxais import trials as trials_module
+from jaxais.controllers import STL, STL_NO_REPLACEMENT
 from jaxais.episode import FAILED_COLLISIONS, FAILED_TIME, FINISHED, RUNNING, outcome
 from jaxais.trials import TrialSet, run_trials, summarise, trial_keys
 
@@ -293,6 +294,17 @@ def test_results_do_not_depend_on_batch_mates():
     assert same_trials(with_hdc["HDC"], hdc_first["HDC"])
     # ... while the later trials of SIE alone are other trials.
     assert not np.array_equal(alone["SIE"].trajectories[2][0], alone["SIE"].trajectories[0][0])
+
+
+def test_a_batch_without_replacement_compiles_without_it_and_gives_the_same_trials():
+    """SIE and HDC never replace antibodies, so their batch runs STL_NO_REPLACEMENT; with UIE-R1
+    among them the full controller runs, and their trials come out the same bit for bit."""
+    without = trials(SIE_HDC, 0)
+    mixed = trials((("SIE", 2), ("UIE-R1", 1), ("HDC", 1)), 0)
+    assert same_trials(without["SIE"], mixed["SIE"])
+    assert same_trials(without["HDC"], mixed["HDC"], 1)
+    controllers = {signature[0][0] for signature in trials_module._COMPILED}
+    assert {STL, STL_NO_REPLACEMENT} <= controllers
 
 
 def test_all_systems_of_a_world_meet_the_same_start_placements():

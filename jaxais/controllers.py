@@ -5,13 +5,16 @@
 - :func:`stl_controller`: the short-term learning network of SPEC 7 over five sets; a
   :class:`System` (its params) says whether it learns, whether selection is idiotypic and whether
   weak antibodies are replaced, so SIE, SRL, UIE, URL and HDC are one program with different data
-  and can share one compiled batch.
+  and can share one compiled batch; :func:`stl_for` leaves out the parts a batch does not use.
 """
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxais.antibodies import Antibodies, antibodies_from_uniform, take
 from jaxais.behaviours import wheel_speeds_from_uniform
@@ -22,6 +25,7 @@ from jaxais.network import (
     idiotopes,
     idiotypic_select_from_uniform,
     rescale_paratopes,
+    tiebreak_argmax,
 )
 from jaxais.reinforcement import (
     PENALTY_NON_IDIOTYPIC,
@@ -141,7 +145,9 @@ class STLState:
     key: jax.Array
 
 
-def stl_controller(replacement: bool = True) -> Controller:
+def stl_controller(
+    replacement: bool = True, idiotypic: bool = True, learning: bool = True
+) -> Controller:
     """The STL network: per iteration RL on the antibody that acted last, eq (4), penalties,
     replacement (unseeded), the idiotope every ``idiotope_period`` iterations, then selection
     (stage 1, or stages 1-3 when idiotypic) and the winner's behaviour.
@@ -150,12 +156,14 @@ def stl_controller(replacement: bool = True) -> Controller:
     antigen order) whose P is below 0.1; any others follow on later iterations.
 
     Args:
-        replacement: build the replacement step in. A batch in which no system replaces
-            (``System.replacement`` False for every run: SIE, SRL, HDC) gives the same numbers
-            without it (checked bit for bit on 30-trial runs of each, and world2's and real's
-            SIE), from a smaller program: for 30 SIE trials in world1 on a 2-core CPU, 11.0-11.6 s
-            -> 9.7-10.8 s to compile and about 15 % less time per iteration
-            (:data:`STL_NO_REPLACEMENT`, which :func:`jaxais.trials.run_trials` picks).
+        replacement, idiotypic, learning: build that part of the network in (default: all of
+            them, which runs every system). A batch in which no run uses a part (its
+            ``System`` flag False throughout) gives the same trials without it, from a smaller
+            and faster program; :func:`stl_for` picks the smallest controller for a batch.
+            Measured for 30 SIE trials in world1 on a 2-core CPU, without replacement:
+            11.0-11.6 s -> 9.7-10.8 s to compile, about 15 % less time per iteration. Checked:
+            30 trials of each system in world1 alone give the very means (and SIE the very
+            trials) of a run with the full controller.
     """
 
     def init(key, system: System):
@@ -191,19 +199,22 @@ def stl_controller(replacement: bool = True) -> Controller:
 
     def learn(u, s: STLState, pc: Percept, system: System):
         u = split(u, system)
-        on = system.learning
-        scored = _scored(s.P.shape, (s.acting, pc.m_prev)) & (pc.t > 0) & on
-        r = rl_score(pc.m_prev, pc.m, pc.v_prev, pc.v, pc.centroid)
-        P = jnp.where(scored, jnp.clip(s.P + r, 0.0, 1.0), s.P)
-        # Eq (4), then the paper's bounds: "the maximum P allowed is 1.00, the minimum 0.00"
-        # (the rescale alone can lift an entry above 1; column means then fall a little short
-        # of sigma0, and only while the bound binds).
-        P = jnp.where(on, jnp.clip(rescale_paratopes(P, s.sigma0), 0.0, 1.0), P)
-        counters, fire = update_penalty(s.counters, pc.m)
-        P = jnp.where(scored & fire, jnp.clip(P - penalty_size(system.idiotypic), 0.0, 1.0), P)
+        P, antibodies, replaced = s.P, s.antibodies, s.replaced
+        if not learning:  # no run in the batch learns: only the penalty counters move
+            counters, _ = update_penalty(s.counters, pc.m)
+        else:
+            on = system.learning
+            scored = _scored(s.P.shape, (s.acting, pc.m_prev)) & (pc.t > 0) & on
+            r = rl_score(pc.m_prev, pc.m, pc.v_prev, pc.v, pc.centroid)
+            P = jnp.where(scored, jnp.clip(s.P + r, 0.0, 1.0), s.P)
+            # Eq (4), then the paper's bounds: "the maximum P allowed is 1.00, the minimum 0.00"
+            # (the rescale alone can lift an entry above 1; column means then fall a little short
+            # of sigma0, and only while the bound binds).
+            P = jnp.where(on, jnp.clip(rescale_paratopes(P, s.sigma0), 0.0, 1.0), P)
+            counters, fire = update_penalty(s.counters, pc.m)
+            P = jnp.where(scored & fire, jnp.clip(P - penalty_size(system.idiotypic), 0.0, 1.0), P)
 
-        antibodies, replaced = s.antibodies, s.replaced
-        if replacement:
+        if learning and replacement:
             weak = (P < REPLACE_BELOW) & system.replacement & on
             first = _scored(P.shape, jnp.unravel_index(jnp.argmax(weak), P.shape)) & jnp.any(weak)
             fresh = antibodies_from_uniform(u["new"])
@@ -233,18 +244,23 @@ def stl_controller(replacement: bool = True) -> Controller:
     def act(u, s: STLState, pc: Percept, system: System):
         u = split(u, system)
         tiebreaks = u["select"].reshape(2, -1)
-        alpha, beta, N = idiotypic_select_from_uniform(
-            tiebreaks, s.P, s.I, s.N, pc.m, system.network
-        )
-        idio = system.idiotypic
-        acting = jnp.where(idio, beta, alpha)
-        ab = take(s.antibodies, (acting, pc.m))
-        s = s.replace(
-            N=jnp.where(idio, N, s.N),
-            acting=acting,
-            differences=s.differences + (idio & (alpha != beta)).astype(jnp.int32),
-            selections=s.selections + 1,
-        )
+        if idiotypic:
+            alpha, beta, N = idiotypic_select_from_uniform(
+                tiebreaks, s.P, s.I, s.N, pc.m, system.network
+            )
+            idio = system.idiotypic
+            acting = jnp.where(idio, beta, alpha)
+            ab = take(s.antibodies, (acting, pc.m))
+            s = s.replace(
+                N=jnp.where(idio, N, s.N),
+                acting=acting,
+                differences=s.differences + (idio & (alpha != beta)).astype(jnp.int32),
+                selections=s.selections + 1,
+            )
+        else:  # no run in the batch is idiotypic: stage 1 alone, the clones never change
+            acting = tiebreak_argmax(tiebreaks[0], jnp.asarray(s.P, jnp.float32)[:, pc.m])
+            ab = take(s.antibodies, (acting, pc.m))
+            s = s.replace(acting=acting, selections=s.selections + 1)
         return s, wheel_speeds_from_uniform(u["behave"], ab, pc.blue_pixels, pc.centroid)
 
     return Controller(init=init, learn=learn, act=act, n_uniform=n_uniform)
@@ -252,7 +268,20 @@ def stl_controller(replacement: bool = True) -> Controller:
 
 LTL = ltl_controller()
 """The GA's controller (one shared instance, so compiled programs are reused)."""
-STL = stl_controller()
-"""The STL network controller (one shared instance, so compiled programs are reused)."""
-STL_NO_REPLACEMENT = stl_controller(replacement=False)
-"""The STL controller for batches in which no system replaces antibodies (same numbers)."""
+
+
+@functools.cache
+def _stl(replacement: bool, idiotypic: bool, learning: bool) -> Controller:
+    # One instance per variant: compiled programs are cached by controller.
+    return stl_controller(replacement, idiotypic, learning)
+
+
+def stl_for(systems: System) -> Controller:
+    """The smallest STL controller that runs every system of a batch (flags [n]), shared."""
+    return _stl(
+        *(bool(np.any(f)) for f in (systems.replacement, systems.idiotypic, systems.learning))
+    )
+
+
+STL = _stl(True, True, True)
+"""The STL network controller, every part built in (one shared instance)."""

@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxais import envs
-from jaxais.controllers import STL, STL_NO_REPLACEMENT, System
+from jaxais.controllers import System, stl_for
 from jaxais.episode import FAILED_BY_NAME, EpisodeConfig, outcome, rollout
 from jaxais.systems import LABELS
 
@@ -105,9 +105,9 @@ def run_trials(
         ],
     )
     update = None if progress is None else progress.update
-    # Without an unseeded system in the batch the replacement step is left out of the program:
-    # same numbers, a smaller and faster loop (stl_controller).
-    controller = STL if np.any(params.replacement) else STL_NO_REPLACEMENT
+    # Parts of the network no system in the batch uses (replacement, idiotypic selection,
+    # learning) are left out of the program: same trials, a smaller and faster loop.
+    controller = stl_for(params)
     batch = rollout(
         reset_keys,
         run_keys,

@@ -21,7 +21,7 @@ import pytest
 
 from jaxais import episode
 from jaxais import trials as trials_module
-from jaxais.controllers import STL, STL_NO_REPLACEMENT
+from jaxais.controllers import STL, stl_for
 from jaxais.episode import FAILED_COLLISIONS, FAILED_TIME, FINISHED, RUNNING, outcome
 from jaxais.trials import TrialSet, run_trials, summarise, trial_keys
 
@@ -296,15 +296,24 @@ def test_results_do_not_depend_on_batch_mates():
     assert not np.array_equal(alone["SIE"].trajectories[2][0], alone["SIE"].trajectories[0][0])
 
 
-def test_a_batch_without_replacement_compiles_without_it_and_gives_the_same_trials():
-    """SIE and HDC never replace antibodies, so their batch runs STL_NO_REPLACEMENT; with UIE-R1
-    among them the full controller runs, and their trials come out the same bit for bit."""
-    without = trials(SIE_HDC, 0)
+def test_a_batch_compiles_only_the_parts_of_the_network_its_systems_use():
+    """SIE and HDC never replace antibodies; HDC and SRL are not idiotypic; HDC does not learn.
+    Each batch runs the smallest controller for its systems (stl_for), the full one once UIE-R1
+    is among them, and every system's trials come out the same bit for bit."""
+    no_replacement = trials(SIE_HDC, 0)
     mixed = trials((("SIE", 2), ("UIE-R1", 1), ("HDC", 1)), 0)
-    assert same_trials(without["SIE"], mixed["SIE"])
-    assert same_trials(without["HDC"], mixed["HDC"], 1)
-    controllers = {signature[0][0] for signature in trials_module._COMPILED}
-    assert {STL, STL_NO_REPLACEMENT} <= controllers
+    not_idiotypic = trials((("HDC", 2), ("SRL", 2)), 0)
+    fixed = trials((("HDC", 4),), 0)
+    assert same_trials(no_replacement["SIE"], mixed["SIE"])
+    for other in (mixed, not_idiotypic, fixed):
+        assert same_trials(no_replacement["HDC"], other["HDC"], len(other["HDC"].records[:2]))
+    sys_ = F.systems()
+    expected = {
+        stl_for(F.stack([sys_[k] for k in labels]))
+        for labels in (("SIE", "HDC"), ("SIE", "UIE-R1", "HDC"), ("HDC", "SRL"), ("HDC",))
+    }
+    assert len(expected) == 4 and STL in expected
+    assert expected <= {signature[0][0] for signature in trials_module._COMPILED}
 
 
 def test_all_systems_of_a_world_meet_the_same_start_placements():

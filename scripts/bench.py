@@ -489,16 +489,17 @@ def bench_peak(b: Bench) -> None:
 
 
 def bench_controller(b: Bench) -> None:
-    """``controller_iterations_per_s``: the full STL controller (SIE: RL, eq 4, penalties,
-    idiotypic selection, behaviours) plus the simulator, in robot-iterations per second, through
-    the same compiled task loop the trials use (``jaxais.episode.compile_rollout``; caps off so
-    no run ends), at ``--controller-batches``; compile time reported separately. With several
-    devices, ``controller_iterations_per_s_sharded`` is the same loop with the batch sharded
-    over all of them, as ``scripts/trials.py`` runs it."""
+    """``controller_iterations_per_s``: the STL controller of SIE (RL, eq 4, penalties,
+    idiotypic selection, behaviours; ``stl_for`` leaves out replacement, as ``scripts/trials.py``
+    does for SIE) plus the simulator, in robot-iterations per second, through the same compiled
+    task loop the trials use (``jaxais.episode.compile_rollout``; caps off so no run ends), at
+    ``--controller-batches``; compile time reported separately. With several devices,
+    ``controller_iterations_per_s_sharded`` is the same loop with the batch sharded over all of
+    them, as ``scripts/trials.py`` runs it."""
     import jax
     import jax.numpy as jnp
 
-    from jaxais.controllers import STL
+    from jaxais.controllers import stl_for
     from jaxais.episode import EpisodeConfig, batch_sharding, compile_rollout
     from jaxais.seed import load_seed
     from jaxais.systems import make_system
@@ -524,7 +525,14 @@ def bench_controller(b: Bench) -> None:
                 )
             t0 = time.perf_counter()
             programs = compile_rollout(
-                reset_keys, run_keys, b.world, b.params, STL, params, config, sharding=sharding
+                reset_keys,
+                run_keys,
+                b.world,
+                b.params,
+                stl_for(params),
+                params,
+                config,
+                sharding=sharding,
             )
             compile_s[str(n)] = time.perf_counter() - t0
             batch = programs.start(reset_keys, run_keys, b.world, b.params, params)

@@ -50,7 +50,6 @@ def test_enable_after_jax_started_changes_nothing():
 
 
 _PROBE = """
-import sys
 from jaxais import loop_kernels
 n = loop_kernels.enable()
 import os, jax, jax.numpy as jnp

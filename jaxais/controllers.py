@@ -213,17 +213,17 @@ def stl_controller(
             P = jnp.where(on, jnp.clip(rescale_paratopes(P, s.sigma0), 0.0, 1.0), P)
             counters, fire = update_penalty(s.counters, pc.m)
             P = jnp.where(scored & fire, jnp.clip(P - penalty_size(system.idiotypic), 0.0, 1.0), P)
-
-        if learning and replacement:
-            weak = (P < REPLACE_BELOW) & system.replacement & on
-            first = _scored(P.shape, jnp.unravel_index(jnp.argmax(weak), P.shape)) & jnp.any(weak)
-            fresh = antibodies_from_uniform(u["new"])
-            antibodies = jax.tree.map(
-                lambda old, new: jnp.where(first, new, old), antibodies, fresh
-            )
-            lo, hi = REPLACEMENT_P
-            P = jnp.where(first, lo + (hi - lo) * u["new_p"][0], P)
-            replaced = replaced + jnp.any(weak).astype(jnp.int32)
+            if replacement:  # only a learning run replaces
+                weak = (P < REPLACE_BELOW) & system.replacement & on
+                first = _scored(P.shape, jnp.unravel_index(jnp.argmax(weak), P.shape))
+                first = first & jnp.any(weak)
+                fresh = antibodies_from_uniform(u["new"])
+                antibodies = jax.tree.map(
+                    lambda old, new: jnp.where(first, new, old), antibodies, fresh
+                )
+                lo, hi = REPLACEMENT_P
+                P = jnp.where(first, lo + (hi - lo) * u["new_p"][0], P)
+                replaced = replaced + jnp.any(weak).astype(jnp.int32)
 
         # The idiotope is redrawn every idiotope_period iterations. The test is on the batch's
         # tick (unbatched), so under vmap this stays a branch taken once per period.

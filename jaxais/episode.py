@@ -21,6 +21,7 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.extend.core import jaxpr_as_fun
 
 from jaxais import envs
 from jaxais.antigens import antigen, is_collision
@@ -374,22 +375,46 @@ def _per_device(task_advance: Callable[..., Batch], sharding: jax.sharding.Named
     loop until its own runs have ended. The chunk count, which the controllers' periodic steps
     read, may then differ between devices; a device stops early only once all its runs have
     ended, so the largest count is the batch's count, and that is what comes back.
+
+    The loop is traced for one device's share of the batch outside ``shard_map`` and handed to
+    it as a finished jaxpr: the same program (same HLO), but traced and lowered about 0.3 s
+    faster than when traced inside, with shard_map's replication checks (30 STL trials in
+    world1, 2-core CPU: trace 0.9-1.3 -> 0.9-1.1 s, lower 0.8-0.9 -> 0.5-0.7 s).
     """
     axis = sharding.spec[0]
+    n_devices = sharding.mesh.shape[axis]
     runs, same = jax.sharding.PartitionSpec(axis), jax.sharding.PartitionSpec()
-    batch_spec = Batch(runs=runs, poses=runs, chunks=same)
+    in_specs = (Batch(runs=runs, poses=runs, chunks=same), same, same, runs)
+    is_spec = lambda x: isinstance(x, jax.sharding.PartitionSpec)
 
     @functools.wraps(task_advance)  # the program keeps its name (compile logs, the cache)
-    def local(batch, w, sp, cp):
-        out = task_advance(batch, w, sp, cp)
-        return out.replace(chunks=jax.lax.pmax(out.chunks, axis))
+    def program(batch, w, sp, cp):
+        args = (batch, w, sp, cp)
+        leaves, treedef = jax.tree.flatten(args)
+        specs = jax.tree.leaves(jax.tree.broadcast(in_specs, args, is_leaf=is_spec), is_spec)
 
-    return jax.shard_map(
-        local,
-        mesh=sharding.mesh,
-        in_specs=(batch_spec, same, same, runs),
-        out_specs=batch_spec,
-    )
+        def one_device(x, spec):
+            aval = jax.typeof(x)
+            shape = (aval.shape[0] // n_devices, *aval.shape[1:]) if spec == runs else aval.shape
+            return jax.ShapeDtypeStruct(shape, aval.dtype, weak_type=aval.weak_type)
+
+        local_args = jax.tree.unflatten(treedef, map(one_device, leaves, specs))
+        closed, out_shape = jax.make_jaxpr(task_advance, return_shape=True)(*local_args)
+        out_tree = jax.tree.structure(out_shape)
+
+        def local(*xs):
+            out = jax.tree.unflatten(out_tree, jaxpr_as_fun(closed)(*xs))
+            return out.replace(chunks=jax.lax.pmax(out.chunks, axis))
+
+        return jax.shard_map(
+            local,
+            mesh=sharding.mesh,
+            in_specs=tuple(specs),
+            out_specs=in_specs[0],
+            check_vma=False,  # the jaxpr was traced without shard_map's types
+        )(*leaves)
+
+    return program
 
 
 def compile_rollout(
@@ -416,9 +441,12 @@ def compile_rollout(
     With a ``sharding`` (:func:`batch_sharding`) both programs keep every run on the device that
     holds it, and each device runs the task loop on its own runs (:func:`_per_device`); the runs
     never exchange data, so the partitioned programs compute the same numbers.
-    The start program compiles in a second thread while the task loop is traced and lowered
-    (XLA compiles outside Python's lock), so on two cores its compile costs little wall time.
-    It runs once per batch, so it is compiled for compile speed
+    The task loop is lowered first (from the start program's traced output shapes) and compiled
+    in a thread; the start program is lowered and compiled beside it (XLA compiles outside
+    Python's lock), so on two cores the start costs little wall time. Together with
+    :func:`_per_device`'s outside trace: 30 STL trials in world1 compile in 8.6-9.2 s, against
+    9.1-9.7 s with the start compiled first (three interleaved pairs, 2-core CPU). The start
+    runs once per batch, so it is compiled for compile speed
     (``envs.jit(..., quick_compile=True)``).
     """
     shardings = _batch_shardings(sharding)
@@ -432,25 +460,27 @@ def compile_rollout(
     if sharding is not None:
         task_advance = _per_device(task_advance, sharding)
     placement = {} if shardings is None else {"out_shardings": shardings}
-    start_lowered = envs.jit(task_start, quick_compile=True, **placement).lower(
+    start_traced = envs.jit(task_start, quick_compile=True, **placement).trace(
         reset_keys, run_keys, world, sim_params, ctrl_params
     )
-    # The start program compiles (outside Python's lock) while the task loop is traced.
-    with concurrent.futures.ThreadPoolExecutor(1) as pool:
-        start_compiled = pool.submit(start_lowered.compile)
-        batch_in = start_lowered.out_info
-        if shardings is not None:  # each field's sharding onto every array of that field
-            batch_in = jax.tree.map(
-                lambda sh, field: jax.tree.map(
-                    lambda s: jax.ShapeDtypeStruct(s.shape, s.dtype, sharding=sh), field
-                ),
-                shardings,
-                batch_in,
-            )
-        advance_lowered = envs.jit(task_advance, **placement).lower(
-            batch_in, world, sim_params, ctrl_params
+    batch_in = start_traced.out_info
+    if shardings is not None:  # each field's sharding onto every array of that field
+        batch_in = jax.tree.map(
+            lambda sh, field: jax.tree.map(
+                lambda s: jax.ShapeDtypeStruct(s.shape, s.dtype, sharding=sh), field
+            ),
+            shardings,
+            batch_in,
         )
-        return Programs(start=start_compiled.result(), advance=advance_lowered.compile())
+    advance_lowered = envs.jit(task_advance, **placement).lower(
+        batch_in, world, sim_params, ctrl_params
+    )
+    # XLA compiles outside Python's lock: the task loop, the longest compile, starts first, and
+    # the start program is lowered and compiled beside it.
+    with concurrent.futures.ThreadPoolExecutor(2) as pool:
+        advance_compiled = pool.submit(advance_lowered.compile)
+        start_compiled = pool.submit(start_traced.lower().compile)
+        return Programs(start=start_compiled.result(), advance=advance_compiled.result())
 
 
 def _pad_batch(tree: Any, pad: int) -> Any:

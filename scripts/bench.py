@@ -59,7 +59,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from jaxais.cli import ArgumentParser, UserError, atomic_write_json, check_output_file, main_wrapper
+from jaxais.cli import (
+    ArgumentParser,
+    UserError,
+    atomic_write_json,
+    check_output_file,
+    main_wrapper,
+    run_script,
+)
 from jaxais.host_devices import usable_cores
 
 PROG = "bench.py"
@@ -666,4 +673,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_script(main)

@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 from typing import Any, NoReturn
 
-from jaxais.cli import UserError, atomic_write, atomic_write_json, fail, main_wrapper
+from jaxais.cli import UserError, atomic_write, atomic_write_json, fail, main_wrapper, run_script
 
 PROG = "evolve.py"
 MAX_SEED = 2**31 - 1
@@ -355,4 +355,4 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -14,10 +14,9 @@ written atomically. User errors end with one line on stderr and exit status 2.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
-from jaxais.cli import ArgumentParser, UserError, check_output_file, main_wrapper
+from jaxais.cli import ArgumentParser, UserError, check_output_file, main_wrapper, run_script
 
 PROG = "render.py"
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg")
@@ -196,4 +195,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_script(main)

@@ -26,6 +26,7 @@ from jaxais.cli import (
     atomic_write_json,
     check_writable_dir,
     main_wrapper,
+    run_script,
 )
 
 WORLDS = ("world1", "world2", "real")
@@ -185,4 +186,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -14,7 +14,14 @@ import argparse
 import sys
 import time
 
-from jaxais.cli import ArgumentParser, UserError, atomic_write_json, check_output_file, main_wrapper
+from jaxais.cli import (
+    ArgumentParser,
+    UserError,
+    atomic_write_json,
+    check_output_file,
+    main_wrapper,
+    run_script,
+)
 
 SYSTEMS = ("SIE", "SRL", "UIE", "URL", "HDC")
 WORLDS = ("world1", "world2", "real")
@@ -109,4 +116,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

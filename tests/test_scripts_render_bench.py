@@ -176,6 +176,32 @@ def test_atomic_write_leaves_nothing_on_failure(tmp_path):
         cli.check_writable_dir(tmp_path / "missing")
 
 
+@pytest.mark.parametrize(
+    "body, status, out, err",
+    [
+        ("print('done', end='')", 0, "done", ""),  # unflushed output still comes out
+        ("return 3", 3, "", ""),
+        ("raise SystemExit(2)", 2, "", ""),
+        ("sys.exit('stopped')", 1, "", "stopped"),
+        ("1 / 0", 1, "", "ZeroDivisionError"),  # a bug keeps its traceback
+    ],
+)
+def test_run_script_exits_with_mains_status_without_teardown(body, status, out, err):
+    code = (
+        "import atexit, sys\n"
+        "from jaxais.cli import run_script\n"
+        "atexit.register(lambda: print('teardown ran', file=sys.stderr))\n"
+        f"def main():\n    {body}\n"
+        "run_script(main)\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == status
+    assert proc.stdout == out
+    assert err in proc.stderr
+    # os._exit skips atexit handlers, except where an exception ends the process the usual way.
+    assert ("teardown ran" in proc.stderr) == (body == "1 / 0")
+
+
 # ---------------------------------------------------------------------------------- plotting
 
 

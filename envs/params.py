@@ -9,7 +9,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from .struct import pytree_dataclass, static_field
+from .struct import device_array, pytree_dataclass, static_field
 
 N_IR = 8
 """Number of IR proximity sensors (ps0..ps7)."""
@@ -66,9 +66,9 @@ class SimParams:
 def default_params(**overrides: float) -> SimParams:
     """The SPEC's e-puck constants, with keyword overrides (e.g. ``speed_unit=2*np.pi/1000``)."""
     base = dict(
-        ir_dist=jnp.asarray(IR_TABLE_DIST, jnp.float32),
-        ir_value=jnp.asarray(IR_TABLE_VALUE, jnp.float32),
-        ir_bearings=jnp.asarray(np.deg2rad(IR_BEARINGS_DEG), jnp.float32),
+        ir_dist=device_array(IR_TABLE_DIST, np.float32),
+        ir_value=device_array(IR_TABLE_VALUE, np.float32),
+        ir_bearings=device_array(np.deg2rad(IR_BEARINGS_DEG), np.float32),
     )
     unknown = set(overrides) - set(SimParams.__dataclass_fields__)
     if unknown:

@@ -6,11 +6,22 @@ import dataclasses
 from typing import Any
 
 import jax
+import numpy as np
 
 
 def static_field(**kwargs: Any) -> Any:
     """A dataclass field kept out of the pytree leaves (shapes, names, flags fixed when traced)."""
     return dataclasses.field(metadata={"static": True}, **kwargs)
+
+
+def device_array(x: Any, dtype: Any = None) -> jax.Array:
+    """``x`` converted by NumPy (to ``dtype``), then put on the default device, uncommitted.
+
+    Outside a trace ``jnp.asarray(x, dtype)`` converts or copies on the device instead, with one
+    small XLA compilation per new shape and dtype (jax 0.10): 20-40 ms each on a CPU, and a
+    world, the simulator's constants and a seed took about twenty of them at a script's start.
+    """
+    return jax.device_put(np.asarray(x, dtype))
 
 
 def pytree_dataclass(cls: type) -> type:

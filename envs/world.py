@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .params import MATERIALS
-from .struct import pytree_dataclass, static_field
+from .struct import device_array, pytree_dataclass, static_field
 
 BUILTIN_WORLDS = ("ga_maze", "world1", "world2", "real")
 
@@ -320,9 +320,9 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
     n_s = max(len(segs), capacity.segments)
     n_b = max(len(box_half), capacity.boxes, 1)
     n_c = max(len(pillars), capacity.pillars, 1)
-    f32 = lambda a: jnp.asarray(a, jnp.float32)
-    i32 = lambda a: jnp.asarray(a, jnp.int32)
-    valid = lambda n_real, n: jnp.arange(n) < n_real
+    f32 = lambda a: device_array(a, np.float32)
+    i32 = lambda a: device_array(a, np.int32)
+    valid = lambda n_real, n: device_array(np.arange(n) < n_real)
     return World(
         arena=f32(arena),
         seg=f32(_pad(segs, n_s, 4)),

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxais.antigens import ANTIGEN_NAMES, N_ANTIGENS
-from jaxais.envs.struct import pytree_dataclass
+from jaxais.envs.struct import device_array, pytree_dataclass
 
 __all__ = [
     "ATTRIBUTE_NAMES",
@@ -413,4 +413,8 @@ def from_dicts(items: Sequence[Mapping[str, Any]]) -> Antibodies:
     parsed = [_parse_one(j, item) for j, item in enumerate(items)]
     types = np.array([t for t, _ in parsed], dtype=np.int32)
     values = np.array([v for _, v in parsed], dtype=np.float32)
-    return from_matrix(types, values)
+    # from_matrix's columns, cut by NumPy: JAX would compile each slice op by op (every script
+    # reads the seed's sets this way).
+    cols = {f: values[:, i] for i, f in enumerate(_FIELDS)}
+    cols["direction"] = np.round(cols["direction"]).astype(np.int32)
+    return jax.tree.map(device_array, Antibodies(type=types, **cols))

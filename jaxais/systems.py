@@ -14,12 +14,12 @@ from __future__ import annotations
 import functools
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from jaxais import envs
 from jaxais.antibodies import Antibodies, from_dicts, sample_antibodies
 from jaxais.controllers import System
+from jaxais.envs.struct import device_array
 from jaxais.network import NetworkParams, relative_fitness, seed_paratopes
 from jaxais.seed import Seed
 
@@ -77,7 +77,7 @@ def random_sets(name: str, x: int = N_SETS) -> tuple[Antibodies, np.ndarray]:
 def hand_designed_sets(x: int = N_SETS) -> tuple[Antibodies, np.ndarray]:
     """HDC as a network: set 0 holds the hand-designed behaviours and alone has P = 1."""
     one = from_dicts(HAND_DESIGNED)
-    antibodies = jax.tree.map(lambda a: jnp.stack([a] * x), one)
+    antibodies = jax.tree.map(lambda a: np.stack([np.asarray(a)] * x), one)
     P = np.zeros((x, 8), np.float32)
     P[0] = 1.0
     return antibodies, P
@@ -117,12 +117,12 @@ def make_system(
         antibodies, P = hand_designed_sets()
     else:
         raise ValueError(f"unknown system {name!r} (one of {', '.join(SYSTEMS)})")
-    antibodies = jax.tree.map(jnp.asarray, antibodies)
+    antibodies = jax.tree.map(device_array, antibodies)
     return System(
         antibodies=antibodies,
-        paratopes=jnp.asarray(P, jnp.float32),
-        learning=jnp.asarray(name != "HDC"),
-        idiotypic=jnp.asarray(name in ("SIE", "UIE")),
-        replacement=jnp.asarray(name in ("UIE", "URL")),
+        paratopes=device_array(P, np.float32),
+        learning=device_array(name != "HDC"),
+        idiotypic=device_array(name in ("SIE", "UIE")),
+        replacement=device_array(name in ("UIE", "URL")),
         network=network,
     )

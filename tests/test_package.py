@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -26,3 +27,34 @@ def test_cli_and_package_import_leave_jax_unloaded():
     code = "import sys, jaxais, jaxais.cli; print('jax' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_reading_worlds_constants_and_the_seed_compiles_only_named_programs():
+    # Every script starts this way. Arrays built op by op (jnp.asarray, slicing) would compile one
+    # small XLA program each, 20-40 ms apiece on a CPU; only the named programs may compile.
+    code = (
+        "import jax\n"
+        "from jaxais import envs\n"
+        "from jaxais.experiment import build_systems\n"
+        "names = []\n"
+        "jax.config.update('jax_log_compiles', True)\n"
+        "import logging\n"
+        "class H(logging.Handler):\n"
+        "    def emit(self, r):\n"
+        "        m = r.getMessage()\n"
+        "        if m.startswith('Compiling '): names.append(m.split()[1])\n"
+        "logging.getLogger('jax').addHandler(H())\n"
+        "for w in envs.BUILTIN_WORLDS: envs.load_world(w)\n"
+        "envs.default_params()\n"
+        "build_systems(['SIE', 'SRL', 'HDC'], None)\n"
+        "print(' '.join(sorted(set(names))))\n"
+    )
+    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    compiled = set(out.stdout.split())
+    # The compiler-option probes (envs.compile), the seed's limits check and eqs (1)-(2).
+    assert compiled <= {"jit(<lambda>)", "jit(within_limits)", "jit(_seeded_paratopes)"}, compiled
+    assert "jit(within_limits)" in compiled  # the listener saw the compiles that do happen

@@ -152,18 +152,22 @@ class main_wrapper(contextlib.ContextDecorator):  # noqa: N801 (used like a func
 
 
 def run_script(main: Callable[[], object]) -> NoReturn:
-    """Run a script's ``main()`` and end the process with its exit status, skipping teardown.
+    """Run a script's ``main()`` and end the process at once, skipping interpreter teardown.
 
     For a script's ``if __name__ == "__main__":`` block only. Once a JAX script is done, with its
     files written and closed, Python's interpreter teardown (XLA's client, its thread pools and
     compiled programs, every module) still took 0.5-0.6 s of wall time on a 2-core CPU
     (``trials.py`` and ``evolve.py``). Here the process ends at once instead (``os._exit``) after
-    flushing stdout and stderr; ``atexit`` handlers do not run. The exit status is main's, as
-    ``sys.exit`` would give it: 0 for None, an int as is, and a message (printed on stderr)
-    gives 1. Exceptions other than ``SystemExit`` propagate as usual, with their traceback.
+    flushing stdout and stderr; ``atexit`` handlers do not run.
+
+    The exit status is 0 when ``main`` returns (what it returns is for in-process callers, e.g.
+    tests, and is ignored), or that of a ``SystemExit`` it raises, as ``sys.exit`` gives it (a
+    message is printed on stderr and gives 1). Other exceptions propagate as usual, with their
+    traceback.
     """
     try:
-        code = main()
+        main()
+        code: object = 0
     except SystemExit as stop:
         code = stop.code
     if code is None:

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from test_ga import TINY
 
-from jaxais import ga
+from jaxais import ga, loop_kernels
 from jaxais.checkpointing import GACheckpointer
 from jaxais.seed import load_seed
 
@@ -121,6 +121,21 @@ def test_outputs(full_run: Path):
     assert meta["command"] == summary["command"] and meta["version"] == summary["version"]
     np.testing.assert_array_equal(seed.tau, [p["best_tau"] for p in summary["populations"]])
     assert sorted(p.name for p in (full_run / "checkpoints").iterdir()) == ["2", "3", "run.json"]
+
+
+def test_run_as_a_user_runs_it(tmp_path: Path, full_run: Path):
+    """The script as a process, with its defaults (small-loop kernels on): status 0, the same
+    seed as the in-process run (kernels off), nothing on stderr but the progress bar."""
+    out = tmp_path / "run"
+    env = {k: v for k, v in os.environ.items() if k != loop_kernels.ENV}
+    cmd = [sys.executable, str(SCRIPT), *TINY_ARGS, "--generations", "3", "--out", str(out)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "error" not in proc.stderr.lower() and "Traceback" not in proc.stderr
+    assert proc.stdout.startswith("3 generations in ") and str(out / "seed") in proc.stdout
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["loop_kernel_bytes"] == loop_kernels.DEFAULT_BYTES
+    assert_same_arrays(seed_arrays(out / "seed"), seed_arrays(full_run / "seed"))
 
 
 def test_same_seed_same_files(tmp_path: Path, monkeypatch, full_run: Path):

@@ -180,7 +180,7 @@ def test_atomic_write_leaves_nothing_on_failure(tmp_path):
     "body, status, out, err",
     [
         ("print('done', end='')", 0, "done", ""),  # unflushed output still comes out
-        ("return 3", 3, "", ""),
+        ("return {'summary': 1}", 0, "", ""),  # a result for in-process callers is not a status
         ("raise SystemExit(2)", 2, "", ""),
         ("sys.exit('stopped')", 1, "", "stopped"),
         ("1 / 0", 1, "", "ZeroDivisionError"),  # a bug keeps its traceback

@@ -23,7 +23,7 @@ Typical use::
         atomic_write_json(args.out, results)
 
     if __name__ == "__main__":
-        run_script(main)  # exits with main's status, without interpreter teardown
+        run_script(main)  # ends the process at once, without interpreter teardown
 
 ``main_wrapper`` also works as a context manager (``with main_wrapper("bench.py"): ...``).
 

@@ -1,8 +1,8 @@
 """scripts/evolve.py: outputs, reproducibility, exact resume, interruption and user errors.
 
 The runs call the script's ``main`` in this process with the tiny GA config of ``test_ga.py``
-(shared compiled programs); only the flag errors, which answer before anything is compiled,
-run as subprocesses.
+(shared compiled programs). Subprocesses: the flag errors, which answer before anything is
+compiled, and one tiny run exactly as a user starts it.
 """
 
 from __future__ import annotations

@@ -163,11 +163,17 @@ def from_matrix(type_: jnp.ndarray, attributes: jnp.ndarray) -> Antibodies:
     Args:
         type_: [...] int behaviour types.
         attributes: [..., N_ATTRIBUTES] float, columns ``ATTRIBUTE_NAMES``.
+
+    Returns:
+        Antibodies of NumPy arrays when both inputs are NumPy arrays (host data, e.g. a parsed
+        file: cut by NumPy, where JAX would compile each slice op by op), else of JAX arrays.
     """
-    attributes = jnp.asarray(attributes, jnp.float32)
+    host = isinstance(type_, np.ndarray) and isinstance(attributes, np.ndarray)
+    xp = np if host else jnp
+    attributes = xp.asarray(attributes, xp.float32)
     cols = {f: attributes[..., i] for i, f in enumerate(_FIELDS)}
-    cols["direction"] = jnp.round(cols["direction"]).astype(jnp.int32)
-    return Antibodies(type=jnp.asarray(type_, jnp.int32), **cols)
+    cols["direction"] = xp.round(cols["direction"]).astype(xp.int32)
+    return Antibodies(type=xp.asarray(type_, xp.int32), **cols)
 
 
 def canonical(ab: Antibodies) -> Antibodies:
@@ -413,8 +419,4 @@ def from_dicts(items: Sequence[Mapping[str, Any]]) -> Antibodies:
     parsed = [_parse_one(j, item) for j, item in enumerate(items)]
     types = np.array([t for t, _ in parsed], dtype=np.int32)
     values = np.array([v for _, v in parsed], dtype=np.float32)
-    # from_matrix's columns, cut by NumPy: JAX would compile each slice op by op (every script
-    # reads the seed's sets this way).
-    cols = {f: values[:, i] for i, f in enumerate(_FIELDS)}
-    cols["direction"] = np.round(cols["direction"]).astype(np.int32)
-    return jax.tree.map(device_array, Antibodies(type=types, **cols))
+    return jax.tree.map(device_array, from_matrix(types, values))

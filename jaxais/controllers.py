@@ -25,7 +25,7 @@ from jaxais.network import (
     idiotopes,
     idiotypic_select_from_uniform,
     rescale_paratopes,
-    tiebreak_argmax,
+    select_alpha_from_uniform,
 )
 from jaxais.reinforcement import (
     PENALTY_NON_IDIOTYPIC,
@@ -258,7 +258,7 @@ def stl_controller(
                 selections=s.selections + 1,
             )
         else:  # no run in the batch is idiotypic: stage 1 alone, the clones never change
-            acting = tiebreak_argmax(tiebreaks[0], jnp.asarray(s.P, jnp.float32)[:, pc.m])
+            acting = select_alpha_from_uniform(tiebreaks[0], s.P, pc.m)
             ab = take(s.antibodies, (acting, pc.m))
             s = s.replace(acting=acting, selections=s.selections + 1)
         return s, wheel_speeds_from_uniform(u["behave"], ab, pc.blue_pixels, pc.centroid)

@@ -278,7 +278,13 @@ def select_alpha(key: jax.Array, P: jax.Array, antigen: jax.Array | int) -> jax.
     Returns:
         n: int32 set index of alpha = A_nm.
     """
-    return random_tiebreak_argmax(key, jnp.asarray(P, jnp.float32)[:, antigen])
+    x = jnp.shape(P)[0]
+    return select_alpha_from_uniform(jax.random.uniform(key, (x,)), P, antigen)
+
+
+def select_alpha_from_uniform(u: jax.Array, P: jax.Array, antigen: jax.Array | int) -> jax.Array:
+    """:func:`select_alpha` given its tie-break uniforms ``u`` [x]."""
+    return tiebreak_argmax(u, jnp.asarray(P, jnp.float32)[:, antigen])
 
 
 def stimulation_suppression(
@@ -348,7 +354,7 @@ def idiotypic_select_from_uniform(
     """:func:`idiotypic_select` given its random draws ``u`` [2, x] (the two tie-breaks)."""
     P = jnp.asarray(P, jnp.float32)
     N = jnp.asarray(N, jnp.float32)
-    alpha = tiebreak_argmax(u[0], P[:, antigen])
+    alpha = select_alpha_from_uniform(u[0], P, antigen)
     eps, delta = stimulation_suppression(
         P, I, concentrations(N, params.Phi), alpha, params.k1, params.k2
     )

@@ -2,7 +2,7 @@
 
     python scripts/bench.py --out bench.json [--world world1] [--steps 200] [--quick]
         [--batches 1,30,1000,10000] [--repeats 5] [--numpy-robots 30] [--numpy-steps 20]
-        [--matmul 2048] [--devices N]
+        [--matmul 2048] [--devices N] [--scripts 3]
 
 Measured in one run (see ``BENCHMARKS``; each benchmark is a function that writes its figures
 into one results dict, so new ones -- e.g. controllers -- are added by appending to the list):
@@ -22,6 +22,10 @@ into one results dict, so new ones -- e.g. controllers -- are added by appending
   devices by setting ``XLA_FLAGS=--xla_force_host_platform_device_count=N`` before JAX is
   imported; the default is one per core), the same programs with the batch axis sharded over a
   1-D mesh. ``--devices 1`` skips it.
+- ``scripts`` (only with ``--scripts N``): the wall time of the two commands the project's
+  speed targets name, each run end to end as a user runs it (a fresh process, compilation
+  included, the compilation cache off), N times each, the two commands alternating so that a
+  drift in the machine's speed hits both alike; see ``SCRIPT_RUNS``.
 - ``machine``: platform, processor, CPUs, memory, versions, backend, devices, load, date.
 
 ``--quick`` uses fewer steps, repeats and batch sizes (explicit flags still win). The JSON is
@@ -42,7 +46,9 @@ JSON layout (batch sizes are string keys; rates are robot-steps per second)::
     flops_per_step, cost_analysis_per_step {B: {flops, transcendentals, bytes accessed}},
     peak_flops, peak {matmul_size, dtype, best_s, ...}, achieved_flops, achieved_flops_batch,
     fraction_of_peak, controller_iterations_per_s {B}, controller_compile_s {B} (and
-    their ``_sharded`` twins), bench_wall_s {benchmark: s}, load_average_end, notes [str]
+    their ``_sharded`` twins), scripts {name: {command, target_s, times_s, min_s, median_s,
+    max_s, within_target}} (with ``--scripts``), bench_wall_s {benchmark: s},
+    load_average_end, notes [str]
 """
 
 from __future__ import annotations
@@ -52,7 +58,9 @@ import datetime
 import os
 import platform
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -82,6 +90,7 @@ FULL = dict(
     matmul=2048,
     controller_batches="30,1000",
     controller_steps=500,
+    scripts=0,
 )
 QUICK = dict(
     steps=50,
@@ -92,6 +101,7 @@ QUICK = dict(
     matmul=512,
     controller_batches="30",
     controller_steps=50,
+    scripts=0,
 )
 SPEEDUP_BATCH = 30
 """The batch size whose JAX rate is compared with NumPy's (a population of 30, as in the GA)."""
@@ -103,6 +113,38 @@ FLOPS_BATCH = 1000
 """Largest batch whose single-step program is cost-analysed."""
 CRUISE, GAIN = 300.0, 0.3
 """The benchmark policy: wheels = CRUISE -/+ GAIN x (right IR - left IR)."""
+SCRIPTS = Path(__file__).resolve().parent
+"""The entry points' folder (``--scripts`` runs two of them)."""
+
+
+@dataclass(frozen=True)
+class ScriptRun:
+    """A command whose wall time ``--scripts`` measures.
+
+    Attributes:
+        name: key in the JSON. argv: the script (a path relative to ``scripts/``) and its flags.
+        out: name of its ``--out`` target, made in a fresh temporary folder per run.
+        target_s: the project's target for this command's wall time, s.
+    """
+
+    name: str
+    argv: tuple[str, ...]
+    out: str
+    target_s: float
+
+
+SCRIPT_RUNS: tuple[ScriptRun, ...] = (
+    # The default LTL run (5 x 10 robots, 30 generations in ga_maze), compilation included.
+    ScriptRun("evolve", ("evolve.py",), "ltl", 30.0),
+    # 30 SIE trials in world1 with the shipped LTL seed, compilation included.
+    ScriptRun(
+        "trials",
+        ("trials.py", "--system", "SIE", "--world", "world1", "--trials", "30"),
+        "results.json",
+        15.0,
+    ),
+)
+"""The commands ``--scripts`` times, with their targets."""
 
 
 # ---------------------------------------------------------------------------------- CLI
@@ -126,6 +168,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--devices", type=int, help=f"N host devices ({DEVICE_FLAG}=N; default: one per core)"
     )
+    p.add_argument(
+        "--scripts",
+        type=int,
+        help="also time evolve.py's default run and 30 SIE trials with trials.py end to end, "
+        "N runs each (default 0: skipped; about 50 s per run)",
+    )
     args = p.parse_args(argv)
     for name, value in (QUICK if args.quick else FULL).items():
         if getattr(args, name) is None:
@@ -142,6 +190,8 @@ def check_args(args: argparse.Namespace) -> None:
             raise UserError(f"{flag} must be a positive integer, got {value}")
     if args.devices is not None and args.devices <= 0:
         raise UserError(f"--devices must be a positive integer, got {args.devices}")
+    if args.scripts < 0:
+        raise UserError(f"--scripts must be a count of runs (0 skips them), got {args.scripts}")
     try:
         batches = sorted({int(b) for b in args.batches.split(",") if b.strip()})
     except ValueError:
@@ -178,6 +228,8 @@ class Bench:
 
     Attributes:
         args: the parsed flags. world, params: the simulator's world and constants.
+        environ: the environment the benchmark was started with (before ``--devices`` set
+            ``XLA_FLAGS``): the scripts ``--scripts`` times run in it, as a user would run them.
         results: the JSON document being built; each benchmark adds its own keys.
         cache: values shared between benchmarks (initial states, compiled programs).
         notes: remarks collected for the JSON and the summary.
@@ -186,6 +238,7 @@ class Bench:
     args: argparse.Namespace
     world: Any
     params: Any
+    environ: dict[str, str] = field(default_factory=dict)
     results: dict[str, Any] = field(default_factory=dict)
     cache: dict[str, Any] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
@@ -552,6 +605,63 @@ def bench_controller(b: Bench) -> None:
         b.results[f"controller_compile_s{suffix}"] = compile_s
 
 
+def run_timed(command: list[str], env: dict[str, str]) -> float:
+    """Wall time of ``command`` run to its end, s.
+
+    Raises:
+        UserError: it failed (the message ends with the last line it wrote on stderr).
+    """
+    t0 = time.perf_counter()
+    proc = subprocess.run(command, env=env, capture_output=True, text=True, check=False)
+    seconds = time.perf_counter() - t0
+    if proc.returncode:
+        last = (proc.stderr.strip().splitlines() or ["(nothing on stderr)"])[-1]
+        name = Path(command[1]).name
+        raise UserError(f"--scripts: {name} exited with status {proc.returncode}: {last}")
+    return seconds
+
+
+def bench_scripts(b: Bench) -> None:
+    """``scripts``: each of ``SCRIPT_RUNS`` run ``--scripts`` times end to end (nothing with 0).
+
+    Every run is a fresh process (JAX import, tracing, compilation, the run and the writing of
+    its outputs all count) with ``JAXAIS_CACHE_DIR=off``, so no run finds programs compiled by
+    an earlier one; the commands alternate. Their outputs go to a temporary folder, deleted
+    afterwards. ``within_target`` counts the runs at or under ``target_s``."""
+    if not b.args.scripts:
+        return
+    from tqdm import tqdm
+
+    env = {**b.environ, "JAXAIS_CACHE_DIR": "off"}
+    times: dict[str, list[float]] = {run.name: [] for run in SCRIPT_RUNS}
+    with (
+        tempfile.TemporaryDirectory(prefix="jaxais-bench-") as tmp,
+        tqdm(
+            total=b.args.scripts * len(SCRIPT_RUNS), desc="scripts", file=sys.stderr, leave=False
+        ) as bar,
+    ):
+        for i in range(b.args.scripts):
+            for run in SCRIPT_RUNS:
+                bar.set_postfix_str(run.argv[0])
+                out = Path(tmp, f"{run.name}-{i}", run.out)
+                out.parent.mkdir()
+                command = [sys.executable, str(SCRIPTS / run.argv[0]), *run.argv[1:]]
+                times[run.name].append(run_timed([*command, "--out", str(out)], env))
+                bar.update()
+    b.results["scripts"] = {
+        run.name: {
+            "command": " ".join([*run.argv, "--out", run.out]),
+            "target_s": run.target_s,
+            "times_s": times[run.name],
+            "min_s": min(times[run.name]),
+            "median_s": statistics.median(times[run.name]),
+            "max_s": max(times[run.name]),
+            "within_target": sum(t <= run.target_s for t in times[run.name]),
+        }
+        for run in SCRIPT_RUNS
+    }
+
+
 BENCHMARKS: list[tuple[str, Callable[[Bench], None]]] = [
     ("machine", bench_machine),
     ("jax simulator", bench_jax),
@@ -560,6 +670,7 @@ BENCHMARKS: list[tuple[str, Callable[[Bench], None]]] = [
     ("STL controller + simulator", bench_controller),
     ("flops per step", bench_flops),
     ("matmul peak", bench_peak),
+    ("scripts end to end", bench_scripts),
 ]
 """The benchmarks, run in this order; each adds its figures to ``Bench.results``."""
 
@@ -624,6 +735,12 @@ def summary(b: Bench, seconds: float) -> str:
             f" = {r['achieved_flops'] / 1e9:.2f} GFLOP/s = {100 * r['fraction_of_peak']:.1f}% of "
             f"the {r['peak_flops'] / 1e9:.1f} GFLOP/s matmul peak"
         )
+    for v in r.get("scripts", {}).values():
+        lines.append(
+            f"  {v['command']}: {len(v['times_s'])} runs, wall s min {v['min_s']:.1f} / median "
+            f"{v['median_s']:.1f} / max {v['max_s']:.1f} (target {v['target_s']:g} s: "
+            f"{v['within_target']} of {len(v['times_s'])} within)"
+        )
     lines += [f"  note: {n}" for n in b.notes]
     return "\n".join(lines)
 
@@ -632,6 +749,7 @@ def summary(b: Bench, seconds: float) -> str:
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     check_args(args)
+    environ = dict(os.environ)
     # One CPU device per core by default, so the sharded figures (every core busy) are measured
     # beside the one-device ones; --devices 1 measures one device only.
     force_host_devices(usable_cores() if args.devices is None else args.devices)
@@ -641,7 +759,9 @@ def main(argv: list[str] | None = None) -> None:
     from jaxais import envs
 
     t0 = time.perf_counter()
-    b = Bench(args=args, world=envs.load_world(args.world), params=envs.default_params())
+    b = Bench(
+        args=args, world=envs.load_world(args.world), params=envs.default_params(), environ=environ
+    )
     b.results.update(
         schema=SCHEMA,
         config={
@@ -652,6 +772,7 @@ def main(argv: list[str] | None = None) -> None:
             "quick": args.quick,
             "numpy_robots": args.numpy_robots,
             "numpy_steps": args.numpy_steps,
+            "scripts": args.scripts,
             "timing": "best of `repeats` timed calls after one warm-up call (median also given)",
             "policy": f"wheels = {CRUISE:g} -/+ {GAIN:g} * (ir0 + ir1 - ir6 - ir7)",
         },

@@ -3,6 +3,8 @@ error and atomic-write helpers in jaxais.cli that they share."""
 
 from __future__ import annotations
 
+import argparse
+import importlib.util
 import json
 import subprocess
 import sys
@@ -14,6 +16,17 @@ from jaxais import cli
 
 REPO = Path(__file__).resolve().parent.parent
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def load_script(name: str):
+    """scripts/{name}.py as a module (its ``main`` is not run)."""
+    if f"{name}_script" not in sys.modules:  # registered: dataclasses look their module up
+        path = REPO / "scripts" / f"{name}.py"
+        spec = importlib.util.spec_from_file_location(f"{name}_script", path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module
+        spec.loader.exec_module(module)
+    return sys.modules[f"{name}_script"]
 
 
 def run_script(name: str, *args: object, timeout: float = 300) -> subprocess.CompletedProcess:
@@ -132,9 +145,79 @@ def test_bench_quick_json(tmp_path):
 def test_bench_bad_values(tmp_path):
     proc = run_script("bench.py", "--batches", "1,x", "--out", tmp_path / "b.json", timeout=60)
     assert_user_error(proc, "bench.py", "--batches")
+    proc = run_script("bench.py", "--scripts", -1, "--out", tmp_path / "b.json", timeout=60)
+    assert_user_error(proc, "bench.py", "--scripts", "-1")
     proc = run_script("bench.py", "--world", tmp_path / "nope.toml", "--out", tmp_path / "b.json")
     assert_user_error(proc, "bench.py", "nope.toml")
     assert not (tmp_path / "b.json").exists()
+
+
+PROBE = """
+import os, sys
+args = sys.argv[1:]
+out = args[args.index("--out") + 1]
+open(out, "w").close()  # its folder exists
+with open(os.environ["PROBE_LOG"], "a") as log:
+    log.write(" ".join([os.environ.get("JAXAIS_CACHE_DIR", "-"), os.environ.get("XLA_FLAGS", "-"),
+                        *args[:-2]]) + "\\n")
+if "--fail" in args:
+    sys.exit("probe.py: error: it broke")
+"""
+
+
+def test_bench_scripts_times_each_command_in_turn(tmp_path, monkeypatch):
+    bench = load_script("bench")
+    probe, log = tmp_path / "probe.py", tmp_path / "log"
+    probe.write_text(PROBE)
+    runs = (
+        bench.ScriptRun("a", (str(probe), "--x", "1"), "a.json", 60.0),
+        bench.ScriptRun("b", (str(probe),), "b", 0.0),
+    )
+    monkeypatch.setattr(bench, "SCRIPT_RUNS", runs)
+    # The scripts get the environment the benchmark started with, not the benchmark's own.
+    monkeypatch.setenv("XLA_FLAGS", "--xla_force_host_platform_device_count=7")
+    environ = {"PROBE_LOG": str(log), "PATH": "/usr/bin:/bin"}
+    args = argparse.Namespace(scripts=0, out="b.json", repeats=1, steps=1)
+    b = bench.Bench(args=args, world=None, params=None, environ=environ)
+    bench.bench_scripts(b)
+    assert "scripts" not in b.results and not log.exists()  # 0 runs: skipped
+
+    b.args.scripts = 2
+    bench.bench_scripts(b)
+    assert log.read_text().splitlines() == ["off - --x 1", "off -", "off - --x 1", "off -"]
+    a, bb = b.results["scripts"]["a"], b.results["scripts"]["b"]
+    assert a["command"] == f"{probe} --x 1 --out a.json" and a["target_s"] == 60.0
+    assert len(a["times_s"]) == len(bb["times_s"]) == 2
+    assert a["min_s"] == min(a["times_s"]) and a["max_s"] == max(a["times_s"]) > 0
+    assert a["min_s"] <= a["median_s"] <= a["max_s"]
+    assert (a["within_target"], bb["within_target"]) == (2, 0)
+    b.results["load_average_end"] = [0.0]
+    text = bench.summary(b, 1.0)
+    assert "--x 1 --out a.json: 2 runs" in text and "(target 60 s: 2 of 2 within)" in text
+    assert "(target 0 s: 0 of 2 within)" in text
+
+    monkeypatch.setattr(
+        bench, "SCRIPT_RUNS", (bench.ScriptRun("c", (str(probe), "--fail"), "c", 1),)
+    )
+    with pytest.raises(bench.UserError, match="probe.py exited with status 1: .*it broke"):
+        bench.bench_scripts(b)
+
+
+def test_bench_script_commands_parse():
+    """The commands ``--scripts`` times are valid for the scripts they run."""
+    bench = load_script("bench")
+    assert [run.name for run in bench.SCRIPT_RUNS] == ["evolve", "trials"]
+    for run in bench.SCRIPT_RUNS:
+        args = load_script(run.argv[0].removesuffix(".py")).parse_args(
+            [*run.argv[1:], "--out", "x"]
+        )
+        assert args.out == "x"
+    evolve, trials = (
+        load_script(run.argv[0].removesuffix(".py")).parse_args([*run.argv[1:], "--out", "x"])
+        for run in bench.SCRIPT_RUNS
+    )
+    assert (evolve.populations, evolve.robots, evolve.generations) == (5, 10, 30)
+    assert (trials.system, trials.world, trials.trials) == ("SIE", "world1", 30)
 
 
 # ---------------------------------------------------------------------------------- jaxais.cli

@@ -185,9 +185,10 @@ def _move(pose, wheels, scene, params):
     v, w = wheel_to_body(wheels, params)
     # The barrier computes the candidate pose once per robot. Without it XLA's CPU backend fuses
     # the arc (four sines and cosines and a division) into every surface's collision test and
-    # recomputes it there: world1 stepped 1.63 M -> 1.93 M robot-steps/s at batch 10000 with it
-    # (2-core CPU, one device), 30 SIE trials ran in 16.9 s instead of 18.2-20.2 s. The numbers
-    # moved by an ulp where the fused copies had rounded differently.
+    # recomputes it there. With it (2-core CPU, interleaved runs): world1 at batch 10000 on one
+    # device 1.49-1.72 -> 1.93-2.21 M robot-steps/s; 30 SIE trials (trials.py) 15.9-20.2 ->
+    # 15.3-17.6 s wall; a GA generation's evaluation 0.50 -> 0.46 s. Positions moved by an ulp
+    # where the fused copies had rounded differently.
     cand = jax.lax.optimization_barrier(integrate_pose(pose, v, w, params.dt))
     xy = resolve_disc(pose[:2], cand[:2], params.body_radius, scene)
     return jnp.concatenate([xy, cand[2:]])

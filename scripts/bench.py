@@ -642,7 +642,7 @@ def bench_scripts(b: Bench) -> None:
     ):
         for i in range(b.args.scripts):
             for run in SCRIPT_RUNS:
-                bar.set_postfix_str(run.argv[0])
+                bar.set_postfix_str(Path(run.argv[0]).name)
                 out = Path(tmp, f"{run.name}-{i}", run.out)
                 out.parent.mkdir()
                 command = [sys.executable, str(SCRIPTS / run.argv[0]), *run.argv[1:]]

@@ -90,7 +90,6 @@ FULL = dict(
     matmul=2048,
     controller_batches="30,1000",
     controller_steps=500,
-    scripts=0,
 )
 QUICK = dict(
     steps=50,
@@ -101,7 +100,6 @@ QUICK = dict(
     matmul=512,
     controller_batches="30",
     controller_steps=50,
-    scripts=0,
 )
 SPEEDUP_BATCH = 30
 """The batch size whose JAX rate is compared with NumPy's (a population of 30, as in the GA)."""
@@ -171,6 +169,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--scripts",
         type=int,
+        default=0,
         help="also time evolve.py's default run and 30 SIE trials with trials.py end to end, "
         "N runs each (default 0: skipped; about 50 s per run)",
     )

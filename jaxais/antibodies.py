@@ -148,13 +148,23 @@ class Antibodies:
         return tuple(jnp.shape(self.type))
 
 
+def _namespace(ab: Antibodies):
+    """NumPy for antibodies of host arrays (e.g. a file just read), else ``jax.numpy``.
+
+    Checking host data with NumPy spares a script's start JAX's op-by-op compilations.
+    """
+    host = all(isinstance(x, np.ndarray | np.generic) for x in jax.tree.leaves(ab))
+    return np if host else jnp
+
+
 def attribute_matrix(ab: Antibodies) -> jnp.ndarray:
     """The attributes as one array, columns ``ATTRIBUTE_NAMES`` (D as 0.0 / 1.0).
 
     Returns:
-        [..., N_ATTRIBUTES] float32.
+        [..., N_ATTRIBUTES] float32 (NumPy for antibodies of NumPy arrays).
     """
-    return jnp.stack([jnp.asarray(getattr(ab, f), jnp.float32) for f in _FIELDS], axis=-1)
+    xp = _namespace(ab)
+    return xp.stack([xp.asarray(getattr(ab, f), xp.float32) for f in _FIELDS], axis=-1)
 
 
 def from_matrix(type_: jnp.ndarray, attributes: jnp.ndarray) -> Antibodies:
@@ -275,14 +285,15 @@ def within_limits(ab: Antibodies) -> jnp.ndarray:
     every unused attribute exactly 0.
 
     Returns:
-        [...] bool with the batch shape of ``ab``.
+        [...] bool with the batch shape of ``ab`` (NumPy for antibodies of NumPy arrays).
     """
+    xp = _namespace(ab)
     valid_type = (ab.type >= 0) & (ab.type < N_TYPES)
-    t = jnp.clip(ab.type, 0, N_TYPES - 1)
+    t = xp.clip(ab.type, 0, N_TYPES - 1)
     x = attribute_matrix(ab)
-    inside = (x >= jnp.asarray(_LO)[t]) & (x <= jnp.asarray(_HI)[t])
-    ok = jnp.where(jnp.asarray(USES)[t], inside, x == 0.0)
-    return valid_type & jnp.all(ok, axis=-1)
+    inside = (x >= xp.asarray(_LO)[t]) & (x <= xp.asarray(_HI)[t])
+    ok = xp.where(xp.asarray(USES)[t], inside, x == 0.0)
+    return valid_type & xp.all(ok, axis=-1)
 
 
 def antibody_distance(a: Antibodies, b: Antibodies) -> jnp.ndarray:

@@ -16,6 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxais import prng
 from jaxais.antibodies import Antibodies, antibodies_from_uniform, take
 from jaxais.behaviours import wheel_speeds_from_uniform
 from jaxais.envs.struct import pytree_dataclass
@@ -226,11 +227,12 @@ def stl_controller(
                 replaced = replaced + jnp.any(weak).astype(jnp.int32)
 
         # The idiotope is redrawn every idiotope_period iterations. The test is on the batch's
-        # tick (unbatched), so under vmap this stays a branch taken once per period.
+        # tick (unbatched), so under vmap this stays a branch taken once per period. Its draw
+        # uses the unrolled hash: the same numbers, without rolled loops in the branch.
         due = (pc.tick % system.network.idiotope_period == 0) & (pc.tick > 0)
         I = jax.lax.cond(
             due,
-            lambda: idiotopes(jax.random.fold_in(s.key, pc.tick), P),
+            lambda: idiotopes(jax.random.fold_in(prng.unrolled(s.key), pc.tick), P),
             lambda: s.I,
         )
         return s.replace(

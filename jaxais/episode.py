@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.extend.core import jaxpr_as_fun
 
-from jaxais import envs
+from jaxais import envs, prng
 from jaxais.antigens import antigen, is_collision
 from jaxais.envs.struct import pytree_dataclass
 
@@ -275,12 +275,13 @@ def advance(
 
     def draws(key):
         """One run's draws for a chunk: StepNoise [chunk, ...] and uniforms [chunk, n_u]."""
-        key, k_sim, k_ctrl = jax.random.split(key, 3)
+        # The same draws as with ``key`` itself, without the hash's rolled loops (jaxais.prng).
+        new_key, k_sim, k_ctrl = jax.random.split(prng.unrolled(key), 3)
         noise = jax.vmap(envs.sample_step_noise, in_axes=(0, None))(
             jax.random.split(k_sim, config.chunk), world
         )
         u = jax.random.uniform(k_ctrl, (config.chunk * n_u,)).reshape(config.chunk, n_u)
-        return key, noise, u
+        return prng.like(new_key, key), noise, u
 
     def chunk(batch: Batch) -> Batch:
         keys, noise, u = jax.vmap(draws)(batch.runs.key)

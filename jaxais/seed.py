@@ -16,7 +16,6 @@ from typing import Any
 
 import numpy as np
 
-from jaxais import envs
 from jaxais.antibodies import (
     Antibodies,
     from_dicts,
@@ -112,11 +111,6 @@ def save_seed(path: str | Path, seed: Seed, provenance: dict[str, Any]) -> Path:
     return path
 
 
-# Reading a seed checks its arrays: one compiled program for Table 1's limits, and NumPy for
-# the comparisons, instead of a dozen small op-by-op compilations at every script's start.
-_within_limits = envs.jit(within_limits, quick_compile=True)
-
-
 def load_seed(path: str | Path | None = None) -> tuple[Seed, dict[str, Any]]:
     """Read a seed directory (default: the shipped seed).
 
@@ -151,7 +145,7 @@ def load_seed(path: str | Path | None = None) -> tuple[Seed, dict[str, Any]]:
     x = seed.tau.shape[0]
     if seed.antibodies.type.shape != (x, 8) or seed.L.shape != (x, 8) or x < 1:
         raise SeedError(f"{path}: seed arrays have inconsistent shapes ({hint})")
-    if not bool(np.all(np.asarray(_within_limits(antibodies)))):
+    if not bool(np.all(within_limits(antibodies))):  # NumPy: host arrays
         raise SeedError(f"{path}: seed antibodies break Table 1's limits ({hint})")
     # The readable file must describe the same sets as the arrays, number for number (the JSON
     # holds each float32 as its shortest round-tripping decimal, so equality is exact).

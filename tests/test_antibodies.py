@@ -187,6 +187,13 @@ def test_within_limits_rejects() -> None:
     # Closed limits.
     assert bool(_within(_one(4, s=300, a=200, d=0)))
     assert bool(_within(_one(5, s=400, a=0)))
+    # Host antibodies (a file just read) are checked by NumPy, with the same verdicts.
+    cases = stack([good, *bad, _one(4, s=300, a=200, d=0)])
+    host = jax.tree.map(np.asarray, cases)
+    verdict = within_limits(host)
+    assert isinstance(verdict, np.ndarray)
+    np.testing.assert_array_equal(verdict, np.asarray(_within(cases)))
+    np.testing.assert_array_equal(verdict, [True] + [False] * len(bad) + [True])
 
 
 def test_canonical() -> None:

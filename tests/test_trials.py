@@ -10,6 +10,7 @@ observation it reads (goal pixels, IR) before each iteration.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from types import SimpleNamespace
 
@@ -207,6 +208,36 @@ def test_vmapped_iterate_equals_a_loop_of_single_iterations():
     I = np.asarray(runs.ctrl.I)
     assert not np.array_equal(I[0], idiotopes_before[0])
     np.testing.assert_array_equal(I[2], idiotopes_before[2])
+
+
+def test_task_loop_equals_iterate_with_jax_random_draws():
+    """One chunk of ``advance`` (its draws made with jaxais.prng's unrolled hash, its iteration
+    traced under jax.disable_jit) = ``iterate`` run chunk times on draws made by ``jax.random``
+    from the runs' own keys in advance's order: the same runs, bit for bit."""
+    chunk = F.BATCH  # so that F.noise_fn (compiled for BATCH keys) draws a chunk's noise
+    config = dataclasses.replace(F.CONFIG, chunk=chunk, segment=chunk, record=False)
+    runs, params = start_runs()
+    w, sp = F.world(), F.sim_params()
+    batch = episode.Batch(runs=runs, poses=jnp.zeros((F.BATCH, 1, 3)), chunks=jnp.int32(0))
+    advanced = F.jit(episode.advance, static_argnums=(3, 5))(batch, w, sp, STL, params, config)
+
+    n_u = STL.n_uniform(params)
+    keys, noises, us = [], [], []
+    for key in runs.key:
+        key, k_sim, k_ctrl = jax.random.split(key, 3)
+        keys.append(key)
+        noises.append(F.noise_fn()(jax.random.split(k_sim, chunk)))  # [chunk, ...]
+        us.append(jax.random.uniform(k_ctrl, (chunk * n_u,)).reshape(chunk, n_u))
+    expected = runs
+    for i in range(chunk):
+        noise = jax.tree.map(lambda *xs, i=i: jnp.stack([x[i] for x in xs]), *noises)
+        u = jnp.stack([x[i] for x in us])
+        # F.CONFIG has the same caps; passing it reuses the compiled iterate.
+        expected = F.iterate_batch_fn()(
+            expected, noise, u, jnp.int32(i), w, sp, STL, params, F.CONFIG
+        )
+    assert tree_equal(advanced.runs, expected.replace(key=jnp.stack(keys)))
+    assert int(advanced.chunks) == 1
 
 
 # ---------------------------------------------------------------------------------- trials

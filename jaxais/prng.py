@@ -20,7 +20,6 @@ in its original implementation. Programs compiled for compile speed (a batch's s
 
 from __future__ import annotations
 
-import functools
 import math
 
 import jax
@@ -35,14 +34,18 @@ _PARITY = np.uint32(0x1BD11BDA)
 
 
 def _rotate_left(x: jax.Array, d: int) -> jax.Array:
-    return jax.lax.shift_left(x, np.uint32(d)) | jax.lax.shift_right_logical(x, np.uint32(32 - d))
+    left = jax.lax.shift_left(x, np.uint32(d))
+    return jax.lax.bitwise_or(left, jax.lax.shift_right_logical(x, np.uint32(32 - d)))
 
 
-@functools.partial(jax.jit, inline=True)
 def threefry2x32(
     k1: jax.Array, k2: jax.Array, x1: jax.Array, x2: jax.Array
 ) -> tuple[jax.Array, jax.Array]:
     """The Threefry-2x32 hash of counters (x1, x2) under key (k1, k2), 20 rounds, unrolled.
+
+    Written in ``jax.lax`` operations, which trace and lower several times faster than
+    ``jax.numpy``'s operators (no dtype promotion, no nested jit): the hash is traced again at
+    every draw the compiled programs lower.
 
     Args:
         k1, k2: the key's words (uint32 scalars).
@@ -51,15 +54,16 @@ def threefry2x32(
     Returns:
         Two uint32 arrays of the counters' shape.
     """
-    ks = (k1, k2, k1 ^ k2 ^ _PARITY)
-    x1, x2 = x1 + ks[0], x2 + ks[1]
+    add, xor = jax.lax.add, jax.lax.bitwise_xor
+    ks = (k1, k2, xor(xor(k1, k2), _PARITY))
+    x1, x2 = add(x1, ks[0]), add(x2, ks[1])
     for group in range(5):
         for r in _ROTATIONS[group % 2]:
-            x1 = x1 + x2
-            x2 = x1 ^ _rotate_left(x2, r)
+            x1 = add(x1, x2)
+            x2 = xor(x1, _rotate_left(x2, r))
         # Key injection after every four rounds, with the group number added.
-        x1 = x1 + ks[(group + 1) % 3]
-        x2 = x2 + ks[(group + 2) % 3] + np.uint32(group + 1)
+        x1 = add(x1, ks[(group + 1) % 3])
+        x2 = add(add(x2, ks[(group + 2) % 3]), np.uint32(group + 1))
     return x1, x2
 
 

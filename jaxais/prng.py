@@ -67,6 +67,52 @@ def threefry2x32(
     return x1, x2
 
 
+def _threefry2x32_host(k1: np.ndarray, k2: np.ndarray, x1: np.ndarray, x2: np.ndarray):
+    """:func:`threefry2x32` in NumPy, on the host (uint32 arithmetic wraps modulo 2**32)."""
+    rotate = lambda x, d: (x << np.uint32(d)) | (x >> np.uint32(32 - d))
+    ks = (k1, k2, k1 ^ k2 ^ _PARITY)
+    with np.errstate(over="ignore"):
+        x1, x2 = x1 + ks[0], x2 + ks[1]
+        for group in range(5):
+            for r in _ROTATIONS[group % 2]:
+                x1 = x1 + x2
+                x2 = x1 ^ rotate(x2, r)
+            x1 = x1 + ks[(group + 1) % 3]
+            x2 = x2 + ks[(group + 2) % 3] + np.uint32(group + 1)
+    return x1, x2
+
+
+def host_keys_match(seed: int) -> bool:
+    """Whether :func:`host_key` and :func:`host_fold_in` give ``jax.random``'s keys for ``seed``:
+    JAX's default implementation is threefry2x32 and the seed fits in 32 bits."""
+    return jax.config.jax_default_prng_impl == "threefry2x32" and 0 <= seed < 2**32
+
+
+def host_key(seed: int) -> np.ndarray:
+    """The data of ``jax.random.key(seed)`` ([2] uint32), computed with NumPy.
+
+    For ``0 <= seed < 2**32`` under JAX's default threefry2x32 (see :func:`host_keys_match`).
+    """
+    return np.asarray([0, seed], np.uint32)
+
+
+def host_fold_in(key: np.ndarray, data: np.ndarray) -> np.ndarray:
+    """The data of ``jax.random.fold_in(key, d)`` for each ``d`` in ``data``, with NumPy.
+
+    Small derivations (a batch's trial keys) need no compiled program this way.
+
+    Args:
+        key: [2] uint32 threefry2x32 key data. data: [n] non-negative ints below 2**32.
+
+    Returns:
+        [n, 2] uint32 key data.
+    """
+    k1, k2 = np.uint32(key[0]), np.uint32(key[1])
+    data = np.asarray(data, np.uint32)
+    x1, x2 = _threefry2x32_host(k1, k2, np.zeros_like(data), data)
+    return np.stack([x1, x2], axis=-1)
+
+
 def _counters(shape: tuple[int, ...]) -> tuple[jax.Array, jax.Array]:
     """(high, low) words of a 64-bit row-major counter over ``shape`` (JAX's iota_2x32_shape)."""
     size = math.prod(shape)

@@ -131,3 +131,23 @@ def test_other_implementations_are_left_alone() -> None:
         assert prng.unrolled(key) is key
     key = jax.random.key(0)
     assert prng.like(key, key) is key
+
+
+@pytest.mark.parametrize("seed", [0, 7, 2**31 + 5, 2**32 - 1])
+def test_host_keys_equal_jax(seed) -> None:
+    assert prng.host_keys_match(seed)
+    key = jax.random.key(seed)
+    np.testing.assert_array_equal(prng.host_key(seed), _data(key))
+    data = np.asarray([0, 1, 2, 1000, 2**32 - 1], np.uint64)
+    want = np.stack([_data(jax.random.fold_in(key, int(d))) for d in data])
+    np.testing.assert_array_equal(prng.host_fold_in(prng.host_key(seed), data), want)
+
+
+def test_host_keys_only_where_they_match() -> None:
+    assert not prng.host_keys_match(-1) and not prng.host_keys_match(2**32)
+    previous = jax.config.jax_default_prng_impl
+    jax.config.update("jax_default_prng_impl", "rbg")
+    try:
+        assert not prng.host_keys_match(0)
+    finally:
+        jax.config.update("jax_default_prng_impl", previous)

@@ -370,6 +370,16 @@ def test_all_systems_of_a_world_meet_the_same_start_placements():
         np.testing.assert_allclose(res["SIE"].trajectories[i][0], sims[i].pose, rtol=1e-6)
 
 
+def test_batch_keys_on_the_host_equal_the_compiled_derivation():
+    plan = (("SIE", 3), ("HDC", 2), ("UIE-R2", 4))
+    for seed in (0, 3, 2**32 - 1):
+        host = trials_module.batch_keys(seed, plan)
+        compiled = trials_module._batch_keys_compiled(seed, plan)
+        for a, b in zip(host, compiled, strict=True):
+            assert jax.random.key_impl(a) == jax.random.key_impl(b)
+            np.testing.assert_array_equal(key_data(a), key_data(b))
+
+
 def test_trial_keys_do_not_depend_on_the_number_of_trials():
     for label in ("SIE", "URL-R2"):
         r4, k4 = trial_keys(3, label, 4)

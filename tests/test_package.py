@@ -59,3 +59,34 @@ def test_reading_worlds_constants_and_the_seed_compiles_only_named_programs():
     # with NumPy.
     assert compiled <= {"jit(<lambda>)", "jit(_seeded_paratopes)"}, compiled
     assert "jit(_seeded_paratopes)" in compiled  # the listener saw the compiles that do happen
+
+
+def _clear_option_caches(ec) -> None:
+    for f in (ec._every_option_accepted, ec.compiler_options, ec.quick_compile_options):
+        f.cache_clear()
+
+
+@pytest.mark.parametrize("rejected", [None, "xla_cpu_use_fusion_emitters"])
+def test_compile_options_probe_once_and_fall_back(monkeypatch, rejected) -> None:
+    """One probe compile when XLA takes every option; the largest accepted set otherwise."""
+    from jaxais.envs import compile as ec
+
+    probes = []
+
+    def accepted(options):
+        probes.append(options)
+        return rejected not in options
+
+    monkeypatch.setattr(ec, "_accepted", accepted)
+    _clear_option_caches(ec)
+    try:
+        base = ec.compiler_options()
+        quick = ec.quick_compile_options()
+    finally:
+        _clear_option_caches(ec)
+    assert base == ec.CPU_COMPILER_OPTIONS
+    if rejected is None:
+        assert quick == {**ec.CPU_COMPILER_OPTIONS, **ec.QUICK_COMPILE_OPTIONS}
+        assert len(probes) == 1
+    else:
+        assert quick == {**ec.CPU_COMPILER_OPTIONS, "xla_backend_optimization_level": 1}

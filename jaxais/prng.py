@@ -16,6 +16,9 @@ Use :func:`unrolled` on a default key inside a compiled loop and :func:`like` to
 in its original implementation. Programs compiled for compile speed (a batch's start, with
 ``quick_compile``) keep the rolled hash: there the unrolled one lowered and compiled more slowly
 (world1's start for 30 trials: lowering 0.45 -> 0.8 s, compiling 2.1 -> 2.3-2.9 s).
+
+The same hash in NumPy derives small sets of keys on the host (:func:`host_fold_in`, e.g. a
+batch's trial keys), where compiling a program for them would cost more than running it.
 """
 
 from __future__ import annotations

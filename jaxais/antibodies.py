@@ -148,12 +148,12 @@ class Antibodies:
         return tuple(jnp.shape(self.type))
 
 
-def _namespace(ab: Antibodies):
-    """NumPy for antibodies of host arrays (e.g. a file just read), else ``jax.numpy``.
+def _namespace(*trees: Any):
+    """NumPy for host arrays only (e.g. a file just read), else ``jax.numpy``.
 
-    Checking host data with NumPy spares a script's start JAX's op-by-op compilations.
+    Host data cut and checked with NumPy spares a script's start JAX's op-by-op compilations.
     """
-    host = all(isinstance(x, np.ndarray | np.generic) for x in jax.tree.leaves(ab))
+    host = all(isinstance(x, np.ndarray | np.generic) for x in jax.tree.leaves(trees))
     return np if host else jnp
 
 
@@ -178,8 +178,7 @@ def from_matrix(type_: jnp.ndarray, attributes: jnp.ndarray) -> Antibodies:
         Antibodies of NumPy arrays when both inputs are NumPy arrays (host data, e.g. a parsed
         file: cut by NumPy, where JAX would compile each slice op by op), else of JAX arrays.
     """
-    host = isinstance(type_, np.ndarray) and isinstance(attributes, np.ndarray)
-    xp = np if host else jnp
+    xp = _namespace(type_, attributes)
     attributes = xp.asarray(attributes, xp.float32)
     cols = {f: attributes[..., i] for i, f in enumerate(_FIELDS)}
     cols["direction"] = xp.round(cols["direction"]).astype(xp.int32)

@@ -41,6 +41,21 @@ def _rotate_left(x: jax.Array, d: int) -> jax.Array:
     return jax.lax.bitwise_or(left, jax.lax.shift_right_logical(x, np.uint32(32 - d)))
 
 
+def _threefry_rounds(k1, k2, x1, x2, add, xor, rotate_left):
+    """Threefry-2x32's key schedule and 20 rounds, given the uint32 operations of an array type
+    (so that the JAX hash and its NumPy twin share one schedule)."""
+    ks = (k1, k2, xor(xor(k1, k2), _PARITY))
+    x1, x2 = add(x1, ks[0]), add(x2, ks[1])
+    for group in range(5):
+        for r in _ROTATIONS[group % 2]:
+            x1 = add(x1, x2)
+            x2 = xor(x1, rotate_left(x2, r))
+        # Key injection after every four rounds, with the group number added.
+        x1 = add(x1, ks[(group + 1) % 3])
+        x2 = add(add(x2, ks[(group + 2) % 3]), np.uint32(group + 1))
+    return x1, x2
+
+
 def threefry2x32(
     k1: jax.Array, k2: jax.Array, x1: jax.Array, x2: jax.Array
 ) -> tuple[jax.Array, jax.Array]:
@@ -57,32 +72,14 @@ def threefry2x32(
     Returns:
         Two uint32 arrays of the counters' shape.
     """
-    add, xor = jax.lax.add, jax.lax.bitwise_xor
-    ks = (k1, k2, xor(xor(k1, k2), _PARITY))
-    x1, x2 = add(x1, ks[0]), add(x2, ks[1])
-    for group in range(5):
-        for r in _ROTATIONS[group % 2]:
-            x1 = add(x1, x2)
-            x2 = xor(x1, _rotate_left(x2, r))
-        # Key injection after every four rounds, with the group number added.
-        x1 = add(x1, ks[(group + 1) % 3])
-        x2 = add(add(x2, ks[(group + 2) % 3]), np.uint32(group + 1))
-    return x1, x2
+    return _threefry_rounds(k1, k2, x1, x2, jax.lax.add, jax.lax.bitwise_xor, _rotate_left)
 
 
 def _threefry2x32_host(k1: np.ndarray, k2: np.ndarray, x1: np.ndarray, x2: np.ndarray):
     """:func:`threefry2x32` in NumPy, on the host (uint32 arithmetic wraps modulo 2**32)."""
     rotate = lambda x, d: (x << np.uint32(d)) | (x >> np.uint32(32 - d))
-    ks = (k1, k2, k1 ^ k2 ^ _PARITY)
     with np.errstate(over="ignore"):
-        x1, x2 = x1 + ks[0], x2 + ks[1]
-        for group in range(5):
-            for r in _ROTATIONS[group % 2]:
-                x1 = x1 + x2
-                x2 = x1 ^ rotate(x2, r)
-            x1 = x1 + ks[(group + 1) % 3]
-            x2 = x2 + ks[(group + 2) % 3] + np.uint32(group + 1)
-    return x1, x2
+        return _threefry_rounds(k1, k2, x1, x2, np.add, np.bitwise_xor, rotate)
 
 
 def host_keys_match(seed: int) -> bool:

@@ -56,15 +56,21 @@ def batch_keys(seed: int, plan: tuple[tuple[str, int], ...]) -> tuple[jax.Array,
     """
     if not prng.host_keys_match(seed):
         return _batch_keys_compiled(seed, plan)
-    base = prng.host_key(seed)
-    worlds = prng.host_fold_in(base, [0])[0]
-    resets, runs = [], []
-    for system_label, n in plan:
-        resets.append(prng.host_fold_in(worlds, np.arange(n)))
-        stream = prng.host_fold_in(base, [1 + LABELS.index(system_label)])[0]
-        runs.append(prng.host_fold_in(stream, np.arange(n)))
+    resets, runs = _derive_keys(prng.host_key(seed), prng.host_fold_in, plan)
     wrap = lambda parts: jax.random.wrap_key_data(np.concatenate(parts))
     return wrap(resets), wrap(runs)
+
+
+def _derive_keys(base, fold_in, plan):
+    """The derivation of :func:`batch_keys` from the seed's key ``base``, given
+    ``fold_in(key, data [n]) -> keys [n]``: ([reset keys] per label, [run keys] per label)."""
+    worlds = fold_in(base, [0])[0]
+    resets, runs = [], []
+    for system_label, n in plan:
+        resets.append(fold_in(worlds, np.arange(n)))
+        stream = fold_in(base, [1 + LABELS.index(system_label)])[0]
+        runs.append(fold_in(stream, np.arange(n)))
+    return resets, runs
 
 
 @functools.partial(envs.jit, quick_compile=True, static_argnums=(0, 1))
@@ -72,14 +78,8 @@ def _batch_keys_compiled(
     seed: int, plan: tuple[tuple[str, int], ...]
 ) -> tuple[jax.Array, jax.Array]:
     """:func:`batch_keys` with ``jax.random`` (any seed, any default PRNG implementation)."""
-    base = jax.random.key(seed)
-    worlds = jax.random.fold_in(base, 0)
-    resets, runs = [], []
-    for system_label, n in plan:
-        trials = jnp.arange(n)
-        resets.append(jax.vmap(lambda i: jax.random.fold_in(worlds, i))(trials))
-        stream = jax.random.fold_in(base, 1 + LABELS.index(system_label))
-        runs.append(jax.vmap(lambda i, s=stream: jax.random.fold_in(s, i))(trials))
+    fold_in = lambda key, data: jax.vmap(lambda d: jax.random.fold_in(key, d))(jnp.asarray(data))
+    resets, runs = _derive_keys(jax.random.key(seed), fold_in, plan)
     return jnp.concatenate(resets), jnp.concatenate(runs)
 
 

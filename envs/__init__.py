@@ -3,7 +3,7 @@
 This package never imports the rest of jaxais: physics sits at the bottom of the stack.
 """
 
-from .compile import compiler_options, jit
+from .compile import compiler_options, jit, small_kernel_options
 from .geometry import Scene, cast_rays, disc_gaps, min_gap
 from .params import (
     CAMERA_COLUMNS,
@@ -61,6 +61,7 @@ __all__ = [
     "observe",
     "reset",
     "sample_step_noise",
+    "small_kernel_options",
     "step",
     "step_with_noise",
     "world_path",

@@ -457,7 +457,9 @@ def compile_rollout(
     :func:`_per_device`'s outside trace: 30 STL trials in world1 compile in 8.6-9.2 s, against
     9.1-9.7 s with the start compiled first (three interleaved pairs, 2-core CPU). The start
     runs once per batch, so it is compiled for compile speed
-    (``envs.jit(..., quick_compile=True)``).
+    (``envs.jit(..., quick_compile=True)``); the task loop, many small kernels, with XLA's older
+    loop emitters (``envs.jit(..., small_kernels=True)``), which compile it faster and run it as
+    fast at these batch sizes.
     """
     shardings = _batch_shardings(sharding)
 
@@ -482,7 +484,7 @@ def compile_rollout(
             shardings,
             batch_in,
         )
-    advance_lowered = envs.jit(task_advance, **placement).lower(
+    advance_lowered = envs.jit(task_advance, small_kernels=True, **placement).lower(
         batch_in, world, sim_params, ctrl_params
     )
     # XLA compiles outside Python's lock: the task loop, the longest compile, starts first, and

@@ -390,6 +390,7 @@ def bench_machine(b: Bench) -> None:
         "device_kinds": sorted({d.device_kind for d in jax.devices()}),
         "xla_flags": os.environ.get("XLA_FLAGS", ""),
         "compiler_options": envs.compiler_options(),
+        "task_loop_compiler_options": envs.small_kernel_options(),
         "load_average_start": list(os.getloadavg()),
         "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
     }

@@ -62,7 +62,12 @@ def test_reading_worlds_constants_and_the_seed_compiles_only_named_programs():
 
 
 def _clear_option_caches(ec) -> None:
-    for f in (ec._every_option_accepted, ec.compiler_options, ec.quick_compile_options):
+    for f in (
+        ec._every_option_accepted,
+        ec.compiler_options,
+        ec.quick_compile_options,
+        ec.small_kernel_options,
+    ):
         f.cache_clear()
 
 
@@ -87,11 +92,37 @@ def test_compile_options_probe_once_and_fall_back(monkeypatch, rejected) -> None
     try:
         base = ec.compiler_options()
         quick = ec.quick_compile_options()
+        small = ec.small_kernel_options()
     finally:
         _clear_option_caches(ec)
     assert base == ec.CPU_COMPILER_OPTIONS
     if rejected is None:
         assert quick == {**ec.CPU_COMPILER_OPTIONS, **ec.QUICK_COMPILE_OPTIONS}
+        assert small == {**ec.CPU_COMPILER_OPTIONS, "xla_cpu_use_fusion_emitters": False}
         assert len(probes) == 1
     else:
         assert quick == {**ec.CPU_COMPILER_OPTIONS, "xla_backend_optimization_level": 1}
+        assert small == ec.CPU_COMPILER_OPTIONS
+
+
+def test_jit_compiles_with_the_options_of_its_mode(monkeypatch) -> None:
+    """envs.jit hands jax.jit the option set its mode names (resolved at first use)."""
+    import jax
+
+    from jaxais.envs import compile as ec
+
+    monkeypatch.setattr(ec, "compiler_options", lambda: {"mode": "default"})
+    monkeypatch.setattr(ec, "quick_compile_options", lambda: {"mode": "quick"})
+    monkeypatch.setattr(ec, "small_kernel_options", lambda: {"mode": "small"})
+    seen = []
+
+    def fake_jit(fun, compiler_options, **kwargs):
+        seen.append(compiler_options)
+
+    monkeypatch.setattr(jax, "jit", fake_jit)
+    fun = lambda x: x
+    for kwargs in ({}, {"quick_compile": True}, {"small_kernels": True}):
+        ec.jit(fun, **kwargs)._jitted  # noqa: B018 (builds the jax.jit)
+    assert [o["mode"] for o in seen] == ["default", "quick", "small"]
+    with pytest.raises(ValueError, match="one of"):
+        ec.jit(fun, quick_compile=True, small_kernels=True)

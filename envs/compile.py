@@ -75,27 +75,28 @@ the shipped LTL seed, world1's SIE trials). Not for the task loop itself: at -O1
 2x slower."""
 
 
-@functools.cache
-def quick_compile_options() -> dict[str, Any] | None:
-    """:func:`compiler_options` plus those of :data:`QUICK_COMPILE_OPTIONS` this XLA accepts."""
+def _extended(*extras: dict[str, Any]) -> dict[str, Any] | None:
+    """:func:`compiler_options` plus the first of ``extras`` this XLA accepts (none: as is)."""
     options = compiler_options()
     if options is None:
         return None
-    quick = {**options, **QUICK_COMPILE_OPTIONS}
-    if _every_option_accepted() or _accepted(quick):
-        return quick
-    fallback = {**options, "xla_backend_optimization_level": 1}
-    return fallback if _accepted(fallback) else options
+    for extra in extras:
+        candidate = {**options, **extra}
+        if _every_option_accepted() or _accepted(candidate):
+            return candidate
+    return options
+
+
+@functools.cache
+def quick_compile_options() -> dict[str, Any] | None:
+    """:func:`compiler_options` plus those of :data:`QUICK_COMPILE_OPTIONS` this XLA accepts."""
+    return _extended(QUICK_COMPILE_OPTIONS, {"xla_backend_optimization_level": 1})
 
 
 @functools.cache
 def small_kernel_options() -> dict[str, Any] | None:
     """:func:`compiler_options` plus :data:`LOOP_EMITTER_OPTIONS` where this XLA accepts them."""
-    options = compiler_options()
-    if options is None:
-        return None
-    loop = {**options, **LOOP_EMITTER_OPTIONS}
-    return loop if _every_option_accepted() or _accepted(loop) else options
+    return _extended(LOOP_EMITTER_OPTIONS)
 
 
 class _Jit:

@@ -458,8 +458,8 @@ def compile_rollout(
     9.1-9.7 s with the start compiled first (three interleaved pairs, 2-core CPU). The start
     runs once per batch, so it is compiled for compile speed
     (``envs.jit(..., quick_compile=True)``); the task loop, many small kernels, with XLA's older
-    loop emitters (``envs.jit(..., small_kernels=True)``), which compile it faster and run it as
-    fast at these batch sizes.
+    loop emitters (``envs.jit(..., small_kernels=True)``), which compile it faster (figures in
+    ``envs.compile.LOOP_EMITTER_OPTIONS``).
     """
     shardings = _batch_shardings(sharding)
 

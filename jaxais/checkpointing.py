@@ -33,6 +33,7 @@ import numpy as np
 
 from jaxais.antibodies import within_limits
 from jaxais.ga import GAConfig, GAState, abstract_state
+from jaxais.orbax_reads import forget_abandoned_reads
 
 __all__ = [
     "FORMAT",
@@ -270,6 +271,7 @@ class GACheckpointer:
             raise CheckpointError(f"{self.directory}: no complete checkpoint to resume")
         where = self.directory / str(step)
         hint = f"delete {where} to resume from an earlier checkpoint, or start again"
+        forget_abandoned_reads()  # a failed read must end with our one-line error alone
         try:
             restored = self._manager.restore(
                 step,

@@ -23,6 +23,7 @@ from jaxais.antibodies import (
     within_limits,
 )
 from jaxais.envs.struct import pytree_dataclass
+from jaxais.orbax_reads import forget_abandoned_reads
 
 SEED_JSON = "seed.json"
 ARRAYS_DIR = "arrays"
@@ -130,6 +131,7 @@ def load_seed(path: str | Path | None = None) -> tuple[Seed, dict[str, Any]]:
         raise SeedError(
             f"{path}: not a seed directory, {SEED_JSON} or {ARRAYS_DIR}/ missing ({hint})"
         )
+    forget_abandoned_reads()  # a failed read must end with our one-line error alone
     try:
         meta = json.loads((path / SEED_JSON).read_text())
         with ocp.StandardCheckpointer() as ckpt:

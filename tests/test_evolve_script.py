@@ -40,8 +40,10 @@ TIME_KEYS = {
     "wall_time_total_s",
 }
 
-# After a failed read orbax's asyncio loop may report "Event loop is closed" when it is
-# garbage-collected, possibly during a later test: harmless, and not ours.
+# After a failed restore, orbax's abandoned reads post to a closed asyncio loop. The checkpoint
+# reader drops those reports (jaxais.orbax_reads), but pytest swaps sys.unraisablehook test by
+# test, so a late one can reach pytest's own hook, which turns it into a warning about nothing of
+# ours.
 pytestmark = pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
 
 

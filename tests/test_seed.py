@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import subprocess
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -13,8 +16,9 @@ import pytest
 
 from jaxais.seed import ARRAYS_DIR, SEED_JSON, Seed, SeedError, load_seed, save_seed
 
-# After a failed restore, orbax's background threads post to a closed asyncio loop; pytest then
-# reports "Exception ignored" warnings that say nothing about the seed.
+# After a failed restore, orbax's abandoned reads post to a closed asyncio loop. load_seed drops
+# those reports (jaxais.orbax_reads), but pytest swaps sys.unraisablehook test by test, so a late
+# one can reach pytest's own hook, which turns it into a warning that says nothing about the seed.
 pytestmark = pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
 
 PROVENANCE = {"command": "test_seed.py", "seed": 7, "version": "0.0-test"}
@@ -143,6 +147,31 @@ def test_bad_seed_is_a_one_line_seed_error(case: str, pristine: Path, tmp_path: 
     assert "\n" not in msg and msg.startswith(str(path))
     assert "scripts/evolve.py" in msg  # says how to make a new one
     assert isinstance(info.value, ValueError)  # the scripts report ValueErrors in one line
+
+
+def test_a_corrupt_seed_leaves_nothing_on_stderr(pristine: Path, tmp_path: Path):
+    """orbax abandons its other reads when one fails; their late callbacks print nothing (they
+    printed a traceback after the scripts' one-line error). Whether a read is still pending when
+    orbax gives up is a race, so the seed is read ten times."""
+    path = tmp_path / "seed"
+    shutil.copytree(pristine, path)
+    _truncate("d/*")(path)
+    code = (
+        "import time\n"
+        "from jaxais.seed import SeedError, load_seed\n"
+        "for _ in range(10):\n"
+        "    try:\n"
+        f"        load_seed({str(path)!r})\n"
+        "    except SeedError:\n"
+        "        print('refused')\n"
+        "time.sleep(1)  # the abandoned reads end meanwhile\n"
+    )
+    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120
+    )
+    assert out.stdout.split() == ["refused"] * 10, out.stderr[-2000:]
+    assert out.stderr == ""
 
 
 def test_seed_breaking_table_1_or_with_bad_shapes_is_refused(tmp_path: Path):

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from _python import run_python
 
 from jaxais import compilation_cache as cc
 
@@ -51,7 +50,7 @@ def test_enable_stores_compiled_programs(tmp_path: Path):
     )
     env = {**os.environ, cc.ENV: str(tmp_path / "xla")}
     env.pop(cc.JAX_ENV, None)
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    out = run_python(code, env)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == str(tmp_path / "xla")
     assert any(p.name.startswith("jit_") for p in (tmp_path / "xla").iterdir())

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 
 import pytest
+from _python import run_python
 
 import jaxais
 
@@ -49,10 +49,7 @@ def test_reading_worlds_constants_and_the_seed_compiles_only_named_programs():
         "build_systems(['SIE', 'SRL', 'HDC'], None)\n"
         "print(' '.join(sorted(set(names))))\n"
     )
-    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
-    out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120
-    )
+    out = run_python(code)
     assert out.returncode == 0, out.stderr[-2000:]
     compiled = set(out.stdout.split())
     # The compiler-option probes (envs.compile) and eqs (1)-(2); the seed's limits are checked

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from _python import run_python
 
 from jaxais import cli
 
@@ -273,7 +274,7 @@ def test_run_script_exits_with_mains_status_without_teardown(body, status, out, 
         f"def main():\n    {body}\n"
         "run_script(main)\n"
     )
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    proc = run_python(code, timeout=60)
     assert proc.returncode == status
     assert proc.stdout == out
     assert err in proc.stderr

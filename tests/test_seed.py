@@ -3,16 +3,14 @@
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import subprocess
-import sys
 from collections.abc import Callable
 from pathlib import Path
 
 import _stl_fixtures as F
 import numpy as np
 import pytest
+from _python import run_python
 
 from jaxais.seed import ARRAYS_DIR, SEED_JSON, Seed, SeedError, load_seed, save_seed
 
@@ -166,10 +164,7 @@ def test_a_corrupt_seed_leaves_nothing_on_stderr(pristine: Path, tmp_path: Path)
         "        print('refused')\n"
         "time.sleep(1)  # the abandoned reads end meanwhile\n"
     )
-    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
-    out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120
-    )
+    out = run_python(code)
     assert out.stdout.split() == ["refused"] * 10, out.stderr[-2000:]
     assert out.stderr == ""
 

@@ -29,7 +29,14 @@ IR_TABLE_DIST = np.array([0.0, 0.005, 0.01, 0.015, 0.02, 0.03, 0.04, 0.05, 0.06,
 IR_TABLE_VALUE = np.array(
     [4095.0, 2133.33, 1465.73, 601.46, 383.84, 234.93, 158.03, 120.0, 104.09, 67.19]
 )
-"""Calibrated e-puck IR table: distance from the body rim (m) -> reading; 0 beyond 0.07 m."""
+"""Calibrated e-puck IR table: distance from the body rim (m) -> reading; its last value beyond
+0.07 m (Webots' e-puck, SPEC 2)."""
+IR_TABLE_NOISE = np.array(
+    [0.002, 0.003, 0.007, 0.0406, 0.01472, 0.0241, 0.0287, 0.04225, 0.03065, 0.04897]
+)
+"""Relative std of the reading at each table distance: Webots' e-puck model draws every IR
+reading with it, so every simulated world has this noise [paper's platform, SPEC 2]. Without it
+a robot can hover exactly at the 250 threshold (SPEC 6)."""
 
 
 @pytree_dataclass
@@ -43,7 +50,8 @@ class SimParams:
         max_speed: wheel speed clip, speed units.
         camera_fov: horizontal field of view, rad [paper: 0.3].
         camera_range: m; camera_height: lens height above the floor, m.
-        ir_dist: [10] table distances (m); ir_value: [10] table readings.
+        ir_dist: [10] table distances (m); ir_value: [10] table readings; ir_noise: [10] relative
+            std of the reading at those distances (zeros for noise-free IR sensors).
         ir_bearings: [8] sensor bearings, rad.
     """
 
@@ -60,6 +68,7 @@ class SimParams:
     # Filled in by default_params(); a bare SimParams() is not meant to be used.
     ir_dist: jnp.ndarray | None = None
     ir_value: jnp.ndarray | None = None
+    ir_noise: jnp.ndarray | None = None
     ir_bearings: jnp.ndarray | None = None
 
 
@@ -68,6 +77,7 @@ def default_params(**overrides: float) -> SimParams:
     base = dict(
         ir_dist=device_array(IR_TABLE_DIST, np.float32),
         ir_value=device_array(IR_TABLE_VALUE, np.float32),
+        ir_noise=device_array(IR_TABLE_NOISE, np.float32),
         ir_bearings=device_array(np.deg2rad(IR_BEARINGS_DEG), np.float32),
     )
     unknown = set(overrides) - set(SimParams.__dataclass_fields__)

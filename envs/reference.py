@@ -71,7 +71,7 @@ WORLD_ARRAYS = (
     "start_heading",
     "wanderer_region",
 )
-WORLD_STATICS = ("name", "goal_shape", "ir_noise", "pixel_flip", "wheel_noise")
+WORLD_STATICS = ("name", "goal_shape", "ir_noise", "camera_miss", "camera_shift", "wheel_noise")
 PARAM_FIELDS = (
     "dt",
     "speed_unit",
@@ -84,10 +84,11 @@ PARAM_FIELDS = (
     "camera_height",
     "ir_dist",
     "ir_value",
+    "ir_noise",
     "ir_bearings",
 )
 STATE_FIELDS = ("pose", "wanderers", "wander_timer", "wander_dir", "goal", "boxes", "t")
-NOISE_FIELDS = ("wheel", "ir", "pixel", "wander")
+NOISE_FIELDS = ("wheel", "ir", "camera", "wander")
 OBS_FIELDS = (
     "ir",
     "vm",
@@ -450,11 +451,20 @@ def wander_wheels(
 
 
 def ir_reading(rim_distance: float, params: Mapping[str, Any]) -> float:
-    """Piecewise-linear table reading at a distance from the body rim; 0 beyond the table."""
-    dist, value = params["ir_dist"], params["ir_value"]
-    if rim_distance > dist[-1]:
-        return 0.0
-    return float(np.interp(rim_distance, dist, value))
+    """Piecewise-linear table reading at a distance from the body rim; the last value beyond."""
+    return float(np.interp(rim_distance, params["ir_dist"], params["ir_value"]))
+
+
+def _shift(a: np.ndarray, by: int) -> np.ndarray:
+    """``a`` [..., 15] moved ``by`` columns to the right (negative: left), vacated columns False."""
+    out = np.zeros_like(a)
+    if by > 0:
+        out[..., by:] = a[..., :-by]
+    elif by < 0:
+        out[..., :by] = a[..., -by:]
+    else:
+        out[...] = a
+    return out
 
 
 def ref_sense(state: Any, noise: Any, world: Any, params: Any) -> dict[str, Any]:
@@ -475,7 +485,8 @@ def ref_sense(state: Any, noise: Any, world: Any, params: Any) -> dict[str, Any]
     """
     world, params, state = _world(world), _params(params), state_to_numpy(state)
     if noise is None:
-        world = {**world, "ir_noise": 0.0, "pixel_flip": 0.0}
+        world = {**world, "ir_noise": 0.0, "camera_miss": 0.0, "camera_shift": 0.0}
+        params = {**params, "ir_noise": np.zeros_like(params["ir_noise"])}
     else:
         noise = noise_to_numpy(noise)
     scene = build_scene(state, world, params, exclude=0)
@@ -496,9 +507,12 @@ def ref_sense(state: Any, noise: Any, world: Any, params: Any) -> dict[str, Any]
         ray_h.append(h)
         ray_hits.append(hits)
 
-    ir = np.array([ir_reading(max(t - r, 0.0), params) for t in ray_t[:N_IR]])
-    if world["ir_noise"] > 0:
-        ir = np.clip(ir * (1.0 + world["ir_noise"] * noise["ir"]), 0.0, params["ir_value"][0])
+    rims = [max(t - r, 0.0) for t in ray_t[:N_IR]]
+    ir = np.array([ir_reading(d, params) for d in rims])
+    if noise is not None:
+        table = np.interp(rims, params["ir_dist"], params["ir_noise"])
+        std = np.sqrt(table**2 + world["ir_noise"] ** 2)
+        ir = np.clip(ir * (1.0 + std * noise["ir"]), 0.0, params["ir_value"][0])
 
     materials = np.zeros(CAMERA_COLUMNS, np.int64)
     depth = np.full(CAMERA_COLUMNS, INF)
@@ -516,10 +530,18 @@ def ref_sense(state: Any, noise: Any, world: Any, params: Any) -> dict[str, Any]
             # line of sight at distance t lies between the floor and the surface's top.
             rise = math.tan(pix * (CAMERA_ROWS // 2 - row)) * t
             blue[row, col] = -cam_h <= rise <= h - cam_h
-    if world["pixel_flip"] > 0:
-        blue = blue ^ (noise["pixel"] < world["pixel_flip"])
+    goal_cols = np.broadcast_to(materials == GOAL, blue.shape)
+    if noise is not None:  # the blob missed, or shifted one column left or right
+        shift = 0
+        if noise["camera"][1] < 0.5 * world["camera_shift"]:
+            shift = -1
+        elif noise["camera"][1] < world["camera_shift"]:
+            shift = 1
+        blue, goal_cols = (_shift(a, shift) for a in (blue, goal_cols))
+        if noise["camera"][0] < world["camera_miss"]:
+            blue = np.zeros_like(blue)
     n_blue = int(blue.sum())
-    goal_px = int(blue[:, materials == GOAL].sum())
+    goal_px = int((blue & goal_cols).sum())
     cols = np.broadcast_to(np.arange(CAMERA_COLUMNS), blue.shape)
     centroid = float(cols[blue].mean()) if n_blue else (CAMERA_COLUMNS - 1) / 2
     return {

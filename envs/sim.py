@@ -72,7 +72,7 @@ class Observation:
     Attributes:
         ir: [8] IR readings (ps0..ps7), 0..4095.
         vm: maximum IR reading.
-        blue: [3, 15] bool, blue (marker or goal) pixels after pixel noise; row 0 is the top.
+        blue: [3, 15] bool, blue (marker or goal) pixels after camera noise; row 0 is the top.
         blue_pixels: int, number of blue pixels.
         goal_pixels: int, blue pixels in columns that see the goal.
         blue_centroid: mean column (0..14, 0 = leftmost) of blue pixels; 7.0 when none.
@@ -96,14 +96,14 @@ class StepNoise:
 
     Attributes:
         wheel: [2] standard normals for the executed wheel speeds.
-        ir: [8] standard normals for the IR readings.
-        pixel: [3, 15] uniforms in [0, 1); a pixel flips where below the flip probability.
+        ir: [8] standard normals for the IR readings (drawn in every world: SPEC 2).
+        camera: [2] uniforms in [0, 1): is the blob missed?, is it shifted (and which way)?
         wander: [W, 3] uniforms: start a turn?, its length, its direction.
     """
 
     wheel: jnp.ndarray
     ir: jnp.ndarray
-    pixel: jnp.ndarray
+    camera: jnp.ndarray
     wander: jnp.ndarray
 
 
@@ -226,17 +226,28 @@ def _wander_wheels(k: int, state: State, u: jnp.ndarray, scene: Scene, params: S
 
 
 def ir_reading(distance: jnp.ndarray, params: SimParams) -> jnp.ndarray:
-    """IR reading(s) at ``distance`` (m from the rim): the table interpolated, 0 beyond it.
+    """IR reading(s) at ``distance`` (m from the rim): the table interpolated, its last value
+    beyond it (Webots' e-puck returns about 67 with nothing in range, not 0: SPEC 2)."""
+    return _table(distance, params.ir_dist, params.ir_value)
 
-    The same as ``jnp.interp(d, ir_dist, ir_value, right=0)`` for table distances that increase,
-    written as a telescoping sum of clipped ramps (a few fused ops instead of a search and a
-    gather, which also compiles much faster).
-    """
-    x, y = params.ir_dist, params.ir_value
+
+def ir_noise_std(distance: jnp.ndarray, params: SimParams) -> jnp.ndarray:
+    """Relative std of the IR reading(s) at ``distance`` (Webots' calibrated table, SPEC 2)."""
+    return _table(distance, params.ir_dist, params.ir_noise)
+
+
+def _table(distance: jnp.ndarray, x: jnp.ndarray, y: jnp.ndarray) -> jnp.ndarray:
+    """``jnp.interp(distance, x, y)`` for increasing ``x``, written as a telescoping sum of
+    clipped ramps (a few fused ops instead of a search and a gather)."""
     d = distance[..., None]
     ramp = jnp.clip((d - x[:-1]) / (x[1:] - x[:-1]), 0.0, 1.0)
-    value = y[0] + jnp.sum(ramp * (y[1:] - y[:-1]), axis=-1)
-    return jnp.where(distance > x[-1], 0.0, value)
+    return y[0] + jnp.sum(ramp * (y[1:] - y[:-1]), axis=-1)
+
+
+def _shift_columns(a: jnp.ndarray, by: int) -> jnp.ndarray:
+    """``a`` [..., 15] moved ``by`` (+-1) columns to the right, the vacated column False."""
+    empty = jnp.zeros_like(a[..., :1])
+    return jnp.concatenate([empty, a[..., :-1]] if by > 0 else [a[..., 1:], empty], axis=-1)
 
 
 def _unit(angles: jnp.ndarray) -> jnp.ndarray:
@@ -273,9 +284,10 @@ def sense(state: State, noise: StepNoise, world: World, params: SimParams) -> Ob
     t, mat, height = (v[:n_rays] for v in cast_rays(origins, dirs, scene))
 
     rim = jnp.maximum(t[:N_IR] - params.body_radius, 0.0)
-    ir = ir_reading(rim, params)
-    if world.ir_noise > 0:
-        ir = jnp.clip(ir * (1.0 + world.ir_noise * noise.ir), 0.0, params.ir_value[0])
+    # Webots' per-distance relative noise in every world, and the world's own on top (the two
+    # independent Gaussians combined into one with the summed variance).
+    std = jnp.sqrt(ir_noise_std(rim, params) ** 2 + world.ir_noise**2)
+    ir = jnp.clip(ir_reading(rim, params) * (1.0 + std * noise.ir), 0.0, params.ir_value[0])
 
     depth, cmat, ch = t[N_IR:], mat[N_IR:], height[N_IR:]
     in_range = depth <= params.camera_range
@@ -287,10 +299,20 @@ def sense(state: State, noise: StepNoise, world: World, params: SimParams) -> Ob
     covers = (rise <= ch[None, :] - params.camera_height) & (rise >= -params.camera_height)
     is_blue = ((cmat == MARKER) | (cmat == GOAL))[None, :]
     blue = covers & is_blue
-    if world.pixel_flip > 0:
-        blue = blue ^ (noise.pixel < world.pixel_flip)
+    goal_cols = jnp.broadcast_to((cmat == GOAL)[None, :], blue.shape)
+    if world.camera_miss > 0 or world.camera_shift > 0:
+        # Camera noise acts on the blob, never on single pixels, so it cannot invent a target
+        # (SPEC 2): the blob is missed, or shifted one column left or right.
+        u_shift = noise.camera[1]
+        left = u_shift < 0.5 * world.camera_shift
+        right = ~left & (u_shift < world.camera_shift)
+        shifted = lambda a: jnp.where(
+            left, _shift_columns(a, -1), jnp.where(right, _shift_columns(a, 1), a)
+        )
+        seen = noise.camera[0] >= world.camera_miss
+        blue, goal_cols = shifted(blue) & seen, shifted(goal_cols)
     n_blue = jnp.sum(blue, dtype=jnp.int32)
-    goal_px = jnp.sum(blue & (cmat == GOAL)[None, :], dtype=jnp.int32)
+    goal_px = jnp.sum(blue & goal_cols, dtype=jnp.int32)
     col_sum = jnp.sum(blue * cols[None, :])
     centroid = jnp.where(n_blue > 0, col_sum / jnp.maximum(n_blue, 1), (CAMERA_COLUMNS - 1) / 2)
     return Observation(
@@ -311,25 +333,21 @@ def sense(state: State, noise: StepNoise, world: World, params: SimParams) -> Ob
 def sample_step_noise(key: jax.Array, world: World) -> StepNoise:
     """Every random number one step uses; noise a world turns off is not drawn (zeros).
 
-    One flat uniform draw (and one normal draw when the world has IR or wheel noise) is sliced
-    into the fields: far cheaper to compile and run than a draw per field.
+    One flat uniform draw and one normal draw (IR noise is on in every world) are sliced into the
+    fields: far cheaper to compile and run than a draw per field.
     """
-    n_w, n_pix = world.n_wanderers, CAMERA_ROWS * CAMERA_COLUMNS
-    n_u = 3 * n_w + (n_pix if world.pixel_flip > 0 else 0)
-    n_z = (2 if world.wheel_noise > 0 else 0) + (N_IR if world.ir_noise > 0 else 0)
-    k_u, k_z = jax.random.split(key) if n_z else (key, None)
+    n_w = world.n_wanderers
+    noisy_camera = world.camera_miss > 0 or world.camera_shift > 0
+    n_u = 3 * n_w + (2 if noisy_camera else 0)
+    n_z = (2 if world.wheel_noise > 0 else 0) + N_IR
+    k_u, k_z = jax.random.split(key)
     u = jax.random.uniform(k_u, (n_u,)) if n_u else jnp.zeros(0)
-    z = jax.random.normal(k_z, (n_z,)) if n_z else jnp.zeros(0)
+    z = jax.random.normal(k_z, (n_z,))
     wander, u = u[: 3 * n_w].reshape(n_w, 3), u[3 * n_w :]
-    # A pixel never flips below a flip probability of 0, so a noiseless world gets ones.
-    pixel = (
-        u.reshape(CAMERA_ROWS, CAMERA_COLUMNS)
-        if u.size
-        else jnp.ones((CAMERA_ROWS, CAMERA_COLUMNS))
-    )
-    wheel, z = (z[:2], z[2:]) if world.wheel_noise > 0 else (jnp.zeros(2), z)
-    ir = z if world.ir_noise > 0 else jnp.zeros(N_IR)
-    return StepNoise(wheel=wheel, ir=ir, pixel=pixel, wander=wander)
+    # A blob is never missed or shifted below a probability of 0: a clean camera gets ones.
+    camera = u if noisy_camera else jnp.ones(2)
+    wheel, ir = (z[:2], z[2:]) if world.wheel_noise > 0 else (jnp.zeros(2), z)
+    return StepNoise(wheel=wheel, ir=ir, camera=camera, wander=wander)
 
 
 def step_with_noise(

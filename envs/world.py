@@ -46,8 +46,10 @@ class World:
         start_region: [4] region of the robot's start position; start_heading: [2] (min, max) rad.
         wanderer_region: [W, 4] start region of each wandering e-puck.
         name: the world's name (static). goal_shape: "box" or "ball" (static).
-        ir_noise: relative std of IR readings; pixel_flip: per-pixel flip probability;
-            wheel_noise: relative std of executed wheel speeds (static floats; all 0 = noiseless).
+        ir_noise: relative std of IR readings on top of the simulator's own (SimParams.ir_noise);
+            camera_miss: probability that the camera misses the blue blob in an iteration;
+            camera_shift: probability that the blob appears one column left or right;
+            wheel_noise: relative std of executed wheel speeds (static floats; 0 = off).
     """
 
     arena: jnp.ndarray
@@ -75,7 +77,8 @@ class World:
     # Noise levels are static: a noiseless world draws no noise at all (it is a large share of a
     # step's cost on a CPU), at the price of one compilation per noise level.
     ir_noise: float = static_field(default=0.0)
-    pixel_flip: float = static_field(default=0.0)
+    camera_miss: float = static_field(default=0.0)
+    camera_shift: float = static_field(default=0.0)
     wheel_noise: float = static_field(default=0.0)
 
     @property
@@ -294,11 +297,17 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
 
     noise_t = rd.get(doc, "noise", "", "table", {})
     noise = {}
-    for key, default in (("ir_relative_std", 0.0), ("pixel_flip_prob", 0.0)):
-        noise[key] = rd.get(noise_t, key, "noise", "number", default)
-    noise["wheel_relative_std"] = rd.get(noise_t, "wheel_relative_std", "noise", "number", 0.0)
+    probabilities = ("camera_miss_prob", "camera_shift_prob")
+    if "pixel_flip_prob" in noise_t:
+        raise _fail(
+            src,
+            "noise.pixel_flip_prob",
+            "per-pixel flips invent targets; use camera_miss_prob and camera_shift_prob",
+        )
+    for key in ("ir_relative_std", *probabilities, "wheel_relative_std"):
+        noise[key] = rd.get(noise_t, key, "noise", "number", 0.0)
     for key, value in noise.items():
-        hi = 1.0 if key == "pixel_flip_prob" else 10.0
+        hi = 1.0 if key in probabilities else 10.0
         if not 0.0 <= value <= hi:
             raise _fail(src, f"noise.{key}", f"must lie in [0, {hi:g}], got {value}")
 
@@ -348,7 +357,8 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
         name=name,
         goal_shape=goal_shape,
         ir_noise=noise["ir_relative_std"],
-        pixel_flip=noise["pixel_flip_prob"],
+        camera_miss=noise["camera_miss_prob"],
+        camera_shift=noise["camera_shift_prob"],
         wheel_noise=noise["wheel_relative_std"],
     )
 

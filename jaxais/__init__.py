@@ -8,8 +8,9 @@ stays free of JAX and a script can still set ``XLA_FLAGS`` before JAX starts)::
     results = run_trials(world, {"SIE": make_system("SIE", load_seed()[0])}, 30, seed=0)
 
 Submodules: ``envs`` (the simulator), ``antigens``, ``antibodies``, ``behaviours``,
-``reinforcement``, ``network`` (eqs 1-10), ``controllers``, ``episode`` (the task loop), ``ga``
-(LTL), ``checkpointing``, ``seed``, ``systems``, ``trials``, ``stats``, ``report``, ``plotting``.
+``reinforcement``, ``network`` (eqs 1-10), ``readings`` (our readings of the paper's open points),
+``controllers``, ``episode`` (the task loop), ``ga`` (LTL), ``checkpointing``, ``seed``,
+``systems``, ``trials``, ``stats``, ``claims`` (the paper's 32 claims), ``report``, ``plotting``.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ if (_checkout_envs / "worlds").is_dir() and not (Path(__file__).parent / "envs")
 _EXPORTS = {
     "GAConfig": "ga",
     "NetworkParams": "network",
+    "Readings": "readings",
     "EpisodeConfig": "episode",
     "System": "controllers",
     "LTL": "controllers",

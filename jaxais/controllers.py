@@ -18,6 +18,7 @@ import numpy as np
 
 from jaxais import prng
 from jaxais.antibodies import Antibodies, antibodies_from_uniform, take
+from jaxais.antigens import is_collision, is_obstacle_or_collision
 from jaxais.behaviours import wheel_speeds_from_uniform
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.episode import Controller, Percept
@@ -28,6 +29,7 @@ from jaxais.network import (
     rescale_paratopes,
     select_alpha_from_uniform,
 )
+from jaxais.readings import DEFAULT, Readings
 from jaxais.reinforcement import (
     PENALTY_NON_IDIOTYPIC,
     PenaltyCounters,
@@ -54,34 +56,93 @@ def _scored(shape: tuple[int, ...], index: tuple[jnp.ndarray, ...]) -> jnp.ndarr
     return mask
 
 
+def _level(m: jnp.ndarray) -> jnp.ndarray:
+    """0 target unseen, 1 target seen, 2 obstacle, 3 collision."""
+    return jnp.where(
+        is_obstacle_or_collision(m), 2 + is_collision(m).astype(jnp.int32), jnp.minimum(m, 1)
+    )
+
+
+def interrupts(m: jnp.ndarray, held: jnp.ndarray) -> jnp.ndarray:
+    """Does antigen ``m`` cut short the bout of the behaviour selected for antigen ``held``?
+
+    [ours] A more urgent situation (target seen while wandering, an obstacle, a collision), or
+    a new obstacle or collision on another side, gets a new selection at once; a calmer one
+    (the obstacle left behind) lets the bout run on, so a reverse turn backs all the way out.
+    """
+    level, held_level = _level(m), _level(held)
+    return (level > held_level) | ((level == held_level) & (level >= 2) & (m != held))
+
+
+@pytree_dataclass
+class Bout:
+    """The behaviour acting now (SPEC 5): it acts for ``Readings.hold`` iterations.
+
+    Attributes:
+        antigen: [] int32 the antigen it was selected for (its antibody column).
+        left: [] int32 iterations of the bout still to act after this one.
+        u: [2] the behaviour's uniforms, drawn at selection (a wander's turn decision holds for
+            the bout, so F % is the share of bouts, i.e. of time, spent turning).
+    """
+
+    antigen: jnp.ndarray
+    left: jnp.ndarray
+    u: jnp.ndarray
+
+
+def _init_bout() -> Bout:
+    return Bout(antigen=jnp.int32(0), left=jnp.int32(0), u=jnp.zeros(2))
+
+
+def _next_bout(bout: Bout, pc: Percept, u: jnp.ndarray, hold: jnp.ndarray):
+    """(select now?, the bout after this iteration's choice)."""
+    select = (bout.left <= 0) | interrupts(pc.m, bout.antigen)
+    new = Bout(
+        antigen=jnp.where(select, pc.m, bout.antigen).astype(jnp.int32),
+        left=jnp.where(select, hold - 1, bout.left - 1).astype(jnp.int32),
+        u=jnp.where(select, u, bout.u),
+    )
+    return select, new
+
+
 # ---------------------------------------------------------------------------------- LTL
 
 
 @pytree_dataclass
 class LTLState:
-    """A GA robot during its run: its set [8], the scores L [8] and the penalty counters."""
+    """A GA robot during its run: its set [8], the scores L [8], the penalty counters and the
+    behaviour acting now."""
 
     antibodies: Antibodies
     L: jnp.ndarray
     counters: PenaltyCounters
+    bout: Bout
 
 
-def ltl_controller() -> Controller:
+def ltl_controller(readings: Readings = DEFAULT) -> Controller:
     """One set, no idiotypic selection: the antibody for the antigen acts; RL accumulates L.
 
-    Params: an :class:`Antibodies` set [8]. L_ij is the cumulative RL score of antibody j,
-    clipped to [0, L_MAX] after every update; penalties subtract the non-idiotypic 1.0.
+    Params: an :class:`Antibodies` set [8]. The antibody selected for an antigen acts for a bout
+    (``readings.hold``, :class:`Bout`). L_ij is the cumulative RL score of antibody j, clipped
+    to [0, L_MAX] after every update; penalties subtract the non-idiotypic 1.0.
+
+    Args:
+        readings: our readings of the paper's open points (built in as constants).
     """
 
     def init(key, antibodies):
         del key
         n = antibodies.type.shape[0]
-        return LTLState(antibodies=antibodies, L=jnp.zeros(n), counters=init_counters())
+        return LTLState(
+            antibodies=antibodies, L=jnp.zeros(n), counters=init_counters(), bout=_init_bout()
+        )
 
     def learn(u, state: LTLState, pc: Percept, antibodies):
         del u, antibodies
-        scored = _scored(state.L.shape, (pc.m_prev,)) & (pc.t > 0)
-        counters, fire = update_penalty(state.counters, pc.m)
+        scored = _scored(state.L.shape, (state.bout.antigen,)) & (pc.t > 0)
+        counters, fire = update_penalty(
+            state.counters, pc.m, readings.count_encounters, readings.encounter_gap
+        )
         r = rl_score(pc.m_prev, pc.m, pc.v_prev, pc.v, pc.centroid)
         r = r - jnp.where(fire, PENALTY_NON_IDIOTYPIC, 0.0)
         L = jnp.where(scored, jnp.clip(state.L + r, 0.0, L_MAX), state.L)
@@ -89,8 +150,10 @@ def ltl_controller() -> Controller:
 
     def act(u, state: LTLState, pc: Percept, antibodies):
         del antibodies
-        ab = take(state.antibodies, pc.m)
-        return state, wheel_speeds_from_uniform(u, ab, pc.blue_pixels, pc.centroid)
+        _, bout = _next_bout(state.bout, pc, u, readings.hold)
+        ab = take(state.antibodies, bout.antigen)
+        wheels = wheel_speeds_from_uniform(bout.u, ab, pc.blue_pixels, pc.centroid)
+        return state.replace(bout=bout), wheels
 
     return Controller(init=init, learn=learn, act=act, n_uniform=lambda params: 2)
 
@@ -109,6 +172,7 @@ class System:
         idiotypic: three-stage idiotypic selection (eqs 5-10) rather than stage 1 alone.
         replacement: replace antibodies with P < 0.1 (unseeded systems).
         network: the network constants.
+        readings: our readings of the paper's open points (:mod:`jaxais.readings`).
     """
 
     antibodies: Antibodies
@@ -117,6 +181,7 @@ class System:
     idiotypic: jnp.ndarray
     replacement: jnp.ndarray
     network: NetworkParams
+    readings: Readings
 
 
 @pytree_dataclass
@@ -127,8 +192,9 @@ class STLState:
         antibodies: [x, y] current sets (replacement changes them).
         P: [x, y] paratopes. sigma0: [y] initial column means (eq 4). I: [x, y] idiotopes.
         N: [x, y] clone counts. counters: penalty runs.
-        acting: set index of the antibody that acted last (scored at the next iteration).
-        differences: iterations with alpha != beta. selections: iterations selected.
+        acting: set index of the antibody acting now (scored at the next iteration); its
+            antigen column is ``bout.antigen``. bout: the behaviour acting now.
+        differences: selections with alpha != beta. selections: selections made (one per bout).
         replaced: antibodies replaced so far.
         key: PRNG key of the periodic idiotope draws.
     """
@@ -140,6 +206,7 @@ class STLState:
     N: jnp.ndarray
     counters: PenaltyCounters
     acting: jnp.ndarray
+    bout: Bout
     differences: jnp.ndarray
     selections: jnp.ndarray
     replaced: jnp.ndarray
@@ -150,8 +217,9 @@ def stl_controller(
     replacement: bool = True, idiotypic: bool = True, learning: bool = True
 ) -> Controller:
     """The STL network: per iteration RL on the antibody that acted last, eq (4), penalties,
-    replacement (unseeded), the idiotope every ``idiotope_period`` iterations, then selection
-    (stage 1, or stages 1-3 when idiotypic) and the winner's behaviour.
+    replacement (unseeded), the idiotope every ``idiotope_period`` iterations, then, when a bout
+    ends or is interrupted (:class:`Bout`), selection (stage 1, or stages 1-3 when idiotypic);
+    the selected antibody's behaviour acts for the bout.
 
     Replacement [ours on the detail]: at most one antibody per iteration, the first (in set,
     antigen order) whose P is below 0.1; any others follow on later iterations.
@@ -173,11 +241,13 @@ def stl_controller(
         return STLState(
             antibodies=system.antibodies,
             P=P,
-            sigma0=jnp.mean(P, axis=0),
+            # Eq (4)'s targets, floored so that no column is pinned at 0 (jaxais.readings).
+            sigma0=jnp.maximum(jnp.mean(P, axis=0), system.readings.sigma0_floor),
             I=idiotopes(k_idiotope, P),
             N=jnp.full(P.shape, system.network.initial_clones, jnp.float32),
             counters=init_counters(),
             acting=jnp.int32(0),
+            bout=_init_bout(),
             differences=jnp.int32(0),
             selections=jnp.int32(0),
             replaced=jnp.int32(0),
@@ -201,18 +271,17 @@ def stl_controller(
     def learn(u, s: STLState, pc: Percept, system: System):
         u = split(u, system)
         P, antibodies, replaced = s.P, s.antibodies, s.replaced
-        if not learning:  # no run in the batch learns: only the penalty counters move
-            counters, _ = update_penalty(s.counters, pc.m)
-        else:
+        rd = system.readings
+        counters, fire = update_penalty(s.counters, pc.m, rd.count_encounters, rd.encounter_gap)
+        if learning:  # else no run in the batch learns: only the penalty counters move
             on = system.learning
-            scored = _scored(s.P.shape, (s.acting, pc.m_prev)) & (pc.t > 0) & on
+            scored = _scored(s.P.shape, (s.acting, s.bout.antigen)) & (pc.t > 0) & on
             r = rl_score(pc.m_prev, pc.m, pc.v_prev, pc.v, pc.centroid)
             P = jnp.where(scored, jnp.clip(s.P + r, 0.0, 1.0), s.P)
             # Eq (4), then the paper's bounds: "the maximum P allowed is 1.00, the minimum 0.00"
             # (the rescale alone can lift an entry above 1; column means then fall a little short
             # of sigma0, and only while the bound binds).
             P = jnp.where(on, jnp.clip(rescale_paratopes(P, s.sigma0), 0.0, 1.0), P)
-            counters, fire = update_penalty(s.counters, pc.m)
             P = jnp.where(scored & fire, jnp.clip(P - penalty_size(system.idiotypic), 0.0, 1.0), P)
             if replacement:  # only a learning run replaces
                 weak = (P < REPLACE_BELOW) & system.replacement & on
@@ -245,25 +314,25 @@ def stl_controller(
 
     def act(u, s: STLState, pc: Percept, system: System):
         u = split(u, system)
+        select, bout = _next_bout(s.bout, pc, u["behave"], system.readings.hold)
         tiebreaks = u["select"].reshape(2, -1)
         if idiotypic:
             alpha, beta, N = idiotypic_select_from_uniform(
                 tiebreaks, s.P, s.I, s.N, pc.m, system.network
             )
             idio = system.idiotypic
-            acting = jnp.where(idio, beta, alpha)
-            ab = take(s.antibodies, (acting, pc.m))
+            chosen = jnp.where(idio, beta, alpha)
+            differ = idio & (alpha != beta) & select
             s = s.replace(
-                N=jnp.where(idio, N, s.N),
-                acting=acting,
-                differences=s.differences + (idio & (alpha != beta)).astype(jnp.int32),
-                selections=s.selections + 1,
+                N=jnp.where(idio & select, N, s.N),
+                differences=s.differences + differ.astype(jnp.int32),
             )
         else:  # no run in the batch is idiotypic: stage 1 alone, the clones never change
-            acting = select_alpha_from_uniform(tiebreaks[0], s.P, pc.m)
-            ab = take(s.antibodies, (acting, pc.m))
-            s = s.replace(acting=acting, selections=s.selections + 1)
-        return s, wheel_speeds_from_uniform(u["behave"], ab, pc.blue_pixels, pc.centroid)
+            chosen = select_alpha_from_uniform(tiebreaks[0], s.P, pc.m)
+        acting = jnp.where(select, chosen, s.acting).astype(jnp.int32)
+        s = s.replace(acting=acting, bout=bout, selections=s.selections + select.astype(jnp.int32))
+        ab = take(s.antibodies, (acting, bout.antigen))
+        return s, wheel_speeds_from_uniform(bout.u, ab, pc.blue_pixels, pc.centroid)
 
     return Controller(init=init, learn=learn, act=act, n_uniform=n_uniform)
 

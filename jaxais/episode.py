@@ -24,7 +24,7 @@ import numpy as np
 from jax.extend.core import jaxpr_as_fun
 
 from jaxais import envs, prng
-from jaxais.antigens import antigen, is_collision
+from jaxais.antigens import OBSTACLE_THRESHOLD, antigen, is_collision
 from jaxais.envs.struct import pytree_dataclass
 
 # Why a run ended (failed_by codes).
@@ -38,9 +38,19 @@ class EpisodeConfig:
 
     Attributes:
         tau_cap: time cap, simulated seconds [paper: 4000 s STL, ours: 500 s LTL].
-        collision_cap: collision cap [paper: 100].
+        collision_cap: collision cap [paper: 100]; a run with more collisions has failed.
+        stop_at_collision_cap: end a run when it reaches the collision cap. The paper's STL runs
+            did not stop there (SPEC 9: in its Table 5 one run can breach both caps), so this is
+            off by default; the GA's evaluation turns it on (its LTL caps, SPEC 10).
+        collision_rule: "episode" counts one collision per contact episode: the antigen enters
+            5-7 and the robot has been free of obstacles (Vm < 250) since the last counted one
+            [ours, SPEC 9]; "entry" counts every entry into 5-7 from another antigen (the
+            earlier reading, which also counts the chatter of one long contact).
         finish_pixels: a run ends after more than this many goal pixels ... [paper: 40]
         finish_streak: ... on this many consecutive iterations [paper: 3].
+        trap_radius, trap_window: a robot is trapped while it has stayed within ``trap_radius``
+            m of one point for at least ``trap_window`` s; the whole stay counts as trapped time
+            [ours: 0.1 m, under three body diameters; 10 s].
         chunk: iterations per inner loop; trajectories are sampled once per chunk.
         segment: iterations per compiled call of :func:`rollout`'s driver (progress granularity).
         record: keep the trajectory (one pose per chunk).
@@ -48,14 +58,23 @@ class EpisodeConfig:
 
     tau_cap: float = 4000.0
     collision_cap: int = 100
+    stop_at_collision_cap: bool = False
+    collision_rule: str = "episode"
     finish_pixels: int = 40
     finish_streak: int = 3
+    trap_radius: float = 0.1
+    trap_window: float = 10.0
     chunk: int = 25
     segment: int = 5000
     record: bool = False
 
     def __post_init__(self):
-        for name in ("tau_cap", "collision_cap", "finish_streak", "chunk", "segment"):
+        if self.collision_rule not in ("episode", "entry"):
+            raise ValueError(
+                f"collision_rule must be 'episode' or 'entry', got {self.collision_rule!r}"
+            )
+        names = ("tau_cap", "collision_cap", "finish_streak", "trap_radius", "trap_window")
+        for name in (*names, "chunk", "segment"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
@@ -67,6 +86,10 @@ class EpisodeConfig:
     def max_iterations(self, dt: float) -> int:
         """Iterations until the time cap."""
         return int(math.ceil(self.tau_cap / dt - 1e-9))
+
+    def trap_iterations(self, dt: float) -> int:
+        """Iterations within the trap disc after which a robot counts as trapped."""
+        return max(1, round(self.trap_window / dt))
 
 
 @pytree_dataclass
@@ -116,8 +139,11 @@ class Run:
 
     Attributes:
         sim: simulator state. obs: last observation. ctrl: controller state. key: PRNG key.
-        m_prev, v_prev: previous antigen and Vm. collisions: collisions so far.
+        m_prev, v_prev: previous antigen and Vm. collisions: collisions so far (uncapped).
+        free: no obstacle seen since the last counted collision (the episode rule).
         streak: consecutive iterations with more than finish_pixels goal pixels.
+        anchor: [2] centre of the current trap disc. still: iterations spent within it.
+        trapped: iterations counted as trapped (EpisodeConfig.trap_radius, trap_window).
         t: iterations so far. status: RUNNING, FINISHED, FAILED_COLLISIONS or FAILED_TIME.
     """
 
@@ -128,7 +154,11 @@ class Run:
     m_prev: jnp.ndarray
     v_prev: jnp.ndarray
     collisions: jnp.ndarray
+    free: jnp.ndarray
     streak: jnp.ndarray
+    anchor: jnp.ndarray
+    still: jnp.ndarray
+    trapped: jnp.ndarray
     t: jnp.ndarray
     status: jnp.ndarray
 
@@ -160,7 +190,11 @@ def start(
         m_prev=jnp.int32(0),
         v_prev=jnp.float32(0.0),
         collisions=jnp.int32(0),
+        free=jnp.bool_(True),
         streak=jnp.int32(0),
+        anchor=sim.pose[:2],
+        still=jnp.int32(0),
+        trapped=jnp.int32(0),
         t=jnp.int32(0),
         status=jnp.int32(RUNNING),
     )
@@ -185,13 +219,19 @@ def iterate(
     """
     obs = run.obs
     m = antigen(obs.ir, obs.blue_pixels)
-    # A collision is the antigen entering 5-7 from a non-collision antigen [ours].
-    collisions = run.collisions + (is_collision(m) & ~is_collision(run.m_prev)).astype(jnp.int32)
+    if config.collision_rule == "episode":  # one per contact episode (EpisodeConfig)
+        counted_now = is_collision(m) & run.free
+        free = (run.free & ~counted_now) | (obs.vm < OBSTACLE_THRESHOLD)
+    else:  # every entry into 5-7
+        counted_now = is_collision(m) & ~is_collision(run.m_prev)
+        free = run.free
+    collisions = run.collisions + counted_now.astype(jnp.int32)
     streak = jnp.where(obs.goal_pixels > config.finish_pixels, run.streak + 1, 0)
+    stop_c = collisions >= config.collision_cap
     status = jnp.select(
         [
             streak >= config.finish_streak,
-            collisions >= config.collision_cap,
+            stop_c & config.stop_at_collision_cap,
             run.t >= config.max_iterations(sim_params.dt),
         ],
         [FINISHED, FAILED_COLLISIONS, FAILED_TIME],
@@ -211,6 +251,13 @@ def iterate(
     ctrl, wheels = controller.act(u, ctrl, percept, ctrl_params)
     sim, new_obs = envs.step_with_noise(run.sim, wheels, sim_noise, world, sim_params)
     new_obs = _carried(new_obs)
+    # Trapped time: a stay within trap_radius of the anchor counts, whole, once it lasts the
+    # window (at the window all of it is added, then one iteration at a time).
+    pos = sim.pose[:2]
+    away = jnp.sum((pos - run.anchor) ** 2) > config.trap_radius**2
+    still = jnp.where(away, 0, run.still + 1)
+    window = config.trap_iterations(sim_params.dt)
+    trapped = run.trapped + jnp.where(still == window, window, (still > window).astype(jnp.int32))
     # The iteration that detects the end records the counts and status and moves nothing; a run
     # that ended earlier keeps everything. One select over the whole run, three over the counts.
     live = run.status == RUNNING
@@ -220,7 +267,16 @@ def iterate(
         status=jnp.where(live, status, run.status),
     )
     moved = counted.replace(
-        sim=sim, obs=new_obs, ctrl=ctrl, m_prev=m, v_prev=percept.v, t=run.t + 1
+        sim=sim,
+        obs=new_obs,
+        ctrl=ctrl,
+        m_prev=m,
+        v_prev=percept.v,
+        free=free,
+        anchor=jnp.where(away, pos, run.anchor),
+        still=still,
+        trapped=trapped,
+        t=run.t + 1,
     )
     return jax.tree.map(lambda a, b: jnp.where(live & (status == RUNNING), a, b), moved, counted)
 
@@ -584,19 +640,26 @@ def rollout(
 
 
 def outcome(runs: Run, config: EpisodeConfig, dt: float) -> dict[str, np.ndarray]:
-    """Per-run τ (s, capped), collisions (capped), f = (ρc + τ)/2 with ρ = 8, and the status.
+    """Per-run τ (s, capped), collisions (raw and capped), f = (ρc + τ)/2 with ρ = 8 and the
+    capped c (SPEC 9), the failures, trapped time and the status.
 
     Returns:
-        NumPy arrays [n]: tau, collisions, fitness, status, iterations.
+        NumPy arrays [n]: tau, collisions (raw), collisions_capped, fitness, failed_collisions
+        (c > cap), failed_time (the time cap reached), trapped_s, status, iterations.
     """
     status = np.asarray(runs.status)
     t = np.asarray(runs.t)
     tau = np.minimum(t * dt, config.tau_cap)
-    collisions = np.minimum(np.asarray(runs.collisions), config.collision_cap)
+    raw = np.asarray(runs.collisions)
+    capped = np.minimum(raw, config.collision_cap)
     return {
         "tau": tau,
-        "collisions": collisions,
-        "fitness": fitness(tau, collisions),
+        "collisions": raw,
+        "collisions_capped": capped,
+        "fitness": fitness(tau, capped),
+        "failed_collisions": raw > config.collision_cap,
+        "failed_time": status == FAILED_TIME,
+        "trapped_s": np.asarray(runs.trapped) * dt,
         "status": status,
         "iterations": t,
     }

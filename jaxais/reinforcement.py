@@ -99,7 +99,8 @@ a real 2-7 antigen, whose Vm is at least 250)."""
 UNSEEN_LIMIT = 250
 """Penalise after more than this many consecutive iterations of antigen 0."""
 OBSTACLE_LIMIT = 15
-"""Penalise after more than this many consecutive iterations of antigens 2-7."""
+"""Penalise after more than this many consecutive obstacle encounters (what an encounter is:
+:class:`jaxais.readings.Readings`)."""
 PENALTY_IDIOTYPIC = 0.5
 """Score removed from the acting antibody by a penalty in idiotypic systems."""
 PENALTY_NON_IDIOTYPIC = 1.0
@@ -169,46 +170,69 @@ class PenaltyCounters:
     Attributes:
         unseen_run: [] int32 consecutive iterations of antigen 0, up to and including the last
             one passed to :func:`update_penalty` (0 after a penalty).
-        obstacle_run: [] int32 consecutive iterations of antigens 2-7, likewise.
+        obstacle_run: [] int32 consecutive obstacle encounters, likewise.
+        clear_run: [] int32 consecutive iterations of antigens 0-1 (Vm < 250).
     """
 
     unseen_run: jnp.ndarray
     obstacle_run: jnp.ndarray
+    clear_run: jnp.ndarray
 
 
 def init_counters() -> PenaltyCounters:
-    """Counters at the start of a run (no antigen seen yet)."""
-    return PenaltyCounters(unseen_run=jnp.int32(0), obstacle_run=jnp.int32(0))
+    """Counters at the start of a run (no antigen seen yet: clear)."""
+    return PenaltyCounters(
+        unseen_run=jnp.int32(0), obstacle_run=jnp.int32(0), clear_run=jnp.int32(1)
+    )
 
 
 def update_penalty(
-    counters: PenaltyCounters, m: jnp.ndarray
+    counters: PenaltyCounters,
+    m: jnp.ndarray,
+    count_encounters: bool | jnp.ndarray = False,
+    encounter_gap: int | jnp.ndarray = 1,
 ) -> tuple[PenaltyCounters, jnp.ndarray]:
     """Count the current antigen ``m`` into the runs and say whether a penalty fires now.
 
-    A run grows by one for each consecutive iteration whose antigen is in its group (0 for the
-    unseen run, 2-7 for the obstacle run) and drops to 0 on any other antigen. A penalty fires on
-    the iteration that makes a run exceed its limit, i.e. on the 251st consecutive antigen 0 or
-    the 16th consecutive antigen in 2-7; that run then restarts at 0, so while the robot stays
-    stuck the penalty repeats on the 502nd, 753rd, ... (resp. 32nd, 48th, ...) consecutive
-    iteration. Call it once per iteration with that iteration's antigen, and apply
-    ``PENALTY_IDIOTYPIC`` or ``PENALTY_NON_IDIOTYPIC`` (see :func:`penalty_size`) to the antibody
-    that is being scored when it returns True.
+    The unseen run grows by one for each consecutive iteration of antigen 0 and drops to 0 on
+    any other [paper: "more than 250 iterations"]. The obstacle run counts encounters:
+
+    - ``count_encounters`` [ours]: an encounter is an entry into antigens 2-7 from 0-1, and the
+      run ends only after ``encounter_gap`` consecutive clear iterations (the robot has moved
+      well away). A robot hovering at the obstacle threshold, whose antigen flips between 0 and
+      2-7, then racks up encounters and is caught; a long unbroken contact is one encounter
+      (Table 2's no-progress term scores that).
+    - otherwise (the literal reading): every iteration of 2-7 counts, one clear iteration ends
+      the run; it fires after 0.48 s of unbroken contact and never catches the hoverer.
+
+    A penalty fires on the iteration that makes a run exceed its limit (the 251st antigen 0, the
+    16th encounter); that run then restarts at 0, so while the robot stays stuck the penalty
+    repeats. Apply ``penalty_size`` to the antibody being scored when it returns True.
 
     Args:
         counters: runs before this iteration.
         m: [] int antigen of this iteration.
+        count_encounters: [] bool, the reading (see above).
+        encounter_gap: [] int clear iterations that end a run of encounters.
 
     Returns:
         (updated counters, [] bool penalise).
     """
+    obstacle_now = is_obstacle_or_collision(m)
     unseen = jnp.where(m == TARGET_UNSEEN, counters.unseen_run + 1, 0)
-    obstacle = jnp.where(is_obstacle_or_collision(m), counters.obstacle_run + 1, 0)
+    clear = jnp.where(obstacle_now, 0, counters.clear_run + 1)
+    entered = obstacle_now & (counters.clear_run > 0)
+    encounters = jnp.where(
+        clear >= encounter_gap, 0, counters.obstacle_run + entered.astype(jnp.int32)
+    )
+    iterations = jnp.where(obstacle_now, counters.obstacle_run + 1, 0)
+    obstacle = jnp.where(count_encounters, encounters, iterations)
     fire_unseen = unseen > UNSEEN_LIMIT
     fire_obstacle = obstacle > OBSTACLE_LIMIT
     new = PenaltyCounters(
         unseen_run=jnp.where(fire_unseen, 0, unseen).astype(jnp.int32),
         obstacle_run=jnp.where(fire_obstacle, 0, obstacle).astype(jnp.int32),
+        clear_run=clear.astype(jnp.int32),
     )
     return new, fire_unseen | fire_obstacle
 

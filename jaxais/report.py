@@ -1,4 +1,5 @@
-"""The results report: our Tables 3-5 beside the paper's, H1-H4, robustness tests and figures.
+"""The results report: the claims ledger, our Tables 3-5 beside the paper's, H1-H4, robustness
+tests and figures.
 
 Figures are drawn with matplotlib's object-oriented API on the Agg canvas (no pyplot, no
 display, no global backend change). The paper's tables ship as package data and are loaded with
@@ -18,7 +19,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from . import stats
+from . import claims, stats
 
 __all__ = ["load_paper_tables", "ordering_differences", "write_report"]
 
@@ -78,7 +79,7 @@ def _p(p: float) -> str:
 
 def _table(header: Sequence[str], body: Sequence[Sequence[str]], align: str = "") -> list[str]:
     align = align or "l" + "r" * (len(header) - 1)
-    sep = ["---:" if a == "r" else "---" for a in align]
+    sep = [{"r": "---:", "c": ":---:"}.get(a, "---") for a in align]
     lines = ["| " + " | ".join(header) + " |", "| " + " | ".join(sep) + " |"]
     lines += ["| " + " | ".join(row) + " |" for row in body]
     return lines + [""]
@@ -148,6 +149,24 @@ def _flagged(diffs: Sequence[Mapping[str, Any]]) -> set[tuple[str, str, str]]:
 # --------------------------------------------------------------------------- sections
 
 
+def _claims_section(ledger: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The ledger line, a note on unevaluated claims, and one table row per claim."""
+    counts = claims.summary(ledger)
+    lines = [claims.headline(counts), ""]
+    missing = counts["total"] - counts["evaluated"]
+    if missing:
+        lines += [
+            f"{missing} of the paper's {counts['total']} claims could not be evaluated (no "
+            "results for their world or systems); they are marked – below.",
+            "",
+        ]
+    mark = {True: "✓", False: "✗", None: "–"}
+    body = [
+        [c["id"], c["text"], mark[c["held"]], c["evidence"].replace("|", "\\|")] for c in ledger
+    ]
+    return lines + _table(["Claim", "The paper says", "Held", "Evidence (ours)"], body, "llcl")
+
+
 def _side_by_side(
     title: str,
     ours: Mapping[str, Any],
@@ -155,12 +174,16 @@ def _side_by_side(
     cols: Sequence[tuple[str, str, int]],
     flagged: set[tuple[str, str, str]],
     n_trials: Mapping[str, Mapping[str, int]] | None,
+    extra: tuple[str, Mapping[str, Mapping[str, Any]]] | None = None,
 ) -> list[str]:
+    """Our table beside the paper's, per world; ``extra = (header, {world: {system: value}})``
+    adds a last column of ours alone (one decimal)."""
     lines = [f"### {title}", ""]
     for world in _worlds(ours, paper):
         mine, theirs = ours.get(world, {}), paper.get(world, {})
         header = ["System"] + (["n"] if n_trials is not None else [])
         header += [f"{h} ours / paper" for _, h, _ in cols]
+        header += [extra[0]] if extra else []
         body = []
         for s in _rows(mine, theirs):
             row = [s] + ([str(n_trials.get(world, {}).get(s, "–"))] if n_trials is not None else [])
@@ -169,6 +192,8 @@ def _side_by_side(
                 b = theirs.get(s, {}).get(key)
                 mark = f" {_RANK_MARK}" if (world, s, key) in flagged else ""
                 row.append(f"{_num(a, dec)} / {_num(b)}{mark}")
+            if extra:
+                row.append(_num(extra[1].get(world, {}).get(s), 1))
             body.append(row)
         lines += [f"**{world}**", ""] + _table(header, body)
     return lines
@@ -498,8 +523,13 @@ def write_report(
     timings: Mapping[str, Any] | None,
     example_trajectories: Mapping[str, Mapping[str, np.ndarray]] | None = None,
     world_drawer: WorldDrawer | None = None,
+    claims_ledger: Sequence[Mapping[str, Any]] | None = None,
 ) -> Path:
     """Write ``out_dir/report.md`` and its figures in ``out_dir/figures/``.
+
+    The report opens with the claims ledger ("**N of M of the paper's claims reproduced**" and a
+    table of every claim), then H1-H4, the tables beside the paper's, the robustness tests, the
+    idiotypic difference rates, the LTL summary, the figures and the run configuration.
 
     Args:
         out_dir: output folder (created if needed).
@@ -517,6 +547,8 @@ def write_report(
         timings: ``None`` or ``{stage: seconds or nested dict}``.
         example_trajectories: ``{world: {system: xy [T, 2]}}`` drawn to ``figures/traj_{world}``.
         world_drawer: ``world_drawer(ax, world_name)`` draws the world under each trajectory.
+        claims_ledger: :func:`jaxais.claims.claims` of ``results_by_world`` (computed here at
+            the 99 % level when ``None``).
 
     Returns:
         The path of ``report.md``.
@@ -548,20 +580,38 @@ def write_report(
     diffs3 = ordering_differences(tables["table3"], p3, stats.METRICS)
     diffs5 = ordering_differences(tables["table5"], p5, stats.FAILURE_COLUMNS)
 
-    lines = [
-        "# jaxais results beside Whitbrook, Aickelin & Garibaldi (2008)",
-        "",
+    if claims_ledger is None:
+        claims_ledger = claims.claims(results_by_world)
+    trapped = tables.get("trapped_s", {})
+    has_trapped = any(v is not None for row in trapped.values() for v in row.values())
+
+    lines = ["# jaxais results beside Whitbrook, Aickelin & Garibaldi (2008)", ""]
+    lines += _claims_section(claims_ledger)
+    lines += [
         f"Paper: {paper.get('source', 'see jaxais/data/paper_tables.json')}",
         "",
-        "Lower is better for c (collisions), τ (seconds) and f = (8c + τ)/2. Each cell reads "
-        "*ours / paper*; – marks a value that does not exist. † marks a system whose rank among "
-        "the systems of that world and column differs from the paper's.",
+        "Lower is better for c (collisions), τ (seconds) and f = (8c + τ)/2; the means use c "
+        "capped at 100, as the paper's Table 3 does. Each cell reads *ours / paper*; – marks a "
+        "value that does not exist. † marks a system whose rank among the systems of that world "
+        "and column differs from the paper's."
+        + (
+            " *Trapped* is the mean simulated time (s) a robot spent trapped (ours; the paper "
+            "has no such column)."
+            if has_trapped
+            else ""
+        ),
         "",
     ]
     lines += _hypotheses_section(tables["hypotheses"], paper.get("hypotheses", {}))
     lines += ["## Tables", ""]
     lines += _side_by_side(
-        "Table 3: mean c, τ and f", tables["table3"], p3, _T3_COLS, _flagged(diffs3), n_trials
+        "Table 3: mean c, τ and f",
+        tables["table3"],
+        p3,
+        _T3_COLS,
+        _flagged(diffs3),
+        n_trials,
+        ("trapped (s), ours", trapped) if has_trapped else None,
     )
     lines += _side_by_side(
         "Table 5: failure rates (%) by collision cap, by time cap and overall",
@@ -572,8 +622,8 @@ def write_report(
         None,
     )
     lines += [
-        "In the paper the c-cap and τ-cap columns overlap (a run can breach both); ours stop at "
-        "the first cap, so our c + τ = total.",
+        "A run can breach both caps (more than 100 collisions and no finish by 4000 s), so the "
+        "c-cap and τ-cap columns overlap and c + τ may exceed total, in ours as in the paper's.",
         "",
     ]
     lines += _table4_section(tables["table4"], p4)

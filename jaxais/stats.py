@@ -5,7 +5,11 @@ Plain NumPy/SciPy, run outside jit on finished trial records. Lower is better fo
 
 A trial record is a dict (see :class:`TrialRecord`); the results of one world are
 ``dict[system_name, list[TrialRecord]]`` and ``results_by_world`` maps world names to those.
-Failed trials are included in the means with their capped values, as the paper's Table 3 does.
+Failed trials are included in the means with their capped values, as the paper's Table 3 does:
+c is the collision count capped at 100 (``collisions_capped``; the raw count can run to
+thousands) and tau is capped at 4000 s by the run itself. A run can breach both caps (SPEC 9), so
+Table 5's c and tau columns overlap. Records of the older schema (no ``collisions_capped``,
+``failed_by`` a single string or ``None``) are still read.
 
 Degenerate samples never raise or return NaN:
 
@@ -30,6 +34,7 @@ from scipy import stats as sps
 
 __all__ = [
     "ALPHA",
+    "COLLISION_CAP",
     "COMPARISONS",
     "FAILURE_COLUMNS",
     "METRICS",
@@ -46,6 +51,7 @@ __all__ = [
     "comparisons",
     "hypotheses",
     "idiotypic_difference_rates",
+    "failure_causes",
     "jsonable",
     "mann_whitney_u",
     "metric_values",
@@ -55,6 +61,7 @@ __all__ = [
     "table3",
     "table4",
     "table5",
+    "trapped_times",
     "welch_t",
 ]
 
@@ -70,6 +77,8 @@ FAILURE_COLUMNS: tuple[str, ...] = ("c", "tau", "total")
 """Table 5 keys: failures by collision cap, by time cap, overall."""
 ALPHA = 0.01
 """The paper accepts differences at the 99 % level only."""
+COLLISION_CAP = 100
+"""Table 3 caps c at this count (the paper's largest mean c is exactly 100)."""
 
 COMPARISONS: tuple[tuple[str, str], ...] = (
     ("SIE", "SRL"),
@@ -87,19 +96,30 @@ COMPARISONS: tuple[tuple[str, str], ...] = (
 )
 """The 12 comparisons of the paper's Table 4, in its row order."""
 
-_RECORD_KEY = {"c": "collisions", "tau": "tau", "f": "fitness"}
+_RECORD_KEY = {"tau": "tau", "f": "fitness"}
 
 
 class TrialRecord(TypedDict):
-    """One STL trial, as produced by the trial runner (SPEC 9)."""
+    """One STL trial, as produced by the trial runner (SPEC 9).
+
+    ``collisions`` is the raw count; ``collisions_capped = min(collisions, 100)`` and
+    ``fitness = (8 collisions_capped + tau) / 2``. ``failed_by`` lists the caps breached (both
+    may be): ``failed_collisions`` is ``collisions > 100``, ``failed_time`` a run that hit the
+    4000 s cap, ``failed`` either. ``trapped_s`` is the simulated time spent trapped.
+    """
 
     tau: float
     collisions: int
+    collisions_capped: int
     fitness: float
     failed: bool
-    failed_by: Literal["collisions", "time"] | None
+    failed_collisions: bool
+    failed_time: bool
+    failed_by: list[Literal["collisions", "time"]]
+    trapped_s: float
     idiotypic_difference_rate: float | None
     iterations: int
+    replaced: int
 
 
 Results = Mapping[str, Sequence[Mapping[str, Any]]]
@@ -144,10 +164,37 @@ def _ordered_systems(results: Results) -> list[str]:
     return [s for s in SYSTEMS if s in have] + [s for s in have if s not in SYSTEMS]
 
 
+def _capped_c(trial: Mapping[str, Any]) -> float:
+    """``collisions_capped``, or ``min(collisions, 100)`` for records without it."""
+    if "collisions_capped" in trial:
+        return float(trial["collisions_capped"])
+    return float(min(trial["collisions"], COLLISION_CAP))
+
+
 def metric_values(trials: Sequence[Mapping[str, Any]], metric: str) -> np.ndarray:
-    """Values of ``metric`` ("c", "tau" or "f") over ``trials``, float64 ``[n]``."""
+    """Values of ``metric`` ("c", "tau" or "f") over ``trials``, float64 ``[n]``.
+
+    "c" is the capped collision count (Table 3's, and the one in f), not the raw count.
+    """
+    if metric == "c":
+        return np.asarray([_capped_c(t) for t in trials], dtype=np.float64)
     key = _RECORD_KEY[metric]
     return np.asarray([float(t[key]) for t in trials], dtype=np.float64)
+
+
+def failure_causes(trial: Mapping[str, Any]) -> frozenset[str]:
+    """The caps a trial breached: a subset of ``{"collisions", "time"}``.
+
+    Read from ``failed_collisions`` / ``failed_time`` when present, else from ``failed_by``
+    (a list, or the older single string or ``None``).
+    """
+    if "failed_collisions" in trial or "failed_time" in trial:
+        flags = {"collisions": trial.get("failed_collisions"), "time": trial.get("failed_time")}
+        return frozenset(k for k, v in flags.items() if v)
+    by = trial.get("failed_by")
+    if by is None:
+        return frozenset()
+    return frozenset([by] if isinstance(by, str) else by)
 
 
 # --------------------------------------------------------------------------- tests
@@ -269,11 +316,11 @@ def table3(results_by_world: ResultsByWorld) -> dict[str, dict[str, dict[str, fl
 
 def _failure_row(trials: Sequence[Mapping[str, Any]]) -> dict[str, float]:
     n = len(trials)
-    by = [t.get("failed_by") for t in trials]
-    failed = [bool(t.get("failed")) or b is not None for t, b in zip(trials, by, strict=True)]
+    causes = [failure_causes(t) for t in trials]
+    failed = [bool(t.get("failed")) or bool(b) for t, b in zip(trials, causes, strict=True)]
     return {
-        "c": 100.0 * by.count("collisions") / n,
-        "tau": 100.0 * by.count("time") / n,
+        "c": 100.0 * sum("collisions" in b for b in causes) / n,
+        "tau": 100.0 * sum("time" in b for b in causes) / n,
         "total": 100.0 * sum(failed) / n,
     }
 
@@ -281,9 +328,10 @@ def _failure_row(trials: Sequence[Mapping[str, Any]]) -> dict[str, float]:
 def table5(results_by_world: ResultsByWorld) -> dict[str, dict[str, dict[str, float]]]:
     """Failure percentages per world and system (the paper's Table 5).
 
-    A trial counts as failed when ``failed`` is true or ``failed_by`` is set; ``"c"`` counts
-    ``failed_by == "collisions"``, ``"tau"`` counts ``failed_by == "time"``. Our runs stop at the
-    first cap, so c + tau = total (the paper's columns overlap).
+    ``"c"`` counts the trials failed by collisions (c > 100), ``"tau"`` those failed by time (the
+    4000 s cap), ``"total"`` those failed by either (or marked ``failed``); see
+    :func:`failure_causes`. A run can breach both caps, so c + tau may exceed total, as in the
+    paper.
 
     Returns:
         ``{world: {system: {"c": %, "tau": %, "total": %}}}`` as floats in [0, 100].
@@ -368,6 +416,22 @@ def idiotypic_difference_rates(results_by_world: ResultsByWorld) -> dict[str, di
     return out
 
 
+def trapped_times(results_by_world: ResultsByWorld) -> dict[str, dict[str, float | None]]:
+    """Mean simulated time spent trapped (``trapped_s``, seconds) per world and system.
+
+    Returns:
+        ``{world: {system: float | None}}``; ``None`` when no trial of the system records it.
+    """
+    out: dict[str, dict[str, float | None]] = {}
+    for world, results in results_by_world.items():
+        row: dict[str, float | None] = {}
+        for s in _ordered_systems(results):
+            values = [float(t["trapped_s"]) for t in results[s] if t.get("trapped_s") is not None]
+            row[s] = float(np.mean(values)) if values else None
+        out[world] = row
+    return out
+
+
 # --------------------------------------------------------------------------- hypotheses
 
 
@@ -406,7 +470,7 @@ def _h1(results_by_world: ResultsByWorld, alpha: float) -> dict[str, Any]:
         if any(s in _ordered_systems(results_by_world[w]) for s in UNSEEDED)
     ]
     if not worlds:
-        return {"supported": False, "evidence": "Not testable: no world has SIE and unseeded."}
+        return _untestable("no world has SIE and unseeded")
     fails, parts = [], []
     for w in worlds:
         res = results_by_world[w]
@@ -441,7 +505,7 @@ def _beats(results_by_world: ResultsByWorld, other: str, alpha: float) -> dict[s
     )
     worlds = _worlds(results_by_world, ["SIE", other])
     if not worlds:
-        return {"supported": False, "evidence": f"Not testable: no world has SIE and {other}."}
+        return _untestable(f"no world has SIE and {other}")
     fails, parts, n_sig = [], [], 0
     for w in worlds:
         a, b = _f(results_by_world[w], "SIE"), _f(results_by_world[w], other)
@@ -464,7 +528,7 @@ def _h4(results_by_world: ResultsByWorld) -> dict[str, Any]:
     rule = "Rule: SIE (no antibody replacement) has 0 failed trials in every world tested."
     worlds = _worlds(results_by_world, ["SIE"])
     if not worlds:
-        return {"supported": False, "evidence": "Not testable: no SIE results."}
+        return _untestable("no SIE results")
     parts, fails = [], []
     for w in worlds:
         row = _failure_row(results_by_world[w]["SIE"])
@@ -475,12 +539,17 @@ def _h4(results_by_world: ResultsByWorld) -> dict[str, Any]:
     return _verdict(not fails, rule, parts, fails)
 
 
+def _untestable(why: str) -> dict[str, Any]:
+    text = f"Not testable: {why}."
+    return {"supported": False, "evidence": text, "summary": text}
+
+
 def _verdict(ok: bool, rule: str, parts: list[str], fails: list[str]) -> dict[str, Any]:
     head = "Supported." if ok else "Not supported."
-    text = f"{head} {rule} " + "; ".join(parts) + "."
+    summary = "; ".join(parts) + "."
     if fails:
-        text += " Violations: " + "; ".join(fails) + "."
-    return {"supported": ok, "evidence": text}
+        summary += " Violations: " + "; ".join(fails) + "."
+    return {"supported": ok, "evidence": f"{head} {rule} {summary}", "summary": summary}
 
 
 def hypotheses(results_by_world: ResultsByWorld, alpha: float = ALPHA) -> dict[str, dict]:
@@ -500,8 +569,9 @@ def hypotheses(results_by_world: ResultsByWorld, alpha: float = ALPHA) -> dict[s
     * **H4** (no replacement needed when seeded): SIE has no failed trial in any world.
 
     Returns:
-        ``{"H1": {"supported": bool, "evidence": str}, ..., "H4": {...}}``; the evidence states
-        the rule, the per-world numbers and any violations.
+        ``{"H1": {"supported": bool, "evidence": str, "summary": str}, ..., "H4": {...}}``; the
+        evidence states the verdict, the rule, the per-world numbers and any violations; the
+        summary only the numbers and violations (it starts "Not testable" when untestable).
     """
     return {
         "H1": _h1(results_by_world, alpha),
@@ -538,7 +608,7 @@ def build_tables(results_by_world: ResultsByWorld, alpha: float = ALPHA) -> dict
     Returns:
         ``{"table3": table3(...), "table4": table4(...), "table5": table5(...),
         "idiotypic_difference_rate": idiotypic_difference_rates(...),
-        "hypotheses": hypotheses(..., alpha)}``.
+        "trapped_s": trapped_times(...), "hypotheses": hypotheses(..., alpha)}``.
     """
     return jsonable(
         {
@@ -546,6 +616,7 @@ def build_tables(results_by_world: ResultsByWorld, alpha: float = ALPHA) -> dict
             "table4": table4(results_by_world),
             "table5": table5(results_by_world),
             "idiotypic_difference_rate": idiotypic_difference_rates(results_by_world),
+            "trapped_s": trapped_times(results_by_world),
             "hypotheses": hypotheses(results_by_world, alpha),
         }
     )

@@ -21,6 +21,7 @@ from jaxais.antibodies import Antibodies, from_dicts, sample_antibodies
 from jaxais.controllers import System
 from jaxais.envs.struct import device_array
 from jaxais.network import NetworkParams, relative_fitness, seed_paratopes
+from jaxais.readings import DEFAULT, Readings
 from jaxais.seed import Seed
 
 SYSTEMS = ("SIE", "SRL", "UIE", "URL", "HDC")
@@ -33,12 +34,15 @@ UNSEEDED_P = (0.25, 0.75)
 N_SETS = 5
 
 HAND_DESIGNED = [
-    # [ours] The paper's HDC wanders at random to search, reverses while turning to escape
-    # collisions and steers away from detected obstacles; we add marker tracking when the target
-    # is seen, without which it could not finish the task.
+    # [paper] The HDC "uses a simple random wander to search for the target, a backward turning
+    # motion to escape collisions, and it steers the robot in the opposite direction of any
+    # detected obstacles"; it names no tracking, so it wanders whether or not the target is seen
+    # and finishes when the finish rule fires while it happens to face the target (SPEC 8; the
+    # paper's tables fit a blind searcher: c about 2, tau about 1300 s). Attributes [ours].
     {"antigen": "target unseen", "type": "wander both", "S": 350, "F": 15, "A": 60, "Rf": 18,
      "Ra": 60},
-    {"antigen": "target seen", "type": "track markers", "S": 350, "A": 30},
+    {"antigen": "target seen", "type": "wander both", "S": 350, "F": 15, "A": 60, "Rf": 18,
+     "Ra": 60},
     {"antigen": "obstacle right", "type": "forward turn", "S": 250, "A": 90, "D": "left"},
     {"antigen": "obstacle rear", "type": "forward turn", "S": 300, "A": 20, "D": "left"},
     {"antigen": "obstacle left", "type": "forward turn", "S": 250, "A": 90, "D": "right"},
@@ -94,6 +98,7 @@ def make_system(
     seed: Seed | None = None,
     random_set: str | None = None,
     network: NetworkParams | None = None,
+    readings: Readings | None = None,
 ) -> System:
     """Build one system.
 
@@ -102,6 +107,8 @@ def make_system(
         seed: the LTL seed (needed by SIE and SRL).
         random_set: R1 or R2 (needed by UIE and URL).
         network: network constants (default: the paper's).
+        readings: our readings of the paper's open points (default: ours,
+            :data:`jaxais.readings.DEFAULT`).
     """
     if "-" in name:
         name, random_set = parse_label(name)
@@ -125,4 +132,5 @@ def make_system(
         idiotypic=device_array(name in ("SIE", "UIE")),
         replacement=device_array(name in ("UIE", "URL")),
         network=network,
+        readings=DEFAULT if readings is None else readings,
     )

@@ -2,7 +2,9 @@
 
 Randomness is split so results do not depend on what else shares a batch: trial i's world
 placement comes from (seed, i) alone, so every system meets the same start configurations (common
-random numbers), and its dynamics from (seed, system label, i).
+random numbers), and its dynamics from (seed, system label, i). A label may carry a variant tag
+after "@" (``"SIE@hold=1"``): the same system with other data (``scripts/ablate.py`` batches
+several variants of one system), which meets the same worlds and random streams as the plain label.
 """
 
 from __future__ import annotations
@@ -18,11 +20,12 @@ import numpy as np
 
 from jaxais import envs, prng
 from jaxais.controllers import System, stl_for
-from jaxais.episode import FAILED_BY_NAME, EpisodeConfig, outcome, rollout
+from jaxais.episode import EpisodeConfig, outcome, rollout
 from jaxais.systems import LABELS
 
-STL_CONFIG = EpisodeConfig(tau_cap=4000.0, collision_cap=100)
-"""The paper's STL caps: 4000 s and 100 collisions."""
+STL_CONFIG = EpisodeConfig(tau_cap=4000.0, collision_cap=100, stop_at_collision_cap=False)
+"""The paper's STL protocol (SPEC 9): a run ends on the finish rule or at 4000 s, nothing else;
+more than 100 collisions fails it, and Table 3 uses c capped at 100."""
 
 _COMPILED: dict = {}
 
@@ -32,13 +35,21 @@ class TrialSet:
     """The trials of one system in one world.
 
     Attributes:
-        records: one dict per trial (tau, collisions, fitness, failed, failed_by,
-            idiotypic_difference_rate, iterations, replaced).
+        records: one dict per trial: tau (s), collisions (the raw count), collisions_capped
+            (at 100, what Table 3 averages), fitness (with the capped c), failed,
+            failed_collisions (c > 100), failed_time (4000 s reached), failed_by (a list of
+            "collisions", "time"; both can hold), trapped_s, idiotypic_difference_rate,
+            iterations, replaced.
         trajectories: [n] arrays [T_i, 3] of poses sampled every ``chunk`` iterations, or None.
     """
 
     records: list[dict[str, Any]]
     trajectories: list[np.ndarray] | None
+
+
+def base_label(name: str) -> str:
+    """A label without its variant tag: ``"SIE@hold=1"`` -> ``"SIE"``."""
+    return name.split("@", 1)[0]
 
 
 def trial_keys(seed: int, system_label: str, n: int) -> tuple[jax.Array, jax.Array]:
@@ -68,7 +79,7 @@ def _derive_keys(base, fold_in, plan):
     resets, runs = [], []
     for system_label, n in plan:
         resets.append(fold_in(worlds, np.arange(n)))
-        stream = fold_in(base, [1 + LABELS.index(system_label)])[0]
+        stream = fold_in(base, [1 + LABELS.index(base_label(system_label))])[0]
         runs.append(fold_in(stream, np.arange(n)))
     return resets, runs
 
@@ -97,7 +108,9 @@ def run_trials(
 
     Args:
         world: the world.
-        systems: label (from :data:`jaxais.systems.LABELS`) -> System.
+        systems: label (from :data:`jaxais.systems.LABELS`, optionally with a variant tag
+            after "@", e.g. ``"SIE@hold=1"``: then the random streams of the plain label) ->
+            System.
         n_trials: trials per system (or per label).
         seed: the run's seed.
         config: caps and recording (``config.record`` keeps trajectories).
@@ -110,7 +123,7 @@ def run_trials(
     sim_params = envs.default_params() if sim_params is None else sim_params
     counts = {k: n_trials if isinstance(n_trials, int) else n_trials[k] for k in systems}
     for name, n in counts.items():
-        if name not in LABELS:
+        if base_label(name) not in LABELS:
             raise ValueError(f"unknown system label {name!r} (one of {', '.join(LABELS)})")
         if n < 1:
             raise ValueError(f"trials must be >= 1, got {n} for {name}")
@@ -152,14 +165,20 @@ def run_trials(
     for name in systems:
         records, trajectories = [], []
         for i in range(start, start + counts[name]):
-            status = int(res["status"][i])
+            by_c, by_t = bool(res["failed_collisions"][i]), bool(res["failed_time"][i])
             records.append(
                 {
                     "tau": float(res["tau"][i]),
                     "collisions": int(res["collisions"][i]),
+                    "collisions_capped": int(res["collisions_capped"][i]),
                     "fitness": float(res["fitness"][i]),
-                    "failed": FAILED_BY_NAME[status] is not None,
-                    "failed_by": FAILED_BY_NAME[status],
+                    "failed": by_c or by_t,
+                    "failed_collisions": by_c,
+                    "failed_time": by_t,
+                    "failed_by": [
+                        name for name, on in (("collisions", by_c), ("time", by_t)) if on
+                    ],
+                    "trapped_s": float(res["trapped_s"][i]),
                     "idiotypic_difference_rate": (
                         float(differences[i] / selections[i]) if idiotypic[i] else None
                     ),
@@ -182,11 +201,12 @@ def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
     return {
         "n": n,
         "tau": float(arr("tau").mean()),
-        "collisions": float(arr("collisions").mean()),
+        "collisions": float(arr("collisions_capped").mean()),
         "fitness": float(arr("fitness").mean()),
         "failure_rate": sum(r["failed"] for r in records) / n,
-        "failed_by_collisions": sum(r["failed_by"] == "collisions" for r in records) / n,
-        "failed_by_time": sum(r["failed_by"] == "time" for r in records) / n,
+        "failed_by_collisions": sum(r["failed_collisions"] for r in records) / n,
+        "failed_by_time": sum(r["failed_time"] for r in records) / n,
+        "trapped_s": float(arr("trapped_s").mean()),
         "idiotypic_difference_rate": (
             None if any(x is None for x in rates) else float(np.mean(rates))
         ),

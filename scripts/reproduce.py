@@ -7,8 +7,9 @@
 Runs the paper's protocol (SPEC 9): 30 trials of each system per simulated world and 20 in
 `real`; the unseeded systems with both random sets R1 and R2 in the simulated worlds and R1 only
 in `real`. All systems of a world run as one compiled, vmapped batch. Writes DIR/tables.json,
-DIR/report.md (with figures in DIR/figures/), every trial in DIR/trials/ and DIR/run.json (the
-config, seeds and timings needed to regenerate it all).
+DIR/claims.json (the paper's 32 claims, each held or not, and a summary), DIR/report.md (opening
+with the claims ledger; figures in DIR/figures/), every trial in DIR/trials/ and DIR/run.json
+(the config, seeds and timings needed to regenerate it all).
 """
 
 from __future__ import annotations
@@ -50,13 +51,18 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     src.add_argument(
         "--evolve",
         action="store_true",
-        help="run the LTL (scripts/evolve.py, defaults) first and use its seed",
+        help="run the LTL (scripts/evolve.py, defaults, PRNG seed --seed) first and use its seed",
     )
-    p.add_argument("--seed", type=int, default=0, help="PRNG seed of the trials")
+    p.add_argument("--seed", type=int, default=0, help="PRNG seed of the trials (and of --evolve)")
     p.add_argument("--worlds", default=",".join(WORLDS), help="comma-separated subset of worlds")
     p.add_argument("--tau-cap", type=float, default=4000.0, help="time cap, s [paper: 4000]")
     p.add_argument("--collision-cap", type=int, default=100, help="collision cap [paper: 100]")
-    p.add_argument("--generations", type=int, default=30, help="LTL generations with --evolve")
+    p.add_argument(
+        "--generations",
+        type=int,
+        default=None,
+        help="LTL generation cap with --evolve (default: evolve.py's)",
+    )
     return p.parse_args(argv)  # fmt: skip
 
 
@@ -84,7 +90,7 @@ def main(argv: list[str] | None = None) -> None:
         raise UserError(f"--trials must be >= 2 (t-tests need two per group), got {args.trials}")
     if args.tau_cap <= 0 or args.collision_cap < 1:
         raise UserError("--tau-cap must be > 0 and --collision-cap >= 1")
-    if args.generations < 1:
+    if args.generations is not None and args.generations < 1:
         raise UserError(f"--generations must be >= 1, got {args.generations}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -92,7 +98,7 @@ def main(argv: list[str] | None = None) -> None:
 
     from tqdm import tqdm
 
-    from jaxais import compilation_cache, envs, host_devices, report, stats
+    from jaxais import claims, compilation_cache, envs, host_devices, report, stats
     from jaxais.episode import EpisodeConfig
     from jaxais.experiment import (
         build_systems,
@@ -115,7 +121,9 @@ def main(argv: list[str] | None = None) -> None:
     if args.evolve:
         ltl_dir = out / "ltl"
         cmd = [sys.executable, str(Path(__file__).with_name("evolve.py")), "--out", str(ltl_dir),
-               "--generations", str(args.generations)]  # fmt: skip
+               "--seed", str(args.seed)]  # fmt: skip
+        if args.generations is not None:
+            cmd += ["--generations", str(args.generations)]
         t = time.perf_counter()
         if subprocess.run(cmd).returncode != 0:
             raise UserError("the LTL run (scripts/evolve.py) failed; see its message above")
@@ -153,6 +161,9 @@ def main(argv: list[str] | None = None) -> None:
 
     tables = stats.build_tables(results_by_world)
     atomic_write_json(out / "tables.json", tables)
+    ledger = claims.claims(results_by_world)
+    claims_doc = claims.document(ledger)
+    atomic_write_json(out / "claims.json", claims_doc)
     timings["total_s"] = time.perf_counter() - started
     run = {
         "command": "reproduce.py " + " ".join(sys.argv[1:] if argv is None else argv),
@@ -176,13 +187,16 @@ def main(argv: list[str] | None = None) -> None:
         timings,
         trajectories,
         lambda ax, world_name: draw_world(ax, loaded[world_name]),
+        claims_ledger=ledger,
     )
     verdicts = ", ".join(
         f"{h} {'supported' if v['supported'] else 'not supported'}"
         for h, v in tables["hypotheses"].items()
     )
-    print(f"{verdicts}. Total {timings['total_s']:.0f} s (compile {timings.get('compile_s', 0):.0f}"
-          f" s). Report: {report_path}")  # fmt: skip
+    counts = claims_doc["summary"]
+    print(f"{counts['reproduced']} of {counts['evaluated']} evaluated claims reproduced "
+          f"({counts['total']} in all); {verdicts}. Total {timings['total_s']:.0f} s "
+          f"(compile {timings.get('compile_s', 0):.0f} s). Report: {report_path}")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -16,9 +16,10 @@ import numpy as np
 
 from jaxais import envs
 from jaxais.antibodies import sample_antibodies
-from jaxais.controllers import STL, STLState, System
+from jaxais.controllers import STL, Bout, STLState, System
 from jaxais.episode import EpisodeConfig, Percept, iterate, start
 from jaxais.network import NetworkParams
+from jaxais.readings import LITERAL, Readings
 from jaxais.reinforcement import PenaltyCounters
 from jaxais.seed import Seed, save_seed
 from jaxais.systems import make_system
@@ -26,8 +27,16 @@ from jaxais.systems import make_system
 WORLD = "world1"
 BATCH = 4
 """Runs per batched program (every batched test uses exactly this many)."""
-CONFIG = EpisodeConfig(tau_cap=20.0, collision_cap=5, chunk=25, segment=500, record=True)
-"""Short caps: 625 iterations at most, 5 collisions."""
+CONFIG = EpisodeConfig(
+    tau_cap=20.0,
+    collision_cap=5,
+    stop_at_collision_cap=True,
+    chunk=25,
+    segment=500,
+    record=True,
+)
+"""Short caps: 625 iterations at most, stopped at 5 collisions (the GA's option, so both caps
+are met in short runs)."""
 X, Y = 5, 8
 N_UNIFORM = 7 + 1 + 2 * X + 2
 """Uniforms per iteration of the STL controller for a 5 x 8 network (see ``stl_controller``:
@@ -122,6 +131,12 @@ def jit(fun, **kwargs):
 
 
 @functools.cache
+def init_fn():
+    """``STL.init`` under one ``jax.jit``."""
+    return jit(STL.init)
+
+
+@functools.cache
 def learn_fn():
     """``STL.learn`` under one ``jax.jit`` (every unit test calls this one)."""
     return jit(STL.learn)
@@ -154,14 +169,17 @@ def system(
     idiotypic: bool = False,
     replacement: bool = False,
     base: str = "UIE-R1",
+    readings: Readings = LITERAL,
 ) -> System:
-    """A system with the given switches over ``base``'s antibodies (default network)."""
+    """A system with the given switches over ``base``'s antibodies (default network; the
+    literal per-iteration readings unless given, so one call of act is one selection)."""
     s = systems()[base]
     return s.replace(
         learning=jnp.asarray(learning),
         idiotypic=jnp.asarray(idiotypic),
         replacement=jnp.asarray(replacement),
         network=NetworkParams(),
+        readings=jax.tree.map(jnp.asarray, readings),
     )
 
 
@@ -173,12 +191,16 @@ def state(
     I=None,
     N=None,
     acting: int = 0,
+    held: int = 0,
+    left: int = 0,
     unseen_run: int = 0,
     obstacle_run: int = 0,
+    clear_run: int = 1,
     antibodies=None,
     key: int = 0,
 ) -> STLState:
-    """A hand-made network state (sigma0 defaults to the column means of P)."""
+    """A hand-made network state (sigma0 defaults to the column means of P); the antibody
+    acting is A[acting, held], with ``left`` iterations of its bout to go."""
     P = jnp.asarray(P, jnp.float32)
     return STLState(
         antibodies=sys_.antibodies if antibodies is None else antibodies,
@@ -187,9 +209,12 @@ def state(
         I=jnp.zeros(P.shape, jnp.float32) if I is None else jnp.asarray(I, jnp.float32),
         N=jnp.full(P.shape, 1000.0, jnp.float32) if N is None else jnp.asarray(N, jnp.float32),
         counters=PenaltyCounters(
-            unseen_run=jnp.int32(unseen_run), obstacle_run=jnp.int32(obstacle_run)
+            unseen_run=jnp.int32(unseen_run),
+            obstacle_run=jnp.int32(obstacle_run),
+            clear_run=jnp.int32(clear_run),
         ),
         acting=jnp.int32(acting),
+        bout=Bout(antigen=jnp.int32(held), left=jnp.int32(left), u=jnp.zeros(2, jnp.float32)),
         differences=jnp.int32(0),
         selections=jnp.int32(0),
         replaced=jnp.int32(0),
@@ -247,8 +272,8 @@ def start_runs(reset_keys: jax.Array, run_keys: jax.Array, params: System | None
     return start_fn()(reset_keys, run_keys, world(), sim_params(), STL, params)
 
 
-def step_one(run, key: jax.Array, u: jnp.ndarray, params: System, tick=None):
+def step_one(run, key: jax.Array, u: jnp.ndarray, params: System, tick=None, config=CONFIG):
     """One unbatched iteration with noise drawn from ``key`` (the tick defaults to run.t)."""
     noise = unstack(noise_fn()(jax.random.split(key, BATCH)), 0)
     tick = run.t if tick is None else jnp.int32(tick)
-    return iterate_fn()(run, noise, u, tick, world(), sim_params(), STL, params, CONFIG)
+    return iterate_fn()(run, noise, u, tick, world(), sim_params(), STL, params, config)

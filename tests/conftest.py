@@ -80,6 +80,8 @@ class Sim:
     def __init__(self) -> None:
         self.params = envs.default_params()
         self.params_np = ref.params_to_numpy(self.params)
+        # Noise-free IR for the geometry tests of observe (steps keep every world's IR noise).
+        self.quiet_params = envs.default_params(ir_noise=np.zeros(10, np.float32))
         self._worlds: dict[str, envs.World] = {}
         opts = fast_compile_options()
         self._step_b = jax.jit(
@@ -124,13 +126,13 @@ class Sim:
         return self._step_1(key, state, jnp.asarray(wheels, jnp.float32), world, self.params)
 
     def observe(self, world: envs.World, states: list[envs.State]) -> dict[str, np.ndarray]:
-        """Observations of unbatched states (any number), as NumPy arrays stacked on axis 0."""
+        """Noise-free IR observations of unbatched states (any number), stacked on axis 0."""
         out: list[dict[str, np.ndarray]] = []
         for lo in range(0, len(states), OBS_BATCH):
             chunk = states[lo : lo + OBS_BATCH]
             padded = chunk + [chunk[-1]] * (OBS_BATCH - len(chunk))
             batch = jax.tree.map(lambda *xs: np.stack(xs), *padded)
-            obs = self._observe_b(self.keys(lo, OBS_BATCH), batch, world, self.params)
+            obs = self._observe_b(self.keys(lo, OBS_BATCH), batch, world, self.quiet_params)
             out.append({k: v[: len(chunk)] for k, v in ref.obs_to_numpy(obs).items()})
         return {k: np.concatenate([o[k] for o in out]) for k in out[0]}
 

@@ -232,3 +232,43 @@ def test_penalty_vmap() -> None:
     batched = jax.jit(jax.vmap(lambda s: _scan(init_counters(), s)))
     _, fire = batched(jnp.asarray(ms))
     assert [(np.flatnonzero(np.asarray(f)) + 1).tolist() for f in fire] == [[251], [16], []]
+
+
+# --- encounters [ours: jaxais.readings] ---------------------------------------------------------
+
+_run_encounters = jax.jit(
+    lambda ms, gap: jax.lax.scan(lambda c, m: update_penalty(c, m, True, gap), init_counters(), ms)
+)
+
+
+def _encounter_fires(ms: list[int], gap: int = 70) -> list[int]:
+    """1-based iterations at which the encounter penalty fires (sequence padded with 1s)."""
+    padded = np.ones(SEQ_LEN, np.int32)
+    padded[: len(ms)] = ms
+    _, fire = _run_encounters(jnp.asarray(padded), gap)
+    return (np.flatnonzero(np.asarray(fire)) + 1).tolist()
+
+
+def test_encounters_count_entries_not_iterations() -> None:
+    # Unbroken contact is one encounter, however long (Table 2's no-progress term scores it).
+    assert _encounter_fires([5] * 400) == []
+    # Hovering at the threshold: antigen 2 every other iteration, 16 entries fire on the 16th.
+    hover = [2, 0] * 20
+    assert _encounter_fires(hover) == [31]
+    # The literal reading never catches the hoverer: every clear iteration ends its run.
+    assert _fires(hover)[0] == []
+
+
+def test_encounter_run_ends_only_after_the_gap() -> None:
+    # 15 encounters, then 69 clear iterations (under the gap of 70): the 16th still fires.
+    seq = [2, 0] * 15 + [0] * 68 + [3]
+    assert _encounter_fires(seq) == [len(seq)]
+    # 70 clear iterations end the run: the next entry is the first of a new run.
+    seq = [2, 0] * 15 + [0] * 69 + [3]
+    assert _encounter_fires(seq) == []
+    # A gap of 1 makes every clear iteration end the run.
+    assert _encounter_fires([2, 0] * 20, gap=1) == []
+
+
+def test_encounter_penalty_restarts_and_repeats() -> None:
+    assert _encounter_fires([4, 1] * 48) == [31, 63, 95]

@@ -8,20 +8,28 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jaxais import report, stats
+from jaxais import claims, report, stats
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def trial(tau: float, c: int = 0, failed_by: str | None = None, rate: float | None = None):
+def trial(tau: float, c: int = 0, rate: float | None = None, trapped: float = 0.0) -> dict:
+    """A record of the current schema: c > 100 fails by collisions, tau = 4000 by time."""
+    capped = min(c, 100)
+    by_c, by_tau = c > 100, tau >= 4000
     return {
         "tau": float(tau),
         "collisions": int(c),
-        "fitness": (8 * c + tau) / 2,
-        "failed": failed_by is not None,
-        "failed_by": failed_by,
+        "collisions_capped": int(capped),
+        "fitness": (8 * capped + tau) / 2,
+        "failed": by_c or by_tau,
+        "failed_collisions": by_c,
+        "failed_time": by_tau,
+        "failed_by": [k for k, hit in (("collisions", by_c), ("time", by_tau)) if hit],
+        "trapped_s": float(trapped),
         "idiotypic_difference_rate": rate,
         "iterations": int(tau / 0.032),
+        "replaced": 0,
     }
 
 
@@ -43,8 +51,8 @@ def synthetic_results(paper: dict, n: int = 6) -> dict:
                 mean = {"c": 1, "tau": 400}
             taus = np.clip(rng.normal(mean["tau"], 0.1 * mean["tau"], n), 10, 4000)
             rate = 0.2 if "IE" in s else None
-            out[world][s] = [trial(t, int(mean["c"]), rate=rate) for t in taus]
-    out["world1"]["URL-R1"][0] = trial(4000, 3, "time")
+            out[world][s] = [trial(t, int(mean["c"]), rate, 12.5) for t in taus]
+    out["world1"]["URL-R1"][0] = trial(4000, 3000)  # failed by both caps
     return out
 
 
@@ -123,6 +131,16 @@ def test_write_report_full(tmp_path, paper):
     )
     assert path == tmp_path / "report.md"
     text = path.read_text()
+    lines = text.splitlines()
+    counts = claims.summary(claims.claims(results))
+    assert counts["total"] == counts["evaluated"] == 32
+    # The ledger line opens the report, right after the title, then the table of claims.
+    assert lines[0].startswith("# ") and lines[1] == ""
+    assert lines[2] == f"**{counts['reproduced']} of 32 of the paper's claims reproduced**"
+    assert lines[4] == "| Claim | The paper says | Held | Evidence (ours) |"
+    assert lines[6].startswith("| world1/SIE-lowest-c | In Simulated World 1, ")
+    assert "| H4 | H4 is supported: " in text
+    assert "could not be evaluated" not in text
     for heading in (
         "## Hypotheses",
         "### Table 3",
@@ -138,6 +156,9 @@ def test_write_report_full(tmp_path, paper):
     ):
         assert heading in text, heading
     assert "| SIE | 6 |" in text  # n column of Table 3
+    assert "trapped (s), ours |" in text and "| 12.5 |" in text
+    assert "c + τ may exceed total" in text
+    assert "| URL-R1 | 17 / 43 | 17 / 30 † | 17 / 57 |" in text  # 1 run of 6, by both caps
     assert "/ 562" in text  # the paper's value beside ours
     assert "**world1, Table 3 f**" in text  # HDC now beats SRL
     assert "SRL 3 vs 2" in text
@@ -175,4 +196,30 @@ def test_write_report_minimal(tmp_path, paper):
     assert "No timings were given." in text
     assert "No trial reported an idiotypic difference rate." in text
     assert "**H4.** Supported." in text
+    # Two systems in one world: most claims cannot be evaluated, and the report says so.
+    ledger = claims.claims(results)
+    counts = claims.summary(ledger)
+    assert counts["evaluated"] < counts["total"] == 32
+    assert text.splitlines()[2] == claims.headline(counts)
+    assert f"{32 - counts['evaluated']} of the paper's 32 claims could not be evaluated" in text
+    assert "| world1/SIE-lowest-c |" in text and "| – | No results for world1. |" in text
+    assert "trapped (s)" in text  # the records carry trapped_s (0 here)
+
+
+def test_write_report_uses_the_given_ledger(tmp_path, paper):
+    results = {"world2": {"SIE": [trial(100), trial(120)], "SRL": [trial(300), trial(340)]}}
+    ledger = [{"id": "X", "world": None, "text": "a claim", "held": False, "evidence": "a|b"}]
+    path = report.write_report(
+        tmp_path,
+        stats.build_tables(results),
+        results,
+        paper,
+        None,
+        {},
+        None,
+        claims_ledger=ledger,
+    )
+    lines = path.read_text().splitlines()
+    assert lines[2] == "**0 of 1 of the paper's claims reproduced**"
+    assert lines[6] == "| X | a claim | ✗ | a\\|b |"  # a pipe in the evidence is escaped
     assert sorted(p.name for p in (tmp_path / "figures").iterdir()) == ["box_world2.png"]

@@ -28,9 +28,13 @@ TIMEOUT = 480
 RECORD_KEYS = {
     "tau",
     "collisions",
+    "collisions_capped",
     "fitness",
     "failed",
+    "failed_collisions",
+    "failed_time",
     "failed_by",
+    "trapped_s",
     "idiotypic_difference_rate",
     "iterations",
 }
@@ -42,6 +46,7 @@ SUMMARY_KEYS = {
     "failure_rate",
     "failed_by_collisions",
     "failed_by_time",
+    "trapped_s",
     "idiotypic_difference_rate",
 }
 
@@ -142,8 +147,8 @@ def test_trials_script_writes_results_json(runs):
     for rec in doc["trials"]:
         assert set(rec) >= RECORD_KEYS
         assert 0 < rec["tau"] <= 10.0 and rec["iterations"] <= 313
-        assert rec["fitness"] == pytest.approx((8 * rec["collisions"] + rec["tau"]) / 2)
-        assert rec["failed"] == (rec["failed_by"] is not None)
+        assert rec["fitness"] == pytest.approx((8 * rec["collisions_capped"] + rec["tau"]) / 2)
+        assert rec["failed"] == bool(rec["failed_by"])
         assert rec["idiotypic_difference_rate"] is None  # HDC is not idiotypic
     assert set(doc["summary"]) == SUMMARY_KEYS
     assert doc["summary"] == pytest.approx(summarise(doc["trials"]))

@@ -41,14 +41,36 @@ def two_tailed_p_df5(t: float) -> float:
     return 1.0 - a
 
 
-def trial(tau: float, c: int = 0, failed_by: str | None = None, rate: float | None = None):
+def trial(tau: float, c: int = 0, rate: float | None = None, trapped: float = 0.0) -> dict:
+    """A record of the current schema (SPEC 9): c > 100 fails by collisions, tau = 4000 by time,
+    both can hold; the means and f use c capped at 100."""
+    capped = min(c, 100)
+    by_c, by_tau = c > 100, tau >= 4000
     return {
         "tau": float(tau),
         "collisions": int(c),
-        "fitness": (8 * c + tau) / 2,
+        "collisions_capped": int(capped),
+        "fitness": (8 * capped + tau) / 2,
+        "failed": by_c or by_tau,
+        "failed_collisions": by_c,
+        "failed_time": by_tau,
+        "failed_by": [k for k, hit in (("collisions", by_c), ("time", by_tau)) if hit],
+        "trapped_s": float(trapped),
+        "idiotypic_difference_rate": rate,
+        "iterations": int(tau / 0.032),
+        "replaced": 0,
+    }
+
+
+def old_trial(tau: float, c: int = 0, failed_by: str | None = None) -> dict:
+    """A record of the older schema: no capped count, no trapped time, one failure cause."""
+    return {
+        "tau": float(tau),
+        "collisions": int(c),
+        "fitness": (8 * min(c, 100) + tau) / 2,
         "failed": failed_by is not None,
         "failed_by": failed_by,
-        "idiotypic_difference_rate": rate,
+        "idiotypic_difference_rate": None,
         "iterations": int(tau / 0.032),
     }
 
@@ -188,11 +210,14 @@ def test_t_tests_match_scipy_reference(a, b):
 def small_results() -> dict:
     return {
         "world1": {
-            "SIE": [trial(100, 1), trial(200, 3)],  # c 2, tau 150, f (8*2 + 150)/2 = 83
+            # c 2, tau 150, f (8*2 + 150)/2 = 83, trapped (1 + 3)/2 = 2.
+            "SIE": [trial(100, 1, trapped=1.0), trial(200, 3, trapped=3.0)],
+            # Failed by time; by collisions; by both (2500 collisions and the 4000 s cap); none.
+            # Capped c: 2, 100, 100, 2 -> 51; tau 8900/4 = 2225; f (8*51 + 2225)/2 = 1316.5.
             "HDC": [
-                trial(4000, 2, "time"),
-                trial(300, 100, "collisions"),
-                trial(500, 0),
+                trial(4000, 2),
+                trial(300, 150, trapped=20.0),
+                trial(4000, 2500, trapped=3000.0),
                 trial(600, 2),
             ],
             "UIE-R2": [trial(50, 0, rate=0.1), trial(70, 0, rate=0.3), trial(60, 0)],
@@ -204,19 +229,49 @@ def small_results() -> dict:
     }
 
 
-def test_table3_means():
+def test_table3_means_use_the_capped_collision_count():
     t3 = stats.table3(small_results())
     assert t3["world1"]["SIE"] == {"c": 2.0, "tau": 150.0, "f": 83.0}
-    assert t3["world1"]["HDC"]["tau"] == pytest.approx((4000 + 300 + 500 + 600) / 4)
-    assert t3["world1"]["HDC"]["c"] == pytest.approx(26.0)
+    # Raw c would average (2 + 150 + 2500 + 2)/4 = 663.5; Table 3 caps each count at 100.
+    assert t3["world1"]["HDC"] == {"c": 51.0, "tau": 2225.0, "f": 1316.5}
+    np.testing.assert_array_equal(
+        stats.metric_values(small_results()["world1"]["HDC"], "c"), [2, 100, 100, 2]
+    )
     # Paper's system order, whatever the input order.
     assert list(t3["world1"]) == ["SIE", "UIE-R2", "HDC"]
 
 
-def test_table5_failure_rates():
+def test_table5_failure_rates_overlap():
     t5 = stats.table5(small_results())
-    assert t5["world1"]["HDC"] == {"c": 25.0, "tau": 25.0, "total": 50.0}
+    # One run by time, one by collisions, one by both, one finished: c 2/4, tau 2/4, either 3/4.
+    assert t5["world1"]["HDC"] == {"c": 50.0, "tau": 50.0, "total": 75.0}
     assert t5["world1"]["SIE"] == {"c": 0.0, "tau": 0.0, "total": 0.0}
+
+
+def test_failure_causes():
+    both = trial(4000, 2500)
+    assert stats.failure_causes(both) == {"collisions", "time"}
+    assert stats.failure_causes(trial(100, 100)) == frozenset()  # c = 100 is not > 100
+    assert stats.failure_causes(trial(100, 101)) == {"collisions"}
+    # The flags win over the list; the older single string and None are read too.
+    assert stats.failure_causes({"failed_time": True, "failed_by": []}) == {"time"}
+    assert stats.failure_causes({"failed_by": ["time", "collisions"]}) == {"time", "collisions"}
+    assert stats.failure_causes(old_trial(300, 150, "collisions")) == {"collisions"}
+    assert stats.failure_causes(old_trial(300, 5)) == frozenset()
+
+
+def test_older_records_still_load():
+    res = {"world1": {"SRL": [old_trial(300, 150, "collisions"), old_trial(4000, 4, "time")]}}
+    assert stats.table3(res)["world1"]["SRL"]["c"] == 52.0  # (min(150, 100) + 4) / 2
+    assert stats.table5(res)["world1"]["SRL"] == {"c": 50.0, "tau": 50.0, "total": 100.0}
+    assert stats.trapped_times(res) == {"world1": {"SRL": None}}
+
+
+def test_trapped_times():
+    trapped = stats.trapped_times(small_results())
+    assert trapped["world1"]["SIE"] == 2.0
+    assert trapped["world1"]["HDC"] == pytest.approx((0 + 20 + 3000 + 0) / 4)
+    assert list(trapped["world1"]) == ["SIE", "UIE-R2", "HDC"]
 
 
 def test_table4_and_comparisons_filtered_per_world():
@@ -225,7 +280,7 @@ def test_table4_and_comparisons_filtered_per_world():
     assert list(comps["world1"]) == ["SIE vs HDC", "SIE vs UIE-R2"]
     assert comps["real"] == {}  # R2 is not a real-world system
     row = comps["world1"]["SIE vs HDC"]["tau"]
-    assert row["mean_diff"] == pytest.approx(150 - 1350)
+    assert row["mean_diff"] == pytest.approx(150 - 2225)
     assert set(row) == {
         "n_a",
         "n_b",
@@ -241,11 +296,15 @@ def test_table4_and_comparisons_filtered_per_world():
         "mwu_p",
         "cohens_d",
     }
-    t, p = stats.student_t([100, 200], [4000, 300, 500, 600])
+    t, p = stats.student_t([100, 200], [4000, 300, 4000, 600])
     assert row["student_t"] == t and row["level"] == stats.significance_level(p)
     t4 = stats.table4(res)
     assert t4["world1"]["SIE vs HDC"]["tau"] == row["level"]
     assert set(t4["world1"]["SIE vs HDC"]) == {"c", "tau", "f"}
+    # The c test runs on the capped counts too.
+    c_row = comps["world1"]["SIE vs HDC"]["c"]
+    assert c_row["mean_b"] == 51.0
+    assert c_row["student_t"] == stats.student_t([1, 3], [2, 100, 100, 2])[0]
 
 
 def test_idiotypic_difference_rates():
@@ -259,7 +318,15 @@ def test_build_tables_is_plain_json():
     res = small_results()
     res["world2"] = {"SIE": [trial(10), trial(10)], "SRL": [trial(30), trial(30)]}  # t = -inf
     tables = stats.build_tables(res)
-    assert set(tables) == {"table3", "table4", "table5", "idiotypic_difference_rate", "hypotheses"}
+    assert set(tables) == {
+        "table3",
+        "table4",
+        "table5",
+        "idiotypic_difference_rate",
+        "trapped_s",
+        "hypotheses",
+    }
+    assert tables["trapped_s"]["world1"]["SIE"] == 2.0
     assert tables["table4"]["world2"]["SIE vs SRL"]["tau"] == 100
     json.loads(json.dumps(tables, allow_nan=False))
 
@@ -335,7 +402,7 @@ def test_h2_and_h3_fail_when_sie_is_worse_somewhere():
 def test_h4_needs_zero_sie_failures():
     res = paper_like()
     assert stats.hypotheses(res)["H4"]["supported"]
-    res["real"]["SIE"][0] = trial(4000, 0, "time")
+    res["real"]["SIE"][0] = trial(4000, 0)
     h = stats.hypotheses(res)
     assert not h["H4"]["supported"]
     assert "real: 12 % failures" in h["H4"]["evidence"]
@@ -349,3 +416,10 @@ def test_missing_worlds_are_skipped_and_untestable_is_not_supported():
     h = stats.hypotheses({"world1": {"HDC": trials_with_f(100)}})
     assert not any(v["supported"] for v in h.values())
     assert all(v["evidence"].startswith("Not testable") for v in h.values())
+    assert all(v["summary"] == v["evidence"] for v in h.values())
+
+
+def test_hypothesis_summary_has_the_numbers_without_the_rule():
+    h = stats.hypotheses(paper_like())["H2"]
+    assert h["evidence"].endswith(h["summary"])
+    assert "Rule:" not in h["summary"] and "world1: SIE f 100 vs SRL 200" in h["summary"]

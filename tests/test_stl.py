@@ -21,7 +21,9 @@ from hypothesis import strategies as st
 
 from jaxais.antibodies import antibodies_from_uniform, take, within_limits
 from jaxais.behaviours import wheel_speeds_from_uniform
+from jaxais.controllers import interrupts
 from jaxais.network import idiotopes
+from jaxais.readings import LITERAL, readings
 from jaxais.reinforcement import rl_score
 
 hyp = settings(max_examples=25, deadline=None)
@@ -30,6 +32,9 @@ antigens = st.integers(0, 7)
 
 
 def learn(s, pc, sys_, u_seed: int = 0):
+    """``STL.learn`` on ``s`` whose acting antibody was selected for ``pc.m_prev`` (as under the
+    literal per-iteration reading that ``F.system`` uses)."""
+    s = s.replace(bout=s.bout.replace(antigen=pc.m_prev))
     return F.learn_fn()(F.uniforms(u_seed), s, pc, sys_)
 
 
@@ -312,7 +317,7 @@ def test_replacement_is_a_valid_antibody_with_p_in_range(seed, row, col):
 
 
 def test_hdc_never_learns_and_always_acts_with_set_0():
-    hdc = F.systems()["HDC"]
+    hdc = F.systems()["HDC"].replace(readings=jax.tree.map(jnp.asarray, LITERAL))
     s0 = F.state(hdc, hdc.paratopes)
     rng = np.random.default_rng(5)
     # Long runs of 0 and of obstacles (penalties would fire) then random antigens; t crosses
@@ -480,3 +485,90 @@ def test_recomputed_idiotope_has_at_most_one_per_set_below_the_column_mean(seed,
     assert np.all(I.sum(axis=1) <= 1)
     # Candidates lie below their column mean (a relative ulp of slack for the float mean).
     assert np.all(Pn[I == 1] < Pn.mean(axis=0)[np.nonzero(I)[1]] * (1 + 1e-6))
+
+
+# ---------------------------------------------------------------------------------- our readings
+
+
+def _bout_system(hold: int = 4):
+    return F.system(readings=readings(hold=hold))
+
+
+def test_a_selected_behaviour_acts_for_its_bout_then_is_selected_again():
+    """With hold h the antibody selected for an antigen keeps acting, with the behaviour draws
+    of its selection, for h iterations (SPEC 5 [ours]); calmer antigens do not cut it short."""
+    sys_ = _bout_system(hold=4)
+    P = np.full((F.X, F.Y), 0.5)
+    P[3, 5] = 0.9  # set 3 wins antigen 5 (collision right), set 1 antigen 0
+    P[1, 0] = 0.9
+    s = F.state(sys_, P)
+    wheels = []
+    # A collision selects A[3, 5]; the robot then backs away: 2 (obstacle) and 0 (clear) follow.
+    for k, m in enumerate([5, 2, 0, 0, 0, 0], start=1):
+        s, w = act(s, F.percept(m=m, t=k), sys_, u_seed=k)
+        wheels.append(np.asarray(w))
+        assert int(s.acting) == (3 if k <= 4 else 1)
+        assert int(s.bout.antigen) == (5 if k <= 4 else 0)
+    assert int(s.selections) == 2
+    expected = wheel_speeds_from_uniform(
+        F.uniforms(1)[F.SLICES["behave"]], take(sys_.antibodies, (3, 5)), 0, 7.0
+    )
+    for w in wheels[:4]:  # the reverse turn's draws are those of its selection
+        np.testing.assert_allclose(w, expected, rtol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("held", "m", "cut"),
+    [(0, 1, True), (0, 3, True), (1, 0, False), (2, 6, True), (2, 4, True), (6, 2, False),
+     (6, 6, False), (6, 7, True), (5, 0, False), (3, 3, False)],
+)  # fmt: skip
+def test_urgent_antigens_interrupt_a_bout(held, m, cut):
+    assert bool(interrupts(jnp.int32(m), jnp.int32(held))) == cut
+
+
+def test_rl_scores_the_held_antibody_after_the_antigen_changed():
+    """During a bout selected for antigen 5, the scored entry is A[acting, 5], whatever the
+    previous antigen was."""
+    sys_ = _bout_system()
+    P = column_P(5, [0.2, 0.4, 0.6, 0.3, 0.5])
+    s = F.state(sys_, P, acting=2, held=5, left=2)
+    out = F.learn_fn()(F.uniforms(0), s, F.percept(m=0, m_prev=2, v=0, v_prev=900, t=5), sys_)
+    expected = P.copy()
+    expected[:, 5] = np.array([0.2, 0.4, 0.7, 0.3, 0.5]) * (0.4 / 0.42)  # 2-7 -> 0: +0.10
+    np.testing.assert_allclose(P_of(out), expected, rtol=1e-6)
+
+
+def test_sigma0_floor_keeps_a_zero_column_learnable():
+    """A column whose initial mean is 0 is pinned at 0 by the literal eq (4); with the floor
+    its scored antibody keeps a positive P (SPEC 7 [ours])."""
+    seeded = F.systems()["SIE"]
+    P0 = np.asarray(seeded.paratopes).copy()
+    P0[:, 1] = 0.0
+    runs = {}
+    for floor in (0.0, 0.05):
+        sys_ = seeded.replace(paratopes=jnp.asarray(P0), readings=readings(sigma0_floor=floor))
+        s = F.init_fn()(jax.random.key(0), sys_)
+        assert float(s.sigma0[1]) == pytest.approx(floor)
+        s = s.replace(acting=jnp.int32(2), bout=s.bout.replace(antigen=jnp.int32(1)))
+        pc = F.percept(m=1, m_prev=0, t=3)  # 0 -> 1 scores +0.10 on A[2, 1]
+        runs[floor] = P_of(F.learn_fn()(F.uniforms(0), s, pc, sys_))[:, 1]
+    np.testing.assert_array_equal(runs[0.0], 0.0)
+    np.testing.assert_allclose(runs[0.05], [0, 0, 0.25, 0, 0], atol=1e-6)
+
+
+def test_encounter_penalty_catches_a_robot_hovering_at_a_wall():
+    """Antigen 2 every other iteration (a robot at the threshold): 16 encounters penalise the
+    acting antibody under our reading; the literal count never does (SPEC 6)."""
+    P = np.full((F.X, F.Y), 0.5)
+    fired = {}
+    for count in (True, False):
+        sys_ = F.system(readings=readings(hold=1, count_encounters=count))
+        s, m_prev, hits = F.state(sys_, P, acting=1), 0, []
+        for k, m in enumerate([2, 0] * 20, start=1):
+            pc = F.percept(m=m, m_prev=m_prev, v=300.0 * (m > 1), v_prev=300.0 * (m_prev > 1), t=k)
+            s = learn(s, pc, sys_)
+            if k > 1 and int(s.counters.obstacle_run) == 0 and m == 2:
+                hits.append(k)
+            m_prev = m
+        fired[count] = hits
+    assert fired[True] == [31] and fired[False] == []

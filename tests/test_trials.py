@@ -79,12 +79,13 @@ def with_obs(run, antigen: int | None = None, goal: int | None = None):
     return run.replace(obs=obs)
 
 
-def drive(run, params, steps: list[dict], seed: int = 0) -> list:
+def drive(run, params, steps: list[dict], config=F.CONFIG, seed: int = 0) -> list:
     """Apply ``iterate`` once per entry of ``steps`` (each rewrites the observation first)."""
     out = []
     for k, mods in enumerate(steps):
         run = with_obs(run, **mods)
-        run = F.step_one(run, jax.random.key(1000 * seed + k), F.uniforms(seed + k), params)
+        key, u = jax.random.key(1000 * seed + k), F.uniforms(seed + k)
+        run = F.step_one(run, key, u, params, config=config)
         out.append(run)
     return out
 
@@ -135,13 +136,34 @@ def test_collision_cap_stops_when_the_count_reaches_it():
     assert tree_equal(runs[2].sim, runs[1].sim)
 
 
-def test_collisions_count_entries_into_5_to_7_from_other_antigens():
+COLLISION_SEQ = [5, 6, 7, 5, 2, 6, 0, 7, 7, 1, 3, 4, 6]
+
+
+def test_collisions_count_one_per_contact_episode():
+    """A collision counts when the antigen is in 5-7 and Vm has fallen under 250 since the last
+    counted one (SPEC 9): the chatter 5-6-7-5-2-6 of one contact is one collision."""
     run, params = one_run(3)
-    seq = [5, 6, 7, 5, 2, 6, 0, 7, 7, 1, 3, 4, 6]
-    runs = drive(run, params, [{"antigen": a} for a in seq])
-    assert [int(r.collisions) for r in runs] == [1, 1, 1, 1, 1, 2, 2, 3, 3, 3, 3, 3, 4]
-    assert [int(r.m_prev) for r in runs] == seq
+    runs = drive(run, params, [{"antigen": a} for a in COLLISION_SEQ])
+    assert [int(r.collisions) for r in runs] == [1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 3]
+    assert [int(r.m_prev) for r in runs] == COLLISION_SEQ
     assert all(status(r) == RUNNING for r in runs)
+
+
+NO_STOP_ENTRY = dataclasses.replace(F.CONFIG, stop_at_collision_cap=False, collision_rule="entry")
+"""The earlier collision count (every entry into 5-7), and runs that go on past the cap."""
+
+
+def test_entry_rule_counts_every_entry_and_runs_go_on_past_the_cap():
+    run, params = one_run(3)
+    runs = drive(run, params, [{"antigen": a} for a in COLLISION_SEQ], NO_STOP_ENTRY)
+    assert [int(r.collisions) for r in runs] == [1, 1, 1, 1, 1, 2, 2, 3, 3, 3, 3, 3, 4]
+    run = run.replace(collisions=jnp.asarray(F.CONFIG.collision_cap, run.collisions.dtype))
+    runs = drive(run, params, [{"antigen": a} for a in (5, 0, 7, 0)], NO_STOP_ENTRY)
+    assert [int(r.collisions) for r in runs] == [6, 6, 7, 7]
+    assert all(status(r) == RUNNING for r in runs) and int(runs[-1].t) == 4
+    res = outcome(jax.tree.map(lambda a: a[None], runs[-1]), NO_STOP_ENTRY, DT)
+    assert res["collisions"][0] == 7 and res["collisions_capped"][0] == 5
+    assert res["failed_collisions"][0] and not res["failed_time"][0]
 
 
 def test_an_ended_run_never_changes():
@@ -156,15 +178,20 @@ def test_an_ended_run_never_changes():
 
 def test_outcome_caps_and_fitness():
     runs = SimpleNamespace(
-        status=np.array([FINISHED, FAILED_TIME, FAILED_COLLISIONS, FINISHED]),
-        t=np.array([100, 700, 300, 0]),
-        collisions=np.array([3, 2, 9, 0]),
+        status=np.array([FINISHED, FAILED_TIME, FAILED_COLLISIONS, FINISHED, FAILED_TIME]),
+        t=np.array([100, 700, 300, 0, 625]),
+        collisions=np.array([3, 2, 9, 0, 6]),
+        trapped=np.array([0, 400, 0, 0, 10]),
     )
     res = outcome(runs, F.CONFIG, DT)
-    np.testing.assert_allclose(res["tau"], [3.2, 20.0, 9.6, 0.0])
-    np.testing.assert_array_equal(res["collisions"], [3, 2, 5, 0])
-    np.testing.assert_allclose(res["fitness"], [13.6, 18.0, 24.8, 0.0])
-    np.testing.assert_array_equal(res["iterations"], [100, 700, 300, 0])
+    np.testing.assert_allclose(res["tau"], [3.2, 20.0, 9.6, 0.0, 20.0])
+    np.testing.assert_array_equal(res["collisions"], [3, 2, 9, 0, 6])
+    np.testing.assert_array_equal(res["collisions_capped"], [3, 2, 5, 0, 5])
+    np.testing.assert_allclose(res["fitness"], [13.6, 18.0, 24.8, 0.0, 30.0])
+    np.testing.assert_array_equal(res["failed_collisions"], [False, False, True, False, True])
+    np.testing.assert_array_equal(res["failed_time"], [False, True, False, False, True])
+    np.testing.assert_allclose(res["trapped_s"], [0.0, 12.8, 0.0, 0.0, 0.32])
+    np.testing.assert_array_equal(res["iterations"], [100, 700, 300, 0, 625])
     assert episode.fitness(10.0, 2) == 13.0 and episode.RHO == 8.0
 
 
@@ -275,19 +302,22 @@ def test_trial_records_are_consistent():
         assert len(ts.records) == 2 and len(ts.trajectories) == 2
         for rec, traj in zip(ts.records, ts.trajectories, strict=True):
             assert set(rec) >= {
-                "tau", "collisions", "fitness", "failed", "failed_by",
+                "tau", "collisions", "collisions_capped", "fitness", "failed",
+                "failed_collisions", "failed_time", "failed_by", "trapped_s",
                 "idiotypic_difference_rate", "iterations",
             }  # fmt: skip
             assert rec["tau"] == pytest.approx(min(rec["iterations"] * DT, F.CONFIG.tau_cap))
-            assert rec["fitness"] == pytest.approx((8 * rec["collisions"] + rec["tau"]) / 2)
-            assert rec["failed"] == (rec["failed_by"] is not None)
-            assert rec["failed_by"] in (None, "time", "collisions")
-            assert 0 <= rec["collisions"] <= F.CONFIG.collision_cap
+            capped = min(rec["collisions"], F.CONFIG.collision_cap)
+            assert rec["collisions_capped"] == capped
+            assert rec["fitness"] == pytest.approx((8 * capped + rec["tau"]) / 2)
+            assert rec["failed"] == (rec["failed_collisions"] or rec["failed_time"])
+            by = [k for k in ("collisions", "time") if rec[f"failed_{k}"]]
+            assert rec["failed_by"] == by
+            assert rec["failed_collisions"] == (rec["collisions"] > F.CONFIG.collision_cap)
+            assert rec["failed_time"] == (rec["iterations"] == MAX_IT)
+            assert 0 <= rec["trapped_s"] <= rec["tau"]
+            assert 0 <= rec["collisions"] <= F.CONFIG.collision_cap  # CONFIG stops at the cap
             assert rec["iterations"] <= MAX_IT
-            if rec["failed_by"] == "time":
-                assert rec["iterations"] == MAX_IT
-            if rec["failed_by"] == "collisions":
-                assert rec["collisions"] == F.CONFIG.collision_cap
             rate = rec["idiotypic_difference_rate"]
             if name == "SIE":
                 assert 0.0 <= rate <= 1.0
@@ -398,33 +428,39 @@ def test_run_trials_rejects_bad_arguments():
 
 
 def test_summarise_by_hand():
-    def rec(tau, c, failed_by, rate):
+    def rec(tau, c, by, rate, trapped=0.0):
+        capped = min(c, 100)
         return {
             "tau": tau,
             "collisions": c,
-            "fitness": (8 * c + tau) / 2,
-            "failed": failed_by is not None,
-            "failed_by": failed_by,
+            "collisions_capped": capped,
+            "fitness": (8 * capped + tau) / 2,
+            "failed": bool(by),
+            "failed_collisions": "collisions" in by,
+            "failed_time": "time" in by,
+            "failed_by": by,
+            "trapped_s": trapped,
             "idiotypic_difference_rate": rate,
             "iterations": int(tau / DT),
         }
 
     records = [
-        rec(10.0, 2, None, 0.2),
-        rec(20.0, 5, "collisions", 0.1),
-        rec(20.0, 1, "time", 0.3),
-        rec(6.0, 0, None, 0.0),
+        rec(10.0, 2, [], 0.2),
+        rec(20.0, 150, ["collisions"], 0.1, 8.0),
+        rec(4000.0, 1, ["time"], 0.3),
+        rec(4000.0, 300, ["collisions", "time"], 0.0, 4.0),
     ]
     s = summarise(records)
     assert s == pytest.approx(
         {
             "n": 4,
-            "tau": 14.0,
-            "collisions": 2.0,
-            "fitness": 15.0,  # (13 + 30 + 14 + 3) / 4
-            "failure_rate": 0.5,
-            "failed_by_collisions": 0.25,
-            "failed_by_time": 0.25,
+            "tau": 2007.5,
+            "collisions": 50.75,  # (2 + 100 + 1 + 100) / 4: capped
+            "fitness": 1206.75,  # (13 + 410 + 2004 + 2400) / 4
+            "failure_rate": 0.75,
+            "failed_by_collisions": 0.5,
+            "failed_by_time": 0.5,
+            "trapped_s": 3.0,
             "idiotypic_difference_rate": 0.15,
         }
     )

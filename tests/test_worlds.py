@@ -33,8 +33,9 @@ def test_builtin_world_loads(name: str) -> None:
     n_wanderers, shape, noisy = EXPECTED[name]
     assert world.n_wanderers == n_wanderers
     assert world.goal_shape == shape
-    assert (world.ir_noise > 0 and world.pixel_flip > 0 and world.wheel_noise > 0) == noisy
-    assert not noisy or (world.ir_noise, world.pixel_flip, world.wheel_noise) == (0.05, 0.02, 0.05)
+    extra = (world.ir_noise, world.camera_miss, world.camera_shift, world.wheel_noise)
+    assert all(v > 0 for v in extra) == noisy
+    assert not noisy or extra == (0.05, 0.05, 0.1, 0.05)
     assert int(world.seg_valid.sum()) >= 4  # the outer walls come first
     arena = np.asarray(world.arena)
     np.testing.assert_allclose(np.asarray(world.seg[:4]).reshape(4, 2, 2).min(axis=(0, 1)), 0.0)
@@ -233,7 +234,12 @@ def test_valid_tiny_world_loads(tmp_path) -> None:
         ("half_size = [0.05, 0.05]", "half_size = [0.05, -0.05]", "goal.half_size"),
         ('shape = "box"', 'shape = "cone"', "goal.shape"),
         ("to = [0.5, 0.3]", "to = [0.5, 1.3]", "walls[0].to"),
-        ('name = "tiny"', 'name = "tiny"\n[noise]\npixel_flip_prob = 2.0', "noise.pixel_flip_prob"),
+        (
+            'name = "tiny"',
+            'name = "tiny"\n[noise]\ncamera_miss_prob = 2.0',
+            "noise.camera_miss_prob",
+        ),
+        ('name = "tiny"', 'name = "tiny"\n[noise]\npixel_flip_prob = 0.1', "noise.pixel_flip_prob"),
         # A start region filled by a pillar: reset could never place the robot clear of it.
         (
             "center = [0.7, 0.2]\nradius = 0.04",

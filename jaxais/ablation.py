@@ -1,0 +1,561 @@
+"""What each [ours] reading does: the paper's protocol rerun with each switched to its alternative.
+
+The engine's readings of what the paper leaves open (SPEC 5-9) are named parameters whose earlier,
+literal readings are kept as options. A :class:`Variant` switches some of them; :data:`VARIANTS`
+holds ours, one variant per reading and ``literal`` (every old reading together). For each
+variant, :func:`run_ablation` runs every system of the paper's protocol in every world and
+:func:`variant_summary` scores it: the paper's claims reproduced (:mod:`jaxais.claims`) and the
+mean f and failure rate of SIE, HDC and URL-R1.
+
+Batching. The readings (:class:`jaxais.readings.Readings`) and the HDC's antibodies are traced
+data of a :class:`~jaxais.controllers.System`, so the variants that differ only there run as one
+batch, in one compiled program per world: the systems of all of them side by side, labelled
+``"SIE@hold=1"`` and so on (:func:`jaxais.trials.run_trials` gives a tagged label the random
+streams of its plain label, so every variant meets the same worlds and draws: common random
+numbers). A variant with another :class:`~jaxais.episode.EpisodeConfig` (collision rule, stopping
+at the collision cap: static, compile-time) is its own call, and so is one with other simulator
+parameters (noise-free IR; traced but shared by a whole batch). :func:`plan_calls` groups them.
+
+Within a call, a variant's system that is the same data as another variant's (the HDC-tracking
+variant changes HDC alone) is run once and its trials shared: a run's numbers do not depend on
+its batch mates (``tests/test_trials.py``), so the shared trials are those it would have run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import jax
+import numpy as np
+
+from jaxais import claims, envs, stats
+from jaxais import trials as trials_module
+from jaxais.antibodies import Antibodies, from_dicts
+from jaxais.controllers import System
+from jaxais.envs.struct import device_array
+from jaxais.episode import EpisodeConfig
+from jaxais.experiment import paper_trials, protocol
+from jaxais.network import NetworkParams
+from jaxais.readings import HOLD, SIGMA0_FLOOR, Readings
+from jaxais.readings import readings as make_readings
+from jaxais.seed import Seed
+from jaxais.systems import HAND_DESIGNED, N_SETS, make_system, parse_label
+from jaxais.trials import STL_CONFIG, TrialSet
+
+__all__ = [
+    "REPORTED",
+    "TRACKING_HDC",
+    "VARIANTS",
+    "Ablation",
+    "Call",
+    "Variant",
+    "batch_systems",
+    "document",
+    "figure",
+    "hdc_antibodies",
+    "markdown",
+    "plan_calls",
+    "run_ablation",
+    "select",
+    "variant_summary",
+    "variant_systems",
+]
+
+REPORTED = ("SIE", "HDC", "URL-R1")
+"""The systems whose mean f and failure rate the ablation table shows."""
+
+TRACKING_HDC = [
+    {"antigen": "target seen", "type": "track markers", "S": 350, "A": 30}
+    if item["antigen"] == "target seen"
+    else item
+    for item in HAND_DESIGNED
+]
+"""The earlier HDC: :data:`jaxais.systems.HAND_DESIGNED` with "target seen" mapped to marker
+tracking instead of a wander (SPEC 8 says the paper's HDC does not track)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Variant:
+    """A setting of the [ours] readings (defaults: ours).
+
+    Attributes:
+        name: short name, also the label tag in a batch (``"SIE@hold=1"``).
+        description: one line: what is switched, and to what.
+        hold: iterations a selected behaviour acts [ours: 31; literal 1].
+        count_encounters: the obstacle penalty counts encounters [ours] or iterations (False).
+        sigma0_floor: floor on eq (4)'s initial column means [ours: 0.05; literal 0].
+        collision_rule: "episode" [ours] or "entry" (every entry into a collision antigen).
+        stop_at_collision_cap: end a run at the collision cap (the earlier reading; ours: no).
+        hdc_tracks: the HDC tracks the target when it sees it (the earlier HDC; ours: no).
+        ir_noise: the simulator's IR noise table in every world [ours]; False: noise-free IR
+            (a world's own extra noise, the ``real`` world's, stays).
+    """
+
+    name: str
+    description: str
+    hold: int = HOLD
+    count_encounters: bool = True
+    sigma0_floor: float = SIGMA0_FLOOR
+    collision_rule: str = "episode"
+    stop_at_collision_cap: bool = False
+    hdc_tracks: bool = False
+    ir_noise: bool = True
+
+    def readings(self) -> Readings:
+        """The controllers' readings of this variant."""
+        return make_readings(
+            hold=self.hold,
+            count_encounters=self.count_encounters,
+            sigma0_floor=self.sigma0_floor,
+        )
+
+    def config(self, base: EpisodeConfig = STL_CONFIG) -> EpisodeConfig:
+        """``base`` (caps, recording) with this variant's collision rule and stopping rule."""
+        return dataclasses.replace(
+            base,
+            collision_rule=self.collision_rule,
+            stop_at_collision_cap=self.stop_at_collision_cap,
+        )
+
+    def sim_params(self) -> envs.SimParams:
+        """The simulator parameters: the defaults, with the IR noise table zeroed if off."""
+        if self.ir_noise:
+            return envs.default_params()
+        return envs.default_params(ir_noise=np.zeros(10, np.float32))
+
+    def settings(self) -> dict[str, Any]:
+        """Every setting, as plain JSON."""
+        return {
+            f.name: getattr(self, f.name)
+            for f in dataclasses.fields(self)
+            if f.name not in ("name", "description")
+        }
+
+    def switched(self) -> list[str]:
+        """The settings that differ from ours."""
+        ours = Variant("", "").settings()
+        return [k for k, v in self.settings().items() if v != ours[k]]
+
+
+VARIANTS = (
+    Variant("ours", "all our readings (the defaults)"),
+    Variant("hold=1", "a selected behaviour acts for one 32 ms iteration, not about 1 s", hold=1),
+    Variant(
+        "count_encounters=False",
+        "the 15-obstacle-encounter penalty counts consecutive iterations, not encounters",
+        count_encounters=False,
+    ),
+    Variant(
+        "sigma0_floor=0",
+        "eq (4) literal: a column whose initial mean is 0 stays pinned at 0",
+        sigma0_floor=0.0,
+    ),
+    Variant(
+        "collision_rule=entry",
+        "every entry into a collision antigen counts, not one per contact episode",
+        collision_rule="entry",
+    ),
+    Variant(
+        "stop_at_collision_cap=True",
+        "a run stops at 100 collisions",
+        stop_at_collision_cap=True,
+    ),
+    Variant("hdc_tracks=True", "the HDC tracks the target when it sees it", hdc_tracks=True),
+    Variant(
+        "ir_noise=0",
+        "noise-free IR: the simulator's IR noise table off (the real world keeps its own noise)",
+        ir_noise=False,
+    ),
+    Variant(
+        "literal",
+        "every old reading together: hold=1, count_encounters=False, sigma0_floor=0, "
+        "collision_rule=entry, stop_at_collision_cap=True, hdc_tracks=True",
+        hold=1,
+        count_encounters=False,
+        sigma0_floor=0.0,
+        collision_rule="entry",
+        stop_at_collision_cap=True,
+        hdc_tracks=True,
+    ),
+)
+"""Ours, one variant per [ours] reading switched to its alternative, and all old ones together."""
+
+
+def select(names: Sequence[str] | None) -> tuple[Variant, ...]:
+    """The variants named (in :data:`VARIANTS`' order; all of them for None).
+
+    Raises:
+        ValueError: an unknown or repeated name (one line, listing the known ones).
+    """
+    if names is None:
+        return VARIANTS
+    known = {v.name: v for v in VARIANTS}
+    unknown = [n for n in names if n not in known]
+    if unknown or not names:
+        raise ValueError(
+            f"unknown variant(s) {unknown} (choose from {', '.join(known)})"
+            if unknown
+            else "no variant named"
+        )
+    if len(set(names)) != len(names):
+        raise ValueError(f"a variant is named twice in {list(names)}")
+    return tuple(v for v in VARIANTS if v.name in names)
+
+
+# --------------------------------------------------------------------------- systems
+
+
+def hdc_antibodies(tracks: bool, x: int = N_SETS) -> Antibodies:
+    """The HDC's [x, 8] antibodies (every set the same), tracking the target or not."""
+    one = from_dicts(TRACKING_HDC if tracks else HAND_DESIGNED)
+    return jax.tree.map(lambda a: device_array(np.stack([np.asarray(a)] * x)), one)
+
+
+def variant_systems(
+    variant: Variant,
+    labels: Sequence[str],
+    seed: Seed | None,
+    network: NetworkParams | None = None,
+) -> dict[str, System]:
+    """The systems of ``labels`` (e.g. ``"UIE-R2"``) as ``variant`` builds them.
+
+    Args:
+        seed: the LTL seed (needed by SIE and SRL).
+    """
+    out = {}
+    for name in labels:
+        system = make_system(name, seed, network=network, readings=variant.readings())
+        if variant.hdc_tracks and parse_label(name)[0] == "HDC":
+            system = system.replace(antibodies=hdc_antibodies(True, system.paratopes.shape[0]))
+        out[name] = system
+    return out
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Two pytrees with the same structure and equal leaves."""
+    la, ta = jax.tree.flatten(a)
+    lb, tb = jax.tree.flatten(b)
+    return ta == tb and all(
+        np.shape(x) == np.shape(y) and np.array_equal(np.asarray(x), np.asarray(y))
+        for x, y in zip(la, lb, strict=True)
+    )
+
+
+# --------------------------------------------------------------------------- batching
+
+
+@dataclasses.dataclass(frozen=True)
+class Call:
+    """One batch: the variants that share an episode config and simulator parameters.
+
+    Attributes:
+        config: the episode config (static: one compiled program per config and batch shape).
+        ir_noise: the simulator's IR noise table on (sim params: shared by the batch).
+        variants: the variants' names, in :data:`VARIANTS`' order.
+    """
+
+    config: EpisodeConfig
+    ir_noise: bool
+    variants: tuple[str, ...]
+
+
+def plan_calls(variants: Sequence[Variant], base: EpisodeConfig = STL_CONFIG) -> list[Call]:
+    """Group the variants into batches: one per (episode config, simulator parameters).
+
+    Variants that differ only in traced data (readings, the HDC's antibodies) share a batch.
+    """
+    groups: dict[tuple[EpisodeConfig, bool], list[str]] = {}
+    for v in variants:
+        groups.setdefault((v.config(base), v.ir_noise), []).append(v.name)
+    return [Call(cfg, noise, tuple(names)) for (cfg, noise), names in groups.items()]
+
+
+def batch_systems(
+    names: Sequence[str], systems: Mapping[str, Mapping[str, System]], share: bool = True
+) -> tuple[dict[str, System], dict[str, dict[str, str]]]:
+    """The batch of one call: every variant's systems under tagged labels.
+
+    Args:
+        names: the call's variants.
+        systems: variant name -> label -> System.
+        share: run a system that is the same data as an earlier variant's of the call once.
+
+    Returns:
+        (tagged label (``"SIE@hold=1"``) -> System, variant -> label -> the tagged label whose
+        trials it gets).
+    """
+    batch: dict[str, System] = {}
+    source: dict[str, dict[str, str]] = {name: {} for name in names}
+    for name in names:
+        for label, system in systems[name].items():
+            twin = None
+            if share:
+                twin = next(
+                    (
+                        source[earlier][label]
+                        for earlier in names[: names.index(name)]
+                        if _same(systems[earlier][label], system)
+                    ),
+                    None,
+                )
+            if twin is None:
+                twin = f"{label}@{name}"
+                batch[twin] = system
+            source[name][label] = twin
+    return batch, source
+
+
+@dataclasses.dataclass
+class Ablation:
+    """The trials of an ablation.
+
+    Attributes:
+        trials: variant -> world -> label -> :class:`~jaxais.trials.TrialSet`.
+        calls: one dict per batch run: world, variants, the episode config's switched fields,
+            ir_noise, systems (tagged labels run), shared (variant -> label -> tagged label run
+            for it, where not its own), runs, compiled (a new program was compiled), compile_s,
+            run_s.
+    """
+
+    trials: dict[str, dict[str, dict[str, TrialSet]]]
+    calls: list[dict[str, Any]]
+
+    def records(self, variant: str) -> dict[str, dict[str, list[dict[str, Any]]]]:
+        """``{world: {label: [trial record]}}`` of a variant (what :mod:`jaxais.claims` reads)."""
+        return {
+            world: {label: ts.records for label, ts in by_label.items()}
+            for world, by_label in self.trials[variant].items()
+        }
+
+
+Runner = Callable[..., dict[str, TrialSet]]
+
+
+def run_ablation(
+    worlds: Sequence[str],
+    variants: Sequence[Variant],
+    seed: int,
+    ltl_seed: Seed | None,
+    n_trials: int | Mapping[str, int] | None = None,
+    base: EpisodeConfig = STL_CONFIG,
+    labels: Sequence[str] | None = None,
+    network: NetworkParams | None = None,
+    share: bool = True,
+    progress: Any = None,
+    runner: Runner | None = None,
+) -> Ablation:
+    """Run every variant's protocol: per world, one :func:`~jaxais.trials.run_trials` per call.
+
+    Args:
+        worlds: world names (``world1``, ``world2``, ``real`` or a world file).
+        variants: the variants (see :data:`VARIANTS`).
+        seed: the trials' PRNG seed (every variant meets the same worlds and random streams).
+        ltl_seed: the LTL seed for SIE and SRL (None if ``labels`` has neither).
+        n_trials: trials per system (or per world name); default the paper's (30, 20 in real).
+        base: the episode config's caps and recording; each variant sets its own rules.
+        labels: the systems (default: the paper's protocol in each world).
+        network: network constants (default: the paper's).
+        share: see :func:`batch_systems`.
+        progress: optional tqdm-like bar: advanced in simulated iterations, its total should be
+            ``len(worlds) * len(plan_calls(variants, base)) * base.max_iterations(dt)``.
+        runner: ``run_trials`` or a stand-in with its signature (tests).
+
+    Returns:
+        The :class:`Ablation`.
+    """
+    run = trials_module.run_trials if runner is None else runner
+    calls = plan_calls(variants, base)
+    by_name = {v.name: v for v in variants}
+    out: dict[str, dict[str, dict[str, TrialSet]]] = {v.name: {} for v in variants}
+    log: list[dict[str, Any]] = []
+    for world_name in worlds:
+        world = envs.load_world(world_name)
+        world_labels = list(protocol(world_name) if labels is None else labels)
+        if n_trials is None:
+            n = paper_trials(world_name)
+        else:
+            n = n_trials if isinstance(n_trials, int) else n_trials[world_name]
+        systems = {
+            name: variant_systems(by_name[name], world_labels, ltl_seed, network)
+            for call in calls
+            for name in call.variants
+        }
+        for call in calls:
+            batch, source = batch_systems(call.variants, systems, share)
+            first = by_name[call.variants[0]]
+            sim_params = first.sim_params()
+            done = _Counter(progress)
+            if progress is not None and hasattr(progress, "set_description_str"):
+                progress.set_description_str(
+                    f"{world_name}: {', '.join(call.variants)} ({len(batch)} systems x {n})"
+                )
+            timings: dict[str, float] = {}
+            before = len(trials_module._COMPILED)
+            results = run(world, batch, n, seed, call.config, sim_params, done, timings)
+            if progress is not None:
+                progress.update(max(0, call.config.max_iterations(sim_params.dt) - done.n))
+            for name in call.variants:
+                out[name][world_name] = {
+                    label: results[tagged] for label, tagged in source[name].items()
+                }
+            log.append(
+                {
+                    "world": world_name,
+                    "variants": list(call.variants),
+                    "episode": {
+                        "collision_rule": call.config.collision_rule,
+                        "stop_at_collision_cap": call.config.stop_at_collision_cap,
+                    },
+                    "ir_noise": call.ir_noise,
+                    "systems": list(batch),
+                    "shared": {
+                        name: {lab: t for lab, t in src.items() if t != f"{lab}@{name}"}
+                        for name, src in source.items()
+                        if any(t != f"{lab}@{name}" for lab, t in src.items())
+                    },
+                    "runs": len(batch) * n,
+                    "compiled": len(trials_module._COMPILED) > before,
+                    "compile_s": timings.get("compile_s", 0.0),
+                    "run_s": timings.get("run_s", 0.0),
+                }
+            )
+    return Ablation(out, log)
+
+
+class _Counter:
+    """Passes progress on to a bar and counts it (so a call's share can be completed)."""
+
+    def __init__(self, bar: Any):
+        self.bar, self.n = bar, 0
+
+    def update(self, k: int) -> None:
+        self.n += k
+        if self.bar is not None:
+            self.bar.update(k)
+
+
+# --------------------------------------------------------------------------- results
+
+
+def _reported(records: Sequence[Mapping[str, Any]]) -> dict[str, float]:
+    return {
+        "f": float(stats.metric_values(records, "f").mean()),
+        "failure_rate": float(np.mean([bool(r["failed"]) for r in records])),
+        "trapped_s": float(np.mean([r["trapped_s"] for r in records])),
+    }
+
+
+def variant_summary(results_by_world: Mapping[str, Mapping[str, Sequence[Mapping]]]) -> dict:
+    """A variant's scores: the claims and the reported systems' means per world.
+
+    Args:
+        results_by_world: ``{world: {label: [trial record]}}``.
+
+    Returns:
+        ``{"claims": {"reproduced", "evaluated", "total"}, "held": [claim ids held],
+        "worlds": {world: {label: {"f", "failure_rate", "trapped_s"}}}}`` for the labels of
+        :data:`REPORTED` that have trials.
+    """
+    ledger = claims.claims(results_by_world)
+    return {
+        "claims": claims.summary(ledger),
+        "held": [c["id"] for c in ledger if c["held"] is True],
+        "worlds": {
+            world: {
+                label: _reported(by_label[label])
+                for label in REPORTED
+                if len(by_label.get(label, ())) > 0
+            }
+            for world, by_label in results_by_world.items()
+        },
+    }
+
+
+def document(
+    ablation: Ablation, variants: Sequence[Variant], n_trials: Mapping[str, int]
+) -> dict[str, Any]:
+    """The ``ablation.json`` document: per variant its settings and :func:`variant_summary`."""
+    return stats.jsonable(
+        {
+            "reported_systems": list(REPORTED),
+            "trials": dict(n_trials),
+            "variants": [
+                {
+                    "name": v.name,
+                    "description": v.description,
+                    "settings": v.settings(),
+                    "switched": v.switched(),
+                    **variant_summary(ablation.records(v.name)),
+                }
+                for v in variants
+            ],
+        }
+    )
+
+
+def _cell(value: float | None, fmt: str) -> str:
+    return "–" if value is None else format(value, fmt)
+
+
+def markdown(doc: Mapping[str, Any]) -> str:
+    """The ablation table: variant | claims reproduced | per world SIE f, HDC f, URL-R1 f,
+    SIE failures (%), then what each variant switches."""
+    worlds = list(doc["trials"])
+    head = ["variant", "claims reproduced"]
+    for w in worlds:
+        head += [f"{w} SIE f", f"{w} HDC f", f"{w} URL-R1 f", f"{w} SIE fail %"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for v in doc["variants"]:
+        c = v["claims"]
+        row = [f"`{v['name']}`", f"{c['reproduced']} of {c['evaluated']}"]
+        for w in worlds:
+            by = v["worlds"].get(w, {})
+            get = lambda label, key, by=by: by.get(label, {}).get(key)
+            fail = get("SIE", "failure_rate")
+            row += [_cell(get(label, "f"), ".0f") for label in REPORTED]
+            row.append(_cell(None if fail is None else 100 * fail, ".0f"))
+        lines.append("| " + " | ".join(row) + " |")
+    trials = ", ".join(f"{w} {n}" for w, n in doc["trials"].items())
+    notes = [
+        "",
+        f"Trials per system: {trials}. f = (8c + τ)/2 (s, lower is better), c capped at 100. "
+        f"Claims: of the paper's claims that our results can evaluate (`jaxais.claims`).",
+        "",
+    ]
+    notes += [f"- `{v['name']}`: {v['description']}." for v in doc["variants"]]
+    return "\n".join(lines + notes) + "\n"
+
+
+def figure(doc: Mapping[str, Any]) -> Any:
+    """Claims reproduced per variant, and SIE's mean f per world and variant (a Figure)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    variants = doc["variants"]
+    names = [v["name"] for v in variants]
+    worlds = list(doc["trials"])
+    fig = Figure(figsize=(12, 0.45 * len(names) + 2.0), layout="constrained")
+    FigureCanvasAgg(fig)
+    ax_c, ax_f = fig.subplots(1, 2, sharey=True)
+    y = np.arange(len(names))
+    held = [v["claims"]["reproduced"] for v in variants]
+    evaluated = [v["claims"]["evaluated"] for v in variants]
+    ax_c.barh(y, evaluated, color="0.85", label="evaluated")
+    ax_c.barh(y, held, color="tab:blue", label="reproduced")
+    for yi, h, e in zip(y, held, evaluated, strict=True):
+        ax_c.text(h + 0.3, yi, f"{h}/{e}", va="center", fontsize=8)
+    ax_c.set_yticks(y, names)
+    ax_c.invert_yaxis()
+    ax_c.set_xlabel("paper's claims")
+    ax_c.set_title("claims reproduced")
+    ax_c.legend(loc="lower right", fontsize=8)
+    height = 0.8 / max(1, len(worlds))
+    for k, w in enumerate(worlds):
+        f = [v["worlds"].get(w, {}).get("SIE", {}).get("f", np.nan) for v in variants]
+        ax_f.barh(y - 0.4 + (k + 0.5) * height, f, height, label=w)
+    ax_f.set_xlabel("SIE mean f = (8c + τ)/2 (lower is better)")
+    ax_f.set_title("SIE's fitness per world")
+    ax_f.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)  # clear of the bars
+    return fig

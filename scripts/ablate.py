@@ -1,0 +1,201 @@
+"""Rerun the paper's protocol with each of our readings switched to its alternative, and tabulate.
+
+    python scripts/ablate.py --out ablation/
+    python scripts/ablate.py --out ablation/ --trials 10 --worlds world1 --variants ours,literal
+
+The engine's readings of what the paper leaves open ([ours] in SPEC 5-9) each have a named
+alternative, the earlier literal reading (jaxais.ablation.VARIANTS): "ours", one variant per
+reading switched, and "literal" (every old reading together). Each variant runs every system in
+every world with the paper's trial counts (30 per simulated world, 20 in `real`). Variants that
+differ only in traced data (the readings, the HDC's antibodies) run as one compiled batch per
+world; a variant with another episode rule or simulator parameters is its own batch. Every
+variant meets the same worlds and random streams (common random numbers). Writes
+DIR/ablation.json (per variant: settings, claims reproduced and held, SIE/HDC/URL-R1 mean f and
+failure rate per world), DIR/ablation.md (the table), DIR/ablation.png and DIR/run.json (the
+config, seeds, versions, batches and timings).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+from jaxais.cli import (
+    ArgumentParser,
+    UserError,
+    atomic_write_json,
+    atomic_write_text,
+    check_writable_dir,
+    main_wrapper,
+    run_script,
+)
+
+WORLDS = ("world1", "world2", "real")
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    p = ArgumentParser(prog="ablate.py", description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", required=True, help="output directory (created if missing)")
+    p.add_argument(
+        "--trials",
+        type=int,
+        default=None,
+        help="trials per system and world (default: the paper's 30, 20 in real)",
+    )
+    p.add_argument("--worlds", default=",".join(WORLDS), help="comma-separated subset of worlds")
+    p.add_argument(
+        "--variants",
+        default=None,
+        help="comma-separated subset of the variants (default: all; names as in ablation.md)",
+    )
+    p.add_argument(
+        "--seeds",
+        default=None,
+        help="LTL seed directory (default: the shipped checkpoints/default)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="PRNG seed of the trials")
+    p.add_argument("--tau-cap", type=float, default=4000.0, help="time cap, s [paper: 4000]")
+    p.add_argument("--collision-cap", type=int, default=100, help="collision cap [paper: 100]")
+    p.add_argument(
+        "--no-share",
+        action="store_true",
+        help="run every variant's every system, even one that is the same data as another's",
+    )
+    return p.parse_args(argv)  # fmt: skip
+
+
+def _portable(path: Path | str) -> str:
+    """A path for run.json: relative to the working directory when under it, else its name."""
+    p = Path(path).resolve()
+    try:
+        return str(p.relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return p.name
+
+
+def _versions() -> dict[str, str]:
+    import jax
+    import jaxlib
+    import numpy
+
+    import jaxais
+
+    return {
+        "jaxais": jaxais.__version__,
+        "jax": jax.__version__,
+        "jaxlib": jaxlib.__version__,
+        "numpy": numpy.__version__,
+        "python": platform.python_version(),
+        "backend": jax.default_backend(),
+    }
+
+
+@main_wrapper("ablate.py")
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(argv)
+    worlds = [w for w in args.worlds.split(",") if w]
+    unknown = sorted(set(worlds) - set(WORLDS))
+    if unknown or not worlds:
+        raise UserError(f"--worlds: unknown world(s) {unknown} (choose from {', '.join(WORLDS)})")
+    if len(set(worlds)) != len(worlds):
+        raise UserError(f"--worlds: a world is named twice in {args.worlds!r}")
+    if not 0 <= args.seed < 2**32:
+        raise UserError(f"--seed must be in [0, 2**32), got {args.seed}")
+    if args.trials is not None and args.trials < 2:
+        raise UserError(f"--trials must be >= 2 (t-tests need two per group), got {args.trials}")
+    if not 0 < args.tau_cap <= 1e6 or args.collision_cap < 1:
+        raise UserError("--tau-cap must be in (0, 1e6] and --collision-cap >= 1")
+    names = None if args.variants is None else [v for v in args.variants.split(",") if v]
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    check_writable_dir(out)
+
+    # Imported after the cheap checks: a bad flag answers without loading JAX.
+    from tqdm import tqdm
+
+    from jaxais import ablation, compilation_cache, envs, host_devices
+    from jaxais.experiment import load_ltl_seed, paper_trials
+    from jaxais.plotting import save_figure
+    from jaxais.trials import STL_CONFIG
+
+    try:
+        variants = ablation.select(names)
+    except ValueError as err:
+        raise UserError(f"--variants: {err}") from None
+    cache_dir = compilation_cache.enable()
+    n_devices = host_devices.enable()
+    started = time.perf_counter()
+    # Read once, and early: a missing or corrupt seed fails before any trial runs.
+    ltl_seed, seed_info = load_ltl_seed(args.seeds)
+    seed_info["path"] = (
+        "shipped (checkpoints/default)" if args.seeds is None else _portable(args.seeds)
+    )
+    made_by = seed_info.get("made_by", {})
+    if isinstance(made_by.get("command"), str):  # evolve.py's own command may name /tmp/...
+        made_by["command"] = " ".join(
+            _portable(w) if w.startswith("/") else w for w in made_by["command"].split()
+        )
+    base = dataclasses.replace(STL_CONFIG, tau_cap=args.tau_cap, collision_cap=args.collision_cap)
+    n_trials = {w: args.trials if args.trials is not None else paper_trials(w) for w in worlds}
+    calls = ablation.plan_calls(variants, base)
+    dt = float(envs.default_params().dt)
+    total = len(worlds) * len(calls) * base.max_iterations(dt)
+    with tqdm(total=total, unit="it", file=sys.stderr, desc="ablation") as bar:
+        result = ablation.run_ablation(
+            worlds, variants, args.seed, ltl_seed, n_trials, base,
+            share=not args.no_share, progress=bar,
+        )  # fmt: skip
+    wall = time.perf_counter() - started
+
+    doc = ablation.document(result, variants, n_trials)
+    atomic_write_json(out / "ablation.json", doc)
+    table = ablation.markdown(doc)
+    atomic_write_text(out / "ablation.md", "# Ablation of our readings\n\n" + table)
+    save_figure(ablation.figure(doc), out / "ablation.png")
+    compile_s = sum(c["compile_s"] for c in result.calls)
+    # The command that regenerates the run, every flag explicit, without the output directory.
+    command = (
+        f"ablate.py --out DIR --worlds {','.join(worlds)} "
+        f"--variants {','.join(v.name for v in variants)} --seed {args.seed} "
+        f"--tau-cap {args.tau_cap:g} --collision-cap {args.collision_cap}"
+        + ("" if args.trials is None else f" --trials {args.trials}")
+        + ("" if args.seeds is None else f" --seeds {seed_info['path']}")
+        + (" --no-share" if args.no_share else "")
+    )
+    run = {
+        "command": command,
+        "seed": args.seed,
+        "trials": n_trials,
+        "worlds": worlds,
+        "variants": [v.name for v in variants],
+        "episode": {"tau_cap": base.tau_cap, "collision_cap": base.collision_cap},
+        "share_identical_systems": not args.no_share,
+        "ltl_seed": seed_info,
+        "versions": _versions(),
+        "devices": n_devices,
+        "cpu_cores": os.cpu_count(),
+        "compilation_cache": cache_dir is not None,
+        "calls": result.calls,
+        "timings_s": {
+            "total_s": wall,
+            "compile_s": compile_s,
+            "run_s": sum(c["run_s"] for c in result.calls),
+        },  # fmt: skip
+    }
+    atomic_write_json(out / "run.json", run)
+    compiled = sum(c["compiled"] for c in result.calls)
+    print(table, end="")
+    print(
+        f"\n{len(variants)} variants x {len(worlds)} worlds in {len(result.calls)} batches "
+        f"({compiled} programs compiled, {compile_s:.0f} s); total {wall:.0f} s. "
+        f"Wrote {out / 'ablation.md'}, ablation.json, ablation.png, run.json."
+    )
+
+
+if __name__ == "__main__":
+    run_script(main)

@@ -5,6 +5,7 @@ This package never imports the rest of jaxais: physics sits at the bottom of the
 
 from .compile import compiler_options, jit, small_kernel_options
 from .geometry import Scene, cast_rays, disc_gaps, min_gap
+from .gymnax import EpuckEnv, make
 from .params import (
     CAMERA_COLUMNS,
     CAMERA_ROWS,
@@ -43,6 +44,7 @@ __all__ = [
     "NONE",
     "WALL",
     "Capacity",
+    "EpuckEnv",
     "Observation",
     "Scene",
     "SimParams",
@@ -57,6 +59,7 @@ __all__ = [
     "disc_gaps",
     "jit",
     "load_world",
+    "make",
     "min_gap",
     "observe",
     "reset",

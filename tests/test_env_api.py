@@ -1,0 +1,219 @@
+"""The gymnax-style environment (``jaxais.envs.make``), its brax wrapper and the console scripts.
+
+Every test shares one environment per auto-reset setting, so each compiled function (reset,
+step, step without auto-reset, its vmapped batch, the brax pair) compiles once. Parameters that
+a test changes (``max_steps``) are traced leaves: they reuse the same programs.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import tomllib
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxais import envs
+from jaxais.envs import gymnax as genv
+
+ROOT = Path(__file__).resolve().parent.parent
+FAR = jnp.array([[-100.0, -100.0, 0.0]])
+"""A wanderer parked outside the arena (as reset parks objects), where it meets nothing."""
+
+
+@pytest.fixture(scope="module")
+def env() -> genv.EpuckEnv:
+    return envs.make("world1")
+
+
+@pytest.fixture(scope="module")
+def env_no_reset() -> genv.EpuckEnv:
+    return envs.make("world1", auto_reset=False)
+
+
+def _placed(env, key, pose, goal=None) -> genv.EnvState:
+    """A fresh episode with the robot at ``pose`` (and the goal at ``goal``), wanderer parked."""
+    _, state = env.reset(key)
+    sim = state.sim.replace(pose=jnp.asarray(pose, jnp.float32), wanderers=FAR)
+    if goal is not None:
+        sim = sim.replace(goal=jnp.asarray(goal, jnp.float32))
+    return state.replace(sim=sim)
+
+
+def test_make_and_spaces(env):
+    assert isinstance(env, envs.EpuckEnv)
+    assert env.num_actions == 2 and env.name == "jaxais-world1"
+    params = env.default_params
+    assert params.max_steps == 125_000  # the paper's 4000 s at 32 ms
+    assert params.world.name == "world1"
+    assert envs.make("world1", max_steps=100).default_params.max_steps == 100
+    with pytest.raises(ValueError, match="unknown environment parameter"):
+        envs.make("world1", max_step=100)
+    with pytest.raises(ValueError, match="max_steps"):
+        envs.make("world1", max_steps=0)
+    with pytest.raises(envs.WorldError):
+        envs.make("no_such_world.toml")
+    obs_space, act_space = env.observation_space(params), env.action_space(params)
+    assert obs_space.shape == (len(genv.OBS_NAMES),) == (11,)
+    assert act_space.shape == (2,)
+    np.testing.assert_array_equal(act_space.low, -1.0)
+    np.testing.assert_array_equal(act_space.high, 1.0)
+
+
+def test_reset_step_shapes_match_spaces(env):
+    key = jax.random.key(0)
+    obs, state = env.reset(key, env.default_params)
+    space = env.observation_space()
+    assert obs.shape == space.shape and obs.dtype == jnp.float32
+    assert bool(space.contains(obs))
+    assert int(state.sim.t) == 0 and int(state.collisions) == 0
+    action = env.action_space().sample(jax.random.key(1))
+    assert bool(env.action_space().contains(action))
+    obs, state, reward, terminated, truncated, info = env.step(key, state, action)
+    assert obs.shape == space.shape and obs.dtype == jnp.float32
+    assert bool(space.contains(obs))
+    assert reward.shape == () and reward.dtype == jnp.float32
+    assert terminated.shape == truncated.shape == () and terminated.dtype == jnp.bool_
+    assert truncated.dtype == jnp.bool_
+    assert {"collisions", "distance", "goal_pixels", "max_ir", "discount"} <= set(info)
+    assert int(state.sim.t) == 1
+    # The IR part of the observation is the raw reading / 4095.
+    np.testing.assert_allclose(float(jnp.max(obs[:8])) * 4095.0, float(info["max_ir"]), rtol=1e-5)
+
+
+def test_same_key_same_result_and_keys_matter(env):
+    _, state = env.reset(jax.random.key(3))
+    action = jnp.array([0.5, 0.2])
+    a = env.step(jax.random.key(4), state, action)
+    b = env.step(jax.random.key(4), state, action)
+    c = env.step(jax.random.key(5), state, action)
+    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
+        np.testing.assert_array_equal(x, y)
+    assert not np.array_equal(a[0], c[0])  # the IR noise comes from the step's key
+    o1, s1 = env.reset(jax.random.key(3))
+    np.testing.assert_array_equal(s1.sim.pose, state.sim.pose)
+
+
+def test_jit_vmap_step_equals_loop(env, env_no_reset):
+    n = 3
+    keys = jax.random.split(jax.random.key(7), n)
+    states = [env.reset(k)[1] for k in keys]
+    actions = jax.random.uniform(jax.random.key(8), (n, 2), minval=-1.0, maxval=1.0)
+    step_keys = jax.random.split(jax.random.key(9), n)
+    params = env_no_reset.default_params
+    loop = [env_no_reset.step(step_keys[i], states[i], actions[i], params) for i in range(n)]
+    batched = jax.jit(jax.vmap(env_no_reset.step, in_axes=(0, 0, 0, None)))(
+        step_keys, jax.tree.map(lambda *x: jnp.stack(x), *states), actions, params
+    )
+    for i in range(n):
+        one = jax.tree.map(lambda x, i=i: x[i], batched)
+        for x, y in zip(jax.tree.leaves(loop[i]), jax.tree.leaves(one), strict=True):
+            np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-5, atol=1e-5)
+
+
+def _expected_rewards(d0, distance, max_ir, params):
+    """Progress minus one penalty per contact episode, by hand (SPEC 9's counting rule)."""
+    rewards, free, prev = [], True, d0
+    for d, vm in zip(distance, max_ir, strict=True):
+        counted = vm >= params.collision_level and free
+        free = (free and not counted) or vm < params.clear_level
+        rewards.append(params.progress_scale * (prev - d) - params.collision_penalty * counted)
+        prev = d
+    return np.asarray(rewards)
+
+
+def test_reward_drive_into_a_wall(env):
+    # Facing the south wall from 0.25 m: drive in, press on, back off clear, drive in again.
+    state = _placed(env, jax.random.key(11), [0.75, 0.25, -np.pi / 2])
+    params = env.default_params
+    d0 = float(genv.goal_distance(state.sim))
+    script = [(1.0, 1.0)] * 70 + [(-1.0, -1.0)] * 40 + [(1.0, 1.0)] * 60
+    rewards, dist, vm, counts = [], [], [], []
+    for t, action in enumerate(script):
+        _, state, r, term, trunc, info = env.step(jax.random.key(100 + t), state, jnp.array(action))
+        assert not bool(term) and not bool(trunc)
+        rewards.append(float(r))
+        dist.append(float(info["distance"]))
+        vm.append(float(info["max_ir"]))
+        counts.append(int(info["collisions"]))
+    vm = np.asarray(vm)
+    assert np.sum(vm >= 2400) > 20  # long contacts, pressed against the wall
+    assert np.min(vm[70:110]) < 250  # backed off clear between them
+    expected = _expected_rewards(d0, dist, vm, params)
+    np.testing.assert_allclose(rewards, expected, atol=1e-5)
+    # One penalty per contact episode: two contacts, two penalties, however long each lasts.
+    assert counts[-1] == 2 == int(state.collisions)
+    assert np.sum(np.diff([0, *counts]) == 1) == 2
+
+
+def test_terminated_after_three_goal_steps(env):
+    # Close up in front of the goal block (half size 0.05 m), facing it, standing still.
+    goal = [0.75, 1.35]
+    state = _placed(env, jax.random.key(12), [0.75, 1.35 - 0.05 - 0.037 - 0.05, np.pi / 2], goal)
+    stop = jnp.zeros(2)
+    out = []
+    for t in range(3):
+        out.append(env.step(jax.random.key(200 + t), state, stop))
+        state = out[-1][1]
+    assert all(int(o[5]["goal_pixels"]) > 40 for o in out)
+    assert [bool(o[3]) for o in out] == [False, False, True]
+    assert not any(bool(o[4]) for o in out)
+    # Standing still: no progress, so the rewards are the finish bonus alone.
+    assert [float(o[2]) for o in out] == [0.0, 0.0, env.default_params.finish_bonus]
+    assert float(out[2][5]["discount"]) == 0.0
+    # Auto-reset: the episode that finished is replaced by a fresh one.
+    assert int(state.sim.t) == 0 and int(state.streak) == 0
+
+
+def test_truncated_at_max_steps(env):
+    params = env.default_params.replace(max_steps=5)
+    size = env._step._cache_size()
+    _, state = env.reset(jax.random.key(13), params)
+    flags = []
+    for t in range(5):
+        _, new, _, term, trunc, _ = env.step(jax.random.key(300 + t), state, jnp.zeros(2), params)
+        flags.append((bool(term), bool(trunc)))
+        if t < 4:
+            state = new
+    assert flags == [(False, False)] * 4 + [(False, True)]
+    assert bool(env.is_terminal(state.replace(sim=state.sim.replace(t=5)), params))
+    assert int(new.sim.t) == 0  # auto-reset
+    assert env._step._cache_size() == size  # max_steps is traced: no new compilation
+
+
+def test_brax_wrapper(env):
+    if importlib.util.find_spec("brax") is None:
+        with pytest.raises(ImportError, match=r"pip install 'jaxais\[brax\]'"):
+            importlib.import_module("jaxais.envs.brax")
+    pytest.importorskip("brax")
+    from jaxais.envs.brax import BraxEnv, BraxState
+
+    benv = BraxEnv(env, params=env.default_params.replace(max_steps=3))
+    assert benv.observation_size == 11 and benv.action_size == 2 and benv.backend == "jaxais"
+    state = jax.jit(benv.reset)(jax.random.PRNGKey(0))
+    assert isinstance(state, BraxState)
+    assert state.obs.shape == (benv.observation_size,) and float(state.done) == 0.0
+    step = jax.jit(benv.step)
+    dones, truncs = [], []
+    for _ in range(3):
+        state = step(state, jnp.array([0.3, 0.3]))
+        dones.append(float(state.done))
+        truncs.append(float(state.info["truncation"]))
+    assert dones == [0.0, 0.0, 1.0] and truncs == [0.0, 0.0, 1.0]
+    assert set(state.metrics) == {"collisions", "distance", "goal_pixels"}
+    assert isinstance(state.pipeline_state, genv.EnvState)
+
+
+def test_console_scripts_point_at_the_scripts():
+    from jaxais import console
+
+    table = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    assert set(table) == {"jaxais-evolve", "jaxais-trials", "jaxais-reproduce"}
+    for name, target in table.items():
+        module, func = target.split(":")
+        assert callable(getattr(importlib.import_module(module), func))
+        assert (console.SCRIPTS_DIR / f"{name.removeprefix('jaxais-')}.py").is_file()

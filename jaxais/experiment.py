@@ -7,6 +7,7 @@ every parameter it used recorded, so a run can be regenerated from its JSON.
 from __future__ import annotations
 
 import dataclasses
+import platform
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +18,7 @@ from jaxais import envs
 from jaxais.controllers import System
 from jaxais.episode import EpisodeConfig
 from jaxais.network import NetworkParams
+from jaxais.readings import DEFAULT, Readings
 from jaxais.seed import Seed, default_seed_dir, load_seed
 from jaxais.systems import LABELS, make_system, parse_label
 from jaxais.trials import TrialSet, summarise
@@ -34,12 +36,50 @@ def paper_trials(world: str) -> int:
     return 20 if world == "real" else 30
 
 
+SHIPPED_SEED = "shipped (checkpoints/default)"
+"""How records name the shipped LTL seed (not by where this machine installed it)."""
+
+
+def portable_path(path: str | Path) -> str:
+    """A path for the records: relative to the working directory when under it, else its
+    name, so no record names a directory of the machine that made it."""
+    p = Path(path).resolve()
+    try:
+        return str(p.relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return p.name
+
+
+def portable_command(command: str) -> str:
+    """``command`` with every absolute path in it made portable (:func:`portable_path`)."""
+    return " ".join(portable_path(w) if w.startswith("/") else w for w in command.split())
+
+
+def versions() -> dict[str, str]:
+    """The versions that made a run: jaxais, jax, jaxlib, numpy, Python, and JAX's backend."""
+    import jax
+    import jaxlib
+
+    return {
+        "jaxais": jaxais.__version__,
+        "jax": jax.__version__,
+        "jaxlib": jaxlib.__version__,
+        "numpy": np.__version__,
+        "python": platform.python_version(),
+        "backend": jax.default_backend(),
+    }
+
+
 def load_ltl_seed(seeds_dir: str | Path | None) -> tuple[Seed, dict[str, Any]]:
-    """The LTL seed (default: the shipped one) and a description of it: path and provenance."""
+    """The LTL seed (default: the shipped one) and a description of it: path and provenance
+    (portable: no absolute paths)."""
     path = default_seed_dir() if seeds_dir is None else Path(seeds_dir)
     seed, meta = load_seed(path)
     made_by = {k: meta.get(k) for k in ("command", "seed", "version") if k in meta}
-    return seed, {"path": str(path), "made_by": made_by}
+    if isinstance(made_by.get("command"), str):  # evolve.py's command may name /tmp/...
+        made_by["command"] = portable_command(made_by["command"])
+    shipped = seeds_dir is None or path.resolve() == default_seed_dir().resolve()
+    return seed, {"path": SHIPPED_SEED if shipped else portable_path(path), "made_by": made_by}
 
 
 def build_systems(
@@ -47,11 +87,13 @@ def build_systems(
     seeds_dir: str | Path | None,
     network: NetworkParams | None = None,
     loaded: tuple[Seed, dict[str, Any]] | None = None,
+    readings: Readings | None = None,
 ) -> tuple[dict[str, System], dict[str, Any]]:
     """Systems by label, loading the LTL seed only when a seeded system needs it.
 
     Args:
         loaded: a seed already read by :func:`load_ltl_seed` (then ``seeds_dir`` is not read).
+        readings: our readings of the paper's open points (default: ours).
 
     Returns:
         (label -> System, a description of the seed used: path and provenance, or None).
@@ -60,7 +102,8 @@ def build_systems(
     seed_info: dict[str, Any] | None = None
     if any(parse_label(name)[0] in ("SIE", "SRL") for name in labels):
         seed, seed_info = loaded if loaded is not None else load_ltl_seed(seeds_dir)
-    return {name: make_system(name, seed, network=network) for name in labels}, seed_info
+    systems = {name: make_system(name, seed, network=network, readings=readings) for name in labels}
+    return systems, seed_info
 
 
 def run_config(
@@ -70,18 +113,22 @@ def run_config(
     network: NetworkParams,
     sim_params: envs.SimParams,
     seed_info: dict[str, Any] | None,
+    readings: Readings | None = None,
 ) -> dict[str, Any]:
-    """Every parameter a run used, as plain JSON."""
+    """Every parameter a run used, as plain JSON (with the versions that made it)."""
     plain = lambda x: np.asarray(x).tolist()
+    fields = lambda obj: {f.name: plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    source = world_source if world_source == world.name else portable_path(world_source)
     return {
-        "world": {"name": world.name, "source": world_source},
+        "world": {"name": world.name, "source": source},
         "episode": dataclasses.asdict(config),
-        "network": {f.name: plain(getattr(network, f.name)) for f in dataclasses.fields(network)},
+        "network": fields(network),
+        "readings": fields(DEFAULT if readings is None else readings),
         "simulator": {
             f.name: plain(getattr(sim_params, f.name)) for f in dataclasses.fields(sim_params)
         },
         "ltl_seed": seed_info,
-        "jaxais_version": jaxais.__version__,
+        "versions": versions(),
     }
 
 

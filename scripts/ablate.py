@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -69,32 +68,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return p.parse_args(argv)  # fmt: skip
 
 
-def _portable(path: Path | str) -> str:
-    """A path for run.json: relative to the working directory when under it, else its name."""
-    p = Path(path).resolve()
-    try:
-        return str(p.relative_to(Path.cwd().resolve()))
-    except ValueError:
-        return p.name
-
-
-def _versions() -> dict[str, str]:
-    import jax
-    import jaxlib
-    import numpy
-
-    import jaxais
-
-    return {
-        "jaxais": jaxais.__version__,
-        "jax": jax.__version__,
-        "jaxlib": jaxlib.__version__,
-        "numpy": numpy.__version__,
-        "python": platform.python_version(),
-        "backend": jax.default_backend(),
-    }
-
-
 @main_wrapper("ablate.py")
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
@@ -119,7 +92,7 @@ def main(argv: list[str] | None = None) -> None:
     from tqdm import tqdm
 
     from jaxais import ablation, compilation_cache, envs, host_devices
-    from jaxais.experiment import load_ltl_seed, paper_trials
+    from jaxais.experiment import load_ltl_seed, paper_trials, versions
     from jaxais.plotting import save_figure
     from jaxais.trials import STL_CONFIG
 
@@ -132,14 +105,6 @@ def main(argv: list[str] | None = None) -> None:
     started = time.perf_counter()
     # Read once, and early: a missing or corrupt seed fails before any trial runs.
     ltl_seed, seed_info = load_ltl_seed(args.seeds)
-    seed_info["path"] = (
-        "shipped (checkpoints/default)" if args.seeds is None else _portable(args.seeds)
-    )
-    made_by = seed_info.get("made_by", {})
-    if isinstance(made_by.get("command"), str):  # evolve.py's own command may name /tmp/...
-        made_by["command"] = " ".join(
-            _portable(w) if w.startswith("/") else w for w in made_by["command"].split()
-        )
     base = dataclasses.replace(STL_CONFIG, tau_cap=args.tau_cap, collision_cap=args.collision_cap)
     n_trials = {w: args.trials if args.trials is not None else paper_trials(w) for w in worlds}
     calls = ablation.plan_calls(variants, base)
@@ -176,7 +141,7 @@ def main(argv: list[str] | None = None) -> None:
         "episode": {"tau_cap": base.tau_cap, "collision_cap": base.collision_cap},
         "share_identical_systems": not args.no_share,
         "ltl_seed": seed_info,
-        "versions": _versions(),
+        "versions": versions(),
         "devices": n_devices,
         "cpu_cores": os.cpu_count(),
         "compilation_cache": cache_dir is not None,

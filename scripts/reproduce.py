@@ -106,7 +106,9 @@ def main(argv: list[str] | None = None) -> None:
         paper_trials,
         protocol,
         results_document,
+        portable_command,
         run_config,
+        versions,
     )
     from jaxais.network import NetworkParams
     from jaxais.plotting import draw_world
@@ -166,12 +168,15 @@ def main(argv: list[str] | None = None) -> None:
     atomic_write_json(out / "claims.json", claims_doc)
     timings["total_s"] = time.perf_counter() - started
     run = {
-        "command": "reproduce.py " + " ".join(sys.argv[1:] if argv is None else argv),
+        "command": portable_command(
+            "reproduce.py " + " ".join(sys.argv[1:] if argv is None else argv)
+        ),
         "seed": args.seed,
         "trials": args.trials,
-        "ltl_seed": str(seeds_dir),
+        "ltl_seed": loaded[1],
         "worlds": configs,
-        "compilation_cache": cache_dir,
+        "compilation_cache": cache_dir is not None,
+        "versions": versions(),
         "devices": n_devices,
         "timings_s": timings,
     }

@@ -245,7 +245,11 @@ def test_reproduce_end_to_end(runs):
         rates = [r["idiotypic_difference_rate"] for r in doc["trials"]]
         assert all((r is not None) == idiotypic for r in rates), (label, rates)
     run = json.loads((out / "run.json").read_text())
-    assert run["ltl_seed"] == str(runs["seeds"]) and run["trials"] == 2
+    assert run["ltl_seed"]["path"] == "seed" and run["trials"] == 2
+    assert set(run["versions"]) >= {"jax", "jaxlib", "numpy"}
+    # The records name no directory of the machine that made them.
+    for doc in [out / "run.json", *(out / "trials").glob("*.json")]:
+        assert str(runs["seeds"].parent) not in doc.read_text(), doc.name
     assert "Report:" in proc.stdout
 
 

@@ -104,9 +104,9 @@ def main(argv: list[str] | None = None) -> None:
         build_systems,
         load_ltl_seed,
         paper_trials,
+        portable_command,
         protocol,
         results_document,
-        portable_command,
         run_config,
         versions,
     )

@@ -3,6 +3,11 @@
 A seed directory holds ``seed.json`` (readable: behaviour types by name, attributes, τ, c, L, and
 the command, seed and version that made it) and ``arrays/``, an orbax checkpoint of the same
 numbers at full precision. Loading reads the orbax arrays and checks them against the JSON.
+
+``seed.json`` may also hold a ``"crossing"`` entry (:data:`CROSSING`): how often each set crossed
+the LTL maze in fresh random starts, measured by ``scripts/evolve.py`` after the GA
+(``{"starts": n, "rate": [x fractions], "tau_cap": s, ...}``; SPEC 10: a seed whose sets do not
+reliably cross the maze is a failed LTL run). Loading checks its form (:func:`check_crossing`).
 """
 
 from __future__ import annotations
@@ -27,6 +32,8 @@ from jaxais.orbax_reads import forget_abandoned_reads
 
 SEED_JSON = "seed.json"
 ARRAYS_DIR = "arrays"
+CROSSING = "crossing"
+"""The optional seed.json entry with the sets' crossing rates (see :func:`check_crossing`)."""
 _FIELDS = ("type", "speed", "freq", "angle", "direction", "right_freq", "right_angle")
 
 
@@ -65,8 +72,34 @@ def _arrays(seed: Seed) -> dict[str, np.ndarray]:
     return out
 
 
-def seed_to_json(seed: Seed, provenance: dict[str, Any]) -> dict[str, Any]:
-    """The readable form of a seed (one entry per set)."""
+def check_crossing(entry: Any, x: int) -> str | None:
+    """What is wrong with a ``"crossing"`` entry for ``x`` sets, or None.
+
+    The entry is a dict with ``starts`` (an int >= 1), ``rate`` (x fractions in [0, 1], each a
+    whole number of crossings out of ``starts``) and ``tau_cap`` (the time cap, s, > 0); further
+    keys (the world, mean τ, how the keys were made, ...) are free.
+    """
+    if not isinstance(entry, dict):
+        return "not a JSON object"
+    starts, rate, cap = entry.get("starts"), entry.get("rate"), entry.get("tau_cap")
+    if isinstance(starts, bool) or not isinstance(starts, int) or starts < 1:
+        return f"starts must be an integer >= 1, got {starts!r}"
+    if not isinstance(rate, list) or len(rate) != x:
+        return f"rate must be a list of {x} fractions"
+    for r in rate:
+        if isinstance(r, bool) or not isinstance(r, int | float) or not 0.0 <= r <= 1.0:
+            return f"rate holds {r!r}, not a fraction in [0, 1]"
+        if abs(r * starts - round(r * starts)) > 1e-6:
+            return f"rate {r!r} is not a whole number of crossings out of {starts}"
+    if isinstance(cap, bool) or not isinstance(cap, int | float) or not 0.0 < cap < float("inf"):
+        return f"tau_cap must be a positive number, got {cap!r}"
+    return None
+
+
+def seed_to_json(
+    seed: Seed, provenance: dict[str, Any], crossing: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """The readable form of a seed (one entry per set; ``crossing`` as its "crossing" entry)."""
     sets = []
     for i in range(seed.tau.shape[0]):
         one = Antibodies(**{f: np.asarray(getattr(seed.antibodies, f))[i] for f in _FIELDS})
@@ -79,16 +112,28 @@ def seed_to_json(seed: Seed, provenance: dict[str, Any]) -> dict[str, Any]:
                 "antibodies": to_dicts(one),
             }
         )
-    return {"format": "jaxais-seed/1", **provenance, "sets": sets}
+    doc = {"format": "jaxais-seed/1", **provenance}
+    if crossing is not None:
+        problem = check_crossing(crossing, len(sets))
+        if problem:
+            raise ValueError(f"crossing entry: {problem}")
+        doc[CROSSING] = crossing
+    return {**doc, "sets": sets}
 
 
-def save_seed(path: str | Path, seed: Seed, provenance: dict[str, Any]) -> Path:
+def save_seed(
+    path: str | Path,
+    seed: Seed,
+    provenance: dict[str, Any],
+    crossing: dict[str, Any] | None = None,
+) -> Path:
     """Write a seed directory atomically (built beside ``path``, then renamed into place).
 
     Args:
         path: the seed directory to create or replace.
         seed: the sets.
         provenance: command, seed, package version, ... (stored in seed.json).
+        crossing: the sets' crossing rates (seed.json's "crossing" entry, :func:`check_crossing`).
     """
     import orbax.checkpoint as ocp
 
@@ -98,7 +143,8 @@ def save_seed(path: str | Path, seed: Seed, provenance: dict[str, Any]) -> Path:
     try:
         with ocp.StandardCheckpointer() as ckpt:
             ckpt.save(tmp / ARRAYS_DIR, _arrays(seed))
-        (tmp / SEED_JSON).write_text(json.dumps(seed_to_json(seed, provenance), indent=1))
+        doc = seed_to_json(seed, provenance, crossing)
+        (tmp / SEED_JSON).write_text(json.dumps(doc, indent=1))
         if path.exists():
             old = path.with_name(f".{path.name}.old")
             shutil.rmtree(old, ignore_errors=True)
@@ -172,4 +218,8 @@ def load_seed(path: str | Path | None = None) -> tuple[Seed, dict[str, Any]]:
     same = same and np.array_equal(json_L, seed.L.astype(np.float32))
     if not same:
         raise SeedError(f"{path}: {SEED_JSON} disagrees with {ARRAYS_DIR}/ ({hint})")
+    if CROSSING in meta:
+        problem = check_crossing(meta[CROSSING], x)
+        if problem:
+            raise SeedError(f"{path}: {SEED_JSON} is malformed (crossing: {problem}); {hint}")
     return seed, meta

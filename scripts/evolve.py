@@ -1,15 +1,28 @@
 """Evolve LTL antibody sets with the genetic algorithm (SPEC 10) and write the STL's seed.
 
-    python scripts/evolve.py --out DIR                  # 5 populations x 10 robots, 30 generations
+    python scripts/evolve.py --out DIR                  # 5 populations x 10 robots
     python scripts/evolve.py --out DIR --resume         # continue an interrupted run exactly
     python scripts/evolve.py --out DIR --diversity      # also compare 5 x 10 with 1 x 50
+    python scripts/evolve.py --check-seed DIR/seed      # measure an existing seed, evolve nothing
 
-Writes ``DIR/summary.json`` (settings, per-generation best and mean f of every population, wall
-and compile time), ``DIR/fitness.png`` (the fitness curves), ``DIR/seed/`` (the seed, for
-``scripts/trials.py --seeds DIR/seed``) and ``DIR/checkpoints/`` (the GA state after every
-generation). Lower f = (8c + tau)/2 is better. The same arguments give the same seed, and a run
-resumed from its checkpoints ends with exactly the seed of an uninterrupted one. SIGTERM and
-Ctrl-C stop the run with the last complete checkpoint intact.
+Writes ``DIR/summary.json`` (settings, per-generation best and mean f of every population, how
+the run stopped, the seed's crossing rates, wall and compile time), ``DIR/fitness.png`` (the
+fitness curves), ``DIR/seed/`` (the seed, for ``scripts/trials.py --seeds DIR/seed``) and
+``DIR/checkpoints/`` (the GA state after every generation). Lower f = (8c + tau)/2 is better.
+The same arguments give the same seed, and a run resumed from its checkpoints ends with exactly
+the seed of an uninterrupted one. SIGTERM and Ctrl-C stop the run with the last complete
+checkpoint intact.
+
+Each robot runs the maze from ``--starts`` random starts per generation (f, tau, c and L are
+means over them); after each generation every population's best robot runs again from
+``--success-starts`` fresh starts, which make the populations' bests (pooled while a set stays
+best), and the run stops once every population's best crossed the maze in at least
+``--success-rate`` of them and still does after ``--success-starts`` more (or at
+``--generations``). Then each seed set runs from ``--crossing-starts`` fresh starts whose keys
+the GA never used, and the fraction in which it crosses the maze (finishes within the time cap)
+is printed and stored in ``seed.json`` ("crossing") and ``summary.json``. ``--check-seed DIR``
+measures that for an existing seed directory (with ``--world``, ``--tau-cap``, ``--seed``) and
+prints it, writing nothing.
 
 ``--diversity`` runs the GA ``--diversity-seeds`` times (default 3; the main run is the first)
 with the given settings and as many times with one population of P x R robots, and compares the
@@ -41,22 +54,61 @@ class _Parser(argparse.ArgumentParser):
         fail(PROG, f"{message} (see --help)")
 
 
+def _rate_or_none(text: str) -> float | None:
+    """``--success-rate``: a number, or ``none`` for no success stop."""
+    if text.strip().lower() in ("none", "off"):
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a fraction or 'none', got {text!r}") from None
+
+
+# The defaults are jaxais.ga.GAConfig's (tests/test_evolve_script.py checks that they agree);
+# they are repeated here so that --help and bad flags answer before JAX is imported.
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = _Parser(prog=PROG, description=__doc__.split("\n\n")[0])
     p.add_argument("--world", default="ga_maze", help="world name or .toml path (default ga_maze)")
     p.add_argument("--populations", type=int, default=5, help="independent populations [paper: 5]")
     p.add_argument("--robots", type=int, default=10, help="robots per population [paper: 10]")
-    p.add_argument("--generations", type=int, default=30, help="generations [ours: 30]")
+    p.add_argument("--generations", type=int, default=50, help="generation cap [ours: 50]")
     p.add_argument("--mutation", type=float, default=0.05, help="per-gene rate [paper: 0.05]")
     p.add_argument("--elitism", type=int, default=1, help="elite robots per population [ours: 1]")
     p.add_argument("--target-f", type=float, default=None, help="stop when every best f <= this")
     p.add_argument("--tau-cap", type=float, default=500.0, help="time cap, s [ours: 500]")
     p.add_argument("--collision-cap", type=int, default=100, help="collision cap [ours: 100]")
+    p.add_argument(
+        "--starts", type=int, default=3, help="random starts per robot and generation [ours: 3]"
+    )
+    p.add_argument(
+        "--success-starts",
+        type=int,
+        default=20,
+        help="fresh starts of each population's best per generation (0: no checks) [ours: 20]",
+    )
+    p.add_argument(
+        "--success-rate",
+        type=_rate_or_none,
+        default=0.95,
+        help="stop once every best crosses in this fraction of them ('none': never) [ours: 0.95]",
+    )
+    p.add_argument(
+        "--crossing-starts",
+        type=int,
+        default=50,
+        help="fresh starts per seed set of the final crossing measurement [ours: 50]",
+    )
     p.add_argument("--seed", type=int, default=0, help="PRNG seed of the run")
-    p.add_argument("--out", required=True, help="output directory (created if missing)")
+    p.add_argument("--out", default=None, help="output directory (created if missing)")
     p.add_argument("--resume", action="store_true", help="continue from DIR/checkpoints")
     p.add_argument("--diversity", action="store_true", help="compare 5 x 10 with 1 x 50")
     p.add_argument("--diversity-seeds", type=int, default=3, help="GA seeds per arm (>= 2)")
+    p.add_argument(
+        "--check-seed",
+        default=None,
+        metavar="DIR",
+        help="measure the crossing rates of the seed in DIR and exit (no GA, no --out)",
+    )
     return p.parse_args(argv)
 
 
@@ -73,6 +125,9 @@ def _config(args: argparse.Namespace):
             target_f=args.target_f,
             tau_cap=args.tau_cap,
             collision_cap=args.collision_cap,
+            starts=args.starts,
+            success_starts=args.success_starts,
+            success_rate=args.success_rate,
         )
     except ConfigError as err:
         raise UserError(f"--{err.field.replace('_', '-')} {err.reason}") from None
@@ -117,13 +172,13 @@ class _CompileClock:
         jax.monitoring.unregister_event_duration_listener(self)
 
 
-def _generation_record(generation: int, evaluation, wall: float) -> dict[str, Any]:
+def _generation_record(generation: int, evaluation, best, wall: float) -> dict[str, Any]:
+    """One generation's line of the history: its evaluation (means over each robot's starts)
+    and, after the success check, each population's best so far."""
     import numpy as np
 
-    from jaxais.episode import FINISHED
-
     f, tau, c = (np.asarray(x) for x in (evaluation.fitness, evaluation.tau, evaluation.collisions))
-    status = np.asarray(evaluation.status)
+    crossings = np.asarray(evaluation.crossings)
     pops = []
     for p in range(f.shape[0]):
         i = int(np.argmin(f[p]))
@@ -132,8 +187,14 @@ def _generation_record(generation: int, evaluation, wall: float) -> dict[str, An
                 "best_f": float(f[p, i]),
                 "mean_f": float(f[p].mean()),
                 "best_tau": float(tau[p, i]),
-                "best_collisions": int(c[p, i]),
-                "finished": int(np.sum(status[p] == FINISHED)),
+                "best_collisions": float(c[p, i]),
+                "best_crossings": int(crossings[p, i]),
+                "crossing_rate": float(crossings[p].mean() / evaluation.starts),
+                "best_so_far": {
+                    "f": float(best.fitness[p]),
+                    "crossings": int(best.crossings[p]),
+                    "starts": int(best.starts[p]),
+                },
             }
         )
     return {
@@ -189,6 +250,17 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         raise UserError(f"--diversity-seeds must be >= 2, got {args.diversity_seeds}")
     if args.diversity and config.populations < 2:
         raise UserError("--diversity needs --populations >= 2")
+    if args.crossing_starts < 1:
+        raise UserError(f"--crossing-starts must be >= 1, got {args.crossing_starts}")
+    if args.check_seed is not None:
+        for flag, used in (("--out", args.out), ("--resume", args.resume)):
+            if used:
+                raise UserError(f"--check-seed measures a seed and writes nothing: drop {flag}")
+        if args.diversity:
+            raise UserError("--check-seed measures a seed and writes nothing: drop --diversity")
+        return _check_seed(args, config)
+    if args.out is None:
+        raise UserError("--out DIR is required (or --check-seed DIR to measure a seed)")
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UserError(f"{out}: exists and is not a directory")
@@ -255,7 +327,8 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
                 t0 = time.perf_counter()
                 generation = int(state.generation)
                 state, evaluation = ga.step(state, config, world, sim_params)
-                record = _generation_record(generation, evaluation, time.perf_counter() - t0)
+                best = jax.tree.map(np.asarray, state.best)
+                record = _generation_record(generation, evaluation, best, time.perf_counter() - t0)
                 history.append(record)
                 ck.save(
                     state,
@@ -283,12 +356,16 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
                     on_run=lambda arm, s: bar.update(1),
                 )
             diversity["wall_time_s"] = round(time.perf_counter() - start - ga_wall, 3)
+
+        seed = ga.best_sets(state)
+        t_crossing = time.perf_counter()
+        crossing = _measure_crossing(seed, world, sim_params, config, args)
+        crossing_wall = time.perf_counter() - t_crossing
         compile_s = clock.seconds
 
     out.mkdir(parents=True, exist_ok=True)
-    seed = ga.best_sets(state)
     generations_run = int(state.generation)
-    stopped_by = "target_f" if ga.reached_target(state, config) else "generations"
+    stopped_by = ga.stopped_by(state, config)
     provenance = {
         "made_by": "scripts/evolve.py",
         "command": command,
@@ -306,8 +383,11 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
             "best_f_final_generation": history[-1]["populations"][p]["best_f"],
             "best_f_overall": float(best.fitness[p]),
             "best_tau": float(best.tau[p]),
-            "best_collisions": int(best.collisions[p]),
+            "best_collisions": float(best.collisions[p]),
+            "best_crossings": int(best.crossings[p]),
+            "best_starts": int(best.starts[p]),
             "best_generation": int(best.generation[p]),
+            "crossing_rate": crossing["rate"][p],
         }
         for p in range(config.populations)
     ]
@@ -327,7 +407,9 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
         "seed_diversity": ga.diversity(seed.antibodies) if config.populations >= 2 else None,
         "generations": history,
         "diversity_comparison": diversity,
+        "crossing": crossing,
         "wall_time_s": round(wall, 3),
+        "crossing_wall_time_s": round(crossing_wall, 3),
         "ga_wall_time_s": round(ga_wall, 3),
         "compile_time_s": round(compile_s, 3),
         "ga_compile_time_s": round(ga_compile, 3),
@@ -336,7 +418,7 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
         "loop_kernel_bytes": loop_kernel_bytes,
         "wall_time_total_s": round(earlier_wall + wall, 3),
     }
-    save_seed(out / "seed", seed, provenance)
+    save_seed(out / "seed", seed, provenance, crossing=crossing)
     _plot(
         out / "fitness.png",
         history,
@@ -347,10 +429,74 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
     first = ", ".join(f"{p['best_f_generation_0']:.0f}" for p in populations)
     last = ", ".join(f"{p['best_f_final_generation']:.0f}" for p in populations)
     print(
-        f"{generations_run} generations in {wall:.1f} s (compile {compile_s:.1f} s); best f per"
-        f" population: generation 0 [{first}] -> generation {generations_run - 1} [{last}];"
-        f" wrote {out}/seed, summary.json, fitness.png"
+        f"{generations_run} generations in {wall:.1f} s (compile {compile_s:.1f} s), stopped by"
+        f" {stopped_by}; best f per population: generation 0 [{first}] -> generation"
+        f" {generations_run - 1} [{last}]; wrote {out}/seed, summary.json, fitness.png"
     )
+    print(_crossing_line(crossing))
+    return summary
+
+
+def _measure_crossing(seed, world, sim_params, config, args: argparse.Namespace) -> dict[str, Any]:
+    """The seed's crossing rates in ``--crossing-starts`` fresh starts (the "crossing" entry of
+    seed.json and summary.json, :func:`jaxais.seed.check_crossing`'s format)."""
+    import jax
+    import numpy as np
+
+    from jaxais import ga
+
+    key = ga.crossing_key(args.seed)
+    # In rollouts of success_starts starts per set: the success check's compiled program.
+    batch = config.success_starts or None
+    ev = ga.measure(
+        key, seed.antibodies, world, args.crossing_starts, sim_params, config, batch_starts=batch
+    )
+    ev = jax.tree.map(np.asarray, ev)
+    return {
+        "starts": args.crossing_starts,
+        "rate": [float(c) / args.crossing_starts for c in ev.crossings],
+        "tau_cap": float(config.tau_cap),
+        "collision_cap": int(config.collision_cap),
+        "world": world.name,
+        "mean_tau": [float(t) for t in ev.tau],
+        "mean_collisions": [float(c) for c in ev.collisions],
+        "keys": f"jaxais.ga.crossing_key({args.seed}), not used by the GA",
+    }
+
+
+def _crossing_line(crossing: dict[str, Any]) -> str:
+    rates = ", ".join(f"{r:.2f}" for r in crossing["rate"])
+    return (
+        f"crossing rate per seed set in {crossing['starts']} fresh starts (time cap"
+        f" {crossing['tau_cap']:g} s): [{rates}], lowest {min(crossing['rate']):.2f}"
+    )
+
+
+def _check_seed(args: argparse.Namespace, config) -> dict[str, Any]:
+    """``--check-seed DIR``: measure an existing seed's crossing rates; write nothing."""
+    import logging
+
+    from jaxais import compilation_cache, envs, host_devices, loop_kernels
+    from jaxais.seed import load_seed
+
+    logging.getLogger("absl").setLevel(logging.ERROR)
+    compilation_cache.enable()
+    loop_kernels.enable()
+    host_devices.enable()
+    seed, meta = load_seed(args.check_seed)
+    world = envs.load_world(args.world)
+    start = time.perf_counter()
+    crossing = _measure_crossing(seed, world, envs.default_params(), config, args)
+    recorded = meta.get("crossing")
+    summary = {
+        "seed_dir": str(args.check_seed),
+        "crossing": crossing,
+        "recorded_crossing": recorded,
+        "wall_time_s": round(time.perf_counter() - start, 3),
+    }
+    print(f"{args.check_seed}: {_crossing_line(crossing)}")
+    if recorded is not None:
+        print(f"{args.check_seed}: recorded in its seed.json: {_crossing_line(recorded)}")
     return summary
 
 

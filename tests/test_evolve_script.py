@@ -29,8 +29,14 @@ _spec = importlib.util.spec_from_file_location("evolve_script", SCRIPT)
 evolve = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(evolve)
 
-TINY_ARGS = ["--populations", "2", "--robots", "4", "--tau-cap", "2"]
+TINY_ARGS = [
+    *("--populations", "2", "--robots", "4", "--tau-cap", "2"),
+    *("--starts", "1", "--success-starts", "4", "--crossing-starts", "8"),
+]
+"""test_ga's TINY config; the crossing measurement runs in batches of 2 sets x 4 starts, the
+size of every other rollout here (one compiled program)."""
 assert TINY.tau_cap == 2.0 and (TINY.populations, TINY.robots) == (2, 4)
+assert (TINY.starts, TINY.success_starts) == (1, 4)
 TIME_KEYS = {
     "wall_s",
     "wall_time_s",
@@ -38,6 +44,7 @@ TIME_KEYS = {
     "compile_time_s",
     "ga_compile_time_s",
     "wall_time_total_s",
+    "crossing_wall_time_s",
 }
 
 # After a failed restore, orbax's abandoned reads post to a closed asyncio loop. The checkpoint
@@ -123,6 +130,35 @@ def test_outputs(full_run: Path):
     assert meta["command"] == summary["command"] and meta["version"] == summary["version"]
     np.testing.assert_array_equal(seed.tau, [p["best_tau"] for p in summary["populations"]])
     assert sorted(p.name for p in (full_run / "checkpoints").iterdir()) == ["2", "3", "run.json"]
+    # Nothing crosses the maze in 2 s: the run ends at its generation cap, rates 0.
+    assert summary["stopped_by"] == "generations"
+    crossing = summary["crossing"]
+    assert crossing == meta["crossing"]
+    assert crossing["starts"] == 8 and crossing["tau_cap"] == 2.0 and crossing["rate"] == [0.0] * 2
+    assert [p["crossing_rate"] for p in summary["populations"]] == crossing["rate"]
+    for p in summary["populations"]:
+        assert p["best_starts"] >= 4 and p["best_crossings"] == 0
+    first = summary["generations"][0]["populations"][0]
+    assert {"best_crossings", "crossing_rate", "best_so_far"} <= first.keys()
+
+
+def test_flag_defaults_are_the_ga_defaults():
+    args = evolve.parse_args(["--out", "x"])
+    assert evolve._config(args) == ga.GAConfig()
+    assert args.crossing_starts == ga.CROSSING_STARTS
+
+
+def test_check_seed_measures_the_recorded_rates(full_run: Path, capsys):
+    """``--check-seed`` with the run's settings measures exactly what the run recorded, and
+    writes nothing."""
+    before = _digest(full_run)
+    capsys.readouterr()
+    summary = evolve.main([*TINY_ARGS, "--check-seed", str(full_run / "seed")])
+    _, meta = load_seed(full_run / "seed")
+    assert summary["crossing"] == meta["crossing"] == summary["recorded_crossing"]
+    out = capsys.readouterr().out
+    assert "crossing rate per seed set in 8 fresh starts" in out and "recorded" in out
+    assert _digest(full_run) == before
 
 
 def test_run_as_a_user_runs_it(tmp_path: Path, full_run: Path):
@@ -135,6 +171,7 @@ def test_run_as_a_user_runs_it(tmp_path: Path, full_run: Path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "error" not in proc.stderr.lower() and "Traceback" not in proc.stderr
     assert proc.stdout.startswith("3 generations in ") and str(out / "seed") in proc.stdout
+    assert "crossing rate per seed set in 8 fresh starts" in proc.stdout
     summary = json.loads((out / "summary.json").read_text())
     assert summary["loop_kernel_bytes"] == loop_kernels.DEFAULT_BYTES
     assert_same_arrays(seed_arrays(out / "seed"), seed_arrays(full_run / "seed"))
@@ -293,6 +330,12 @@ def test_bad_loop_kernel_setting_subprocess(tmp_path: Path):
         ["--robots", "many"],
         ["--no-such-flag"],
         ["--diversity", "--diversity-seeds", "1"],
+        ["--starts", "0"],
+        ["--success-starts", "-1"],
+        ["--success-starts", "0"],  # the default success rate needs checks
+        ["--success-rate", "1.5"],
+        ["--success-rate", "often"],
+        ["--crossing-starts", "0"],
     ],
 )
 def test_bad_flags(tmp_path: Path, capsys, case: list[str]):
@@ -307,6 +350,21 @@ def test_bad_flags(tmp_path: Path, capsys, case: list[str]):
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
     assert err.startswith("evolve.py: error: ") and (case[0] in err or case[1] in err)
     assert _digest(keep) == before
+
+
+def test_check_seed_and_out_refusals(tmp_path: Path, capsys, full_run: Path):
+    last = expect_exit(capsys, "--check-seed", str(full_run / "seed"), "--out", str(tmp_path))
+    assert "--check-seed" in last and "--out" in last
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as info:
+        evolve.main(["--populations", "2"])
+    assert info.value.code == 2
+    assert "--out" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as info:
+        evolve.main(["--check-seed", str(tmp_path / "none")])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "no such seed directory" in err
 
 
 def test_diversity_comparison(tmp_path: Path):

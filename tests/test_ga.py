@@ -1,8 +1,12 @@
-"""The LTL genetic algorithm (SPEC 10): selection, crossover, mutation, elitism, bests, diversity.
+"""The LTL genetic algorithm (SPEC 10): selection, crossover, mutation, elitism, bests, robust
+evaluation, success checks and stop, crossing rates, diversity.
 
 Every compiled program is shared: breeding is tested through ``ga.tell`` with one tiny config
-(2 populations x 4 robots), and the GA runs use the same config and a 2 s time cap, so the
-rollout compiles once for the session (``_ga_run`` below is shared with the other GA tests).
+(2 populations x 4 robots, one start each, success checks of 4 starts: every rollout is a batch
+of 8), and the GA runs use the same config and a 2 s time cap, so the maze's rollout compiles
+once for the session (``tiny_run`` below is shared with the other GA tests). Crossings need a
+robot that can reach the goal within 2 s: those tests run in ``EASY``, a small room with the goal
+block right in front of the start.
 """
 
 from __future__ import annotations
@@ -29,13 +33,40 @@ from jaxais.checkpointing import state_to_tree
 from jaxais.controllers import LTL
 from jaxais.episode import EpisodeConfig, rollout
 
-TINY = ga.GAConfig(populations=2, robots=4, generations=2, tau_cap=2.0)
-"""The tests' GA: every test that evaluates robots uses exactly this config (one compile)."""
+TINY = ga.GAConfig(populations=2, robots=4, generations=2, tau_cap=2.0, starts=1, success_starts=4)
+"""The tests' GA: every test that evaluates robots uses this config (batches of 8 runs)."""
+NOCHECK = ga.GAConfig(**{**TINY.to_dict(), "success_starts": 0, "success_rate": None})
+"""TINY without success checks: the generations' evaluations make the bests."""
+
+EASY = """
+# A small room; the goal block fills the camera of a robot at the start, so most sets finish in
+# three iterations and some turn away first (crossings vary from set to set).
+name = "easy"
+[arena]
+width = 0.6
+height = 0.4
+wall_height = 0.1
+[robot]
+start_region = [0.12, 0.17, 0.16, 0.23]
+start_heading = [-0.3, 0.3]
+[goal]
+shape = "box"
+half_size = [0.05, 0.08]
+height = 0.1
+region = [0.38, 0.19, 0.4, 0.21]
+"""
 
 
 @functools.cache
 def maze() -> envs.World:
     return envs.load_world("ga_maze")
+
+
+@pytest.fixture(scope="session")
+def easy(tmp_path_factory: pytest.TempPathFactory) -> envs.World:
+    path = tmp_path_factory.mktemp("worlds") / "easy.toml"
+    path.write_text(EASY)
+    return envs.load_world(path)
 
 
 @functools.cache
@@ -59,12 +90,15 @@ def hand_sets(types: list[list[int]], speed: float = 100.0) -> Antibodies:
     return Antibodies(type=t, **fields)
 
 
-def evaluation(f, tau=None, c=None, L=None) -> ga.Evaluation:
+def evaluation(f, tau=None, c=None, L=None, crossings=None, starts: int = 1) -> ga.Evaluation:
     f = np.asarray(f, np.float32)
     tau = 2 * f if tau is None else np.asarray(tau, np.float32)
-    c = np.zeros(f.shape, np.int32) if c is None else np.asarray(c, np.int32)
+    c = np.zeros(f.shape, np.float32) if c is None else np.asarray(c, np.float32)
     L = np.zeros((*f.shape, 8), np.float32) if L is None else np.asarray(L, np.float32)
-    return ga.Evaluation(fitness=f, tau=tau, collisions=c, L=L, status=np.zeros(f.shape, np.int32))
+    crossings = np.zeros(f.shape, np.int32) if crossings is None else np.asarray(crossings)
+    return ga.Evaluation(
+        fitness=f, tau=tau, collisions=c, L=L, crossings=crossings.astype(np.int32), starts=starts
+    )
 
 
 # ------------------------------------------------------------------------------- config
@@ -91,6 +125,13 @@ def test_lower_is_better_is_declared_once():
         ("collision_cap", 0),
         ("robots", 2.5),
         ("populations", True),
+        ("starts", 0),
+        ("starts", 1.5),
+        ("success_starts", -1),
+        ("success_rate", 0.0),
+        ("success_rate", 1.5),
+        ("success_rate", float("nan")),
+        ("success_rate", True),
     ],
 )
 def test_config_rejects_out_of_range_values(field, value):
@@ -100,12 +141,21 @@ def test_config_rejects_out_of_range_values(field, value):
     assert "\n" not in str(info.value) and str(info.value).startswith(field)
 
 
+def test_a_success_stop_needs_success_checks():
+    with pytest.raises(ga.ConfigError) as info:
+        ga.GAConfig(success_starts=0, success_rate=0.8)
+    assert info.value.field == "success_starts" and "success_rate" in str(info.value)
+    assert ga.GAConfig(success_starts=0, success_rate=None).success_starts == 0
+
+
 def test_config_defaults_and_round_trip():
     c = ga.GAConfig()
-    assert (c.populations, c.robots, c.generations, c.mutation, c.elitism) == (5, 10, 30, 0.05, 1)
+    assert (c.populations, c.robots, c.generations, c.mutation, c.elitism) == (5, 10, 50, 0.05, 1)
     assert (c.tau_cap, c.collision_cap, c.target_f) == (500.0, 100, None)
+    assert (c.starts, c.success_starts, c.success_rate) == (3, 20, 0.95)
     assert ga.GAConfig.from_dict(c.to_dict()) == c
     assert c.episode_config().tau_cap == 500.0
+    assert c.episode_config().stop_at_collision_cap  # the LTL caps end a run (SPEC 10)
 
 
 # ------------------------------------------------------------------------------- selection
@@ -210,7 +260,7 @@ def test_elite_survives_through_a_real_run():
 
 
 def test_best_is_kept_until_strictly_beaten():
-    config = MUT0
+    config = ga.GAConfig(**{**NOCHECK.to_dict(), "mutation": 0.0})
     s0 = fresh_state(5, config)
     s1 = ga.tell(
         jax.random.key(1), s0, evaluation([[9.0, 7.0, 8.0, 9.0], [3.0, 4.0, 5.0, 6.0]]), config
@@ -229,6 +279,16 @@ def test_best_is_kept_until_strictly_beaten():
     )
     seed = ga.best_sets(s2)
     assert seed.antibodies.type.shape == (2, 8) and seed.tau.dtype == np.float32
+    assert seed.collisions.dtype == np.int32
+
+
+def test_with_checks_tell_leaves_the_bests_to_verify():
+    state = fresh_state(5, MUT0)
+    new = ga.tell(jax.random.key(1), state, evaluation(np.full((2, 4), 3.0)), MUT0)
+    np.testing.assert_array_equal(np.asarray(new.best.starts), [0, 0])
+    assert np.all(np.isinf(np.asarray(new.best.fitness)))
+    with pytest.raises(ValueError, match="no generation"):
+        ga.best_sets(new)
 
 
 def test_tell_compiles_once_per_config():
@@ -241,12 +301,17 @@ def test_tell_compiles_once_per_config():
 
 def test_is_done_and_target():
     state = tiny_run()
-    assert ga.is_done(state, TINY)
+    assert ga.is_done(state, TINY) and ga.stopped_by(state, TINY) == "generations"
     more = ga.GAConfig(**{**TINY.to_dict(), "generations": 5})
-    assert not ga.is_done(state, more)
+    assert not ga.is_done(state, more) and ga.stopped_by(state, more) is None
     best = float(np.max(np.asarray(state.best.fitness)))
     reach = ga.GAConfig(**{**more.to_dict(), "target_f": best})
     assert ga.is_done(state, reach) and ga.reached_target(state, reach)
+    assert ga.stopped_by(state, reach) == "target_f"
+    # Nothing crosses the maze in 2 s: the success stop cannot fire.
+    assert not ga.reached_success(state, more)
+    starts = np.asarray(state.best.starts)  # checked, pooled where a set stayed best
+    assert np.all(starts >= 4) and np.all(starts % 4 == 0)
 
 
 # ------------------------------------------------------------------------------- runs
@@ -265,6 +330,150 @@ def test_run_is_reproducible_and_consistent():
     assert int(a.generation) == 2
     seed = ga.best_sets(a)
     np.testing.assert_array_equal(seed.tau, np.asarray(a.best.tau))
+    np.testing.assert_array_equal(seed.collisions, np.rint(np.asarray(a.best.collisions)))
+
+
+# ------------------------------------------------------------------------------- robust runs
+
+
+def test_robust_evaluation_is_the_mean_of_one_start_evaluations(easy):
+    """Three starts per robot, in one rollout, give each robot the mean τ, c, L and f of three
+    one-start evaluations from the same start keys (and the sum of their crossings)."""
+    population = fresh_state(11).population
+    keys = ga.start_keys(jax.random.key(12), 3)
+    params = envs.default_params()
+    three = ga.evaluate(keys, population, easy, params, TINY)
+    ones = [ga.evaluate(keys[s : s + 1], population, easy, params, TINY) for s in range(3)]
+    assert three.starts == 3 and all(e.starts == 1 for e in ones)
+    for name in ("tau", "collisions", "L"):
+        stacked = np.stack([np.asarray(getattr(e, name)) for e in ones])
+        want = stacked.mean(axis=0, dtype=np.float64).astype(np.float32)
+        np.testing.assert_array_equal(np.asarray(getattr(three, name)), want, err_msg=name)
+    np.testing.assert_allclose(
+        np.asarray(three.fitness), np.mean([np.asarray(e.fitness) for e in ones], 0), rtol=1e-6
+    )
+    crossings = sum(np.asarray(e.crossings) for e in ones)
+    np.testing.assert_array_equal(np.asarray(three.crossings), crossings)
+    assert 0 < crossings.sum() < 3 * 8  # some robots cross, not all: the test means something
+    # A single key is split into config.starts start keys.
+    by_key = ga.evaluate(jax.random.key(12), population, easy, params, TINY)
+    np.testing.assert_array_equal(np.asarray(by_key.tau), np.asarray(ones[0].tau))
+
+
+def test_crossing_rates_do_not_depend_on_batching(easy):
+    sets = jax.tree.map(lambda x: x[:, 0], fresh_state(13).population)  # [2, 8]
+    key, params = jax.random.key(14), envs.default_params()
+    whole = ga.crossing_rates(key, sets, easy, 8, params, TINY)
+    split = ga.crossing_rates(key, sets, easy, 8, params, TINY, batch_starts=4)
+    np.testing.assert_array_equal(whole, split)
+    assert whole.shape == (2,) and np.all((whole >= 0) & (whole <= 1))
+    ev = ga.measure(key, sets, easy, 8, params, TINY, batch_starts=4)
+    np.testing.assert_array_equal(whole, np.asarray(ev.crossings) / 8)
+    assert ev.starts == 8 and ev.L.shape == (2, 8)
+    # The measurement's keys are not the run's: fold_in, not split.
+    run_keys = jax.random.split(jax.random.key(0), 4)
+    assert not np.any(
+        np.all(jax.random.key_data(run_keys) == jax.random.key_data(ga.crossing_key(0)), axis=1)
+    )
+
+
+SUCCESS = ga.GAConfig(**{**TINY.to_dict(), "generations": 6, "success_rate": 0.5})
+
+
+@pytest.fixture(scope="module")
+def success_run(easy: envs.World) -> ga.GAState:
+    return ga.run(jax.random.key(3), SUCCESS, easy)
+
+
+def test_the_success_stop_fires(success_run):
+    state = success_run
+    assert ga.stopped_by(state, SUCCESS) == "success"
+    assert ga.reached_success(state, SUCCESS) and int(state.generation) < SUCCESS.generations
+    starts, crossings = np.asarray(state.best.starts), np.asarray(state.best.crossings)
+    assert np.all(crossings >= 0.5 * starts)
+    # The stop came after a confirmation: every best has two checks or more behind it.
+    assert np.all(starts >= 2 * SUCCESS.success_starts)
+    # The same run without the stop goes on to the cap.
+    plain = ga.GAConfig(**{**SUCCESS.to_dict(), "success_rate": None, "generations": 2})
+    assert not ga.reached_success(state, plain)
+
+
+def test_confirm_pools_fresh_starts_into_every_best(easy, success_run):
+    state = success_run
+    more = ga.confirm(jax.random.key(9), state, easy, envs.default_params(), SUCCESS)
+    before, after = jax.tree.map(np.asarray, state.best), jax.tree.map(np.asarray, more.best)
+    np.testing.assert_array_equal(after.starts, before.starts + SUCCESS.success_starts)
+    assert np.all(after.crossings >= before.crossings)
+    assert np.all(after.crossings <= before.crossings + SUCCESS.success_starts)
+    sets = zip(jax.tree.leaves(after.antibodies), jax.tree.leaves(before.antibodies), strict=True)
+    for a, b in sets:
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_allclose(after.fitness, (8 * after.collisions + after.tau) / 2, rtol=1e-6)
+
+
+def test_resume_with_checks_equals_uninterrupted(easy):
+    config = ga.GAConfig(**{**SUCCESS.to_dict(), "success_rate": 1.0, "generations": 3})
+    straight = ga.run(jax.random.key(5), config, easy)
+    first = ga.run(jax.random.key(5), ga.GAConfig(**{**config.to_dict(), "generations": 1}), easy)
+    tree = state_to_tree(first)
+    from jaxais.checkpointing import state_from_tree
+
+    restored = state_from_tree(tree, config, str(jax.random.key_impl(first.key)))
+    resumed = ga.run(restored, config, easy)
+    a, b = state_to_tree(straight), state_to_tree(resumed)
+    for name in a:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+
+
+def _verify_state(best_same: bool) -> tuple[ga.GAState, ga.Evaluation]:
+    """A state whose population 0's generation best is (or is not) its best so far, which has
+    18 crossings in 20 starts, and a check of 20 more starts with 20 crossings."""
+    state = fresh_state(21, MUT0)
+    for k in range(2):  # the check is of generation 1
+        state = ga.tell(jax.random.key(k), state, evaluation([[5.0, 1.0, 9.0, 9.0]] * 2), MUT0)
+    cand = jax.tree.map(lambda x: np.asarray(x)[:, 1], state.evaluated)
+    other = cand.replace(speed=cand.speed + 1.0)  # another set (only compared, never run)
+    best = state.best.replace(
+        antibodies=cand if best_same else other,
+        fitness=np.array([60.0, 60.0], np.float32),
+        tau=np.array([120.0, 120.0], np.float32),
+        collisions=np.array([0.0, 0.0], np.float32),
+        L=np.full((2, 8), 2.0, np.float32),
+        crossings=np.array([18, 18], np.int32),
+        starts=np.array([20, 20], np.int32),
+        generation=np.array([0, 0], np.int32),
+    )
+    record = ga.Evaluation(
+        fitness=np.array([40.0, 70.0], np.float32),
+        tau=np.array([80.0, 140.0], np.float32),
+        collisions=np.array([0.0, 0.0], np.float32),
+        L=np.full((2, 8), 4.0, np.float32),
+        crossings=np.array([20, 20], np.int32),
+        starts=20,
+    )
+    return state.replace(best=best), record
+
+
+def test_a_check_of_the_best_set_is_pooled():
+    state, record = _verify_state(best_same=True)
+    best = ga._verify_update(state, record, np.float32(0.95)).best
+    np.testing.assert_array_equal(np.asarray(best.starts), [40, 40])
+    np.testing.assert_array_equal(np.asarray(best.crossings), [38, 38])
+    np.testing.assert_allclose(np.asarray(best.tau), [100.0, 130.0])
+    np.testing.assert_allclose(np.asarray(best.fitness), [50.0, 65.0])  # (8c + τ)/2
+    np.testing.assert_allclose(np.asarray(best.L), 3.0)
+
+
+def test_a_passing_check_outranks_a_failing_best():
+    state, record = _verify_state(best_same=False)
+    # 18 of 20 fails a rate of 0.95 and 20 of 20 passes it: the check wins even at higher f.
+    best = ga._verify_update(state, record, np.float32(0.95)).best
+    np.testing.assert_array_equal(np.asarray(best.fitness), [40.0, 70.0])
+    np.testing.assert_array_equal(np.asarray(best.generation), [1, 1])
+    # Without a success rate (2 never passes), plain f decides.
+    best = ga._verify_update(state, record, np.float32(2.0)).best
+    np.testing.assert_array_equal(np.asarray(best.fitness), [40.0, 60.0])
+    np.testing.assert_array_equal(np.asarray(best.starts), [20, 20])
 
 
 def test_best_sets_needs_an_evaluation():

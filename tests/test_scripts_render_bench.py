@@ -213,7 +213,7 @@ def test_bench_script_commands_parse():
         for run in bench.SCRIPT_RUNS
     )
     assert evolve.out == trials.out == "x"
-    assert (evolve.populations, evolve.robots, evolve.generations) == (5, 10, 30)
+    assert (evolve.populations, evolve.robots, evolve.generations) == (5, 10, 50)
     assert (trials.system, trials.world, trials.trials) == ("SIE", "world1", 30)
 
 

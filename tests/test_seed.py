@@ -12,7 +12,16 @@ import numpy as np
 import pytest
 from _python import run_python
 
-from jaxais.seed import ARRAYS_DIR, SEED_JSON, Seed, SeedError, load_seed, save_seed
+from jaxais.seed import (
+    ARRAYS_DIR,
+    CROSSING,
+    SEED_JSON,
+    Seed,
+    SeedError,
+    check_crossing,
+    load_seed,
+    save_seed,
+)
 
 # After a failed restore, orbax's abandoned reads post to a closed asyncio loop. load_seed drops
 # those reports (jaxais.orbax_reads), but pytest swaps sys.unraisablehook test by test, so a late
@@ -20,6 +29,12 @@ from jaxais.seed import ARRAYS_DIR, SEED_JSON, Seed, SeedError, load_seed, save_
 pytestmark = pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
 
 PROVENANCE = {"command": "test_seed.py", "seed": 7, "version": "0.0-test"}
+CROSSING_ENTRY = {
+    "starts": 50,
+    "rate": [0.9, 0.82, 1.0, 0.96, 0.88],
+    "tau_cap": 500.0,
+    "world": "ga_maze",
+}
 
 
 def seed_arrays(seed: Seed) -> dict[str, np.ndarray]:
@@ -55,6 +70,43 @@ def test_round_trip_is_bit_identical(tmp_path: Path):
     assert [s["tau"] for s in meta["sets"]] == [float(t) for t in seed.tau]
     assert [s["collisions"] for s in meta["sets"]] == [int(c) for c in seed.collisions]
     assert meta["sets"][3]["L"] == [float(x) for x in seed.L[3]]
+
+
+def test_crossing_entry_round_trip(tmp_path: Path):
+    seed = F.random_seed(2)
+    save_seed(tmp_path / "seed", seed, PROVENANCE, crossing=CROSSING_ENTRY)
+    loaded, meta = load_seed(tmp_path / "seed")
+    assert_same(seed, loaded)
+    assert meta[CROSSING] == CROSSING_ENTRY
+    _, plain = load_seed(save_seed(tmp_path / "plain", seed, PROVENANCE))
+    assert CROSSING not in plain  # optional
+
+
+@pytest.mark.parametrize(
+    "change, words",
+    [
+        ({"starts": 0}, "starts"),
+        ({"starts": 2.5}, "starts"),
+        ({"rate": [0.9] * 4}, "5 fractions"),
+        ({"rate": [0.9, 0.82, 1.2, 0.96, 0.88]}, "fraction"),
+        ({"rate": [0.9, 0.81, 1.0, 0.96, 0.88]}, "whole number"),
+        ({"tau_cap": -1}, "tau_cap"),
+        ({"tau_cap": None}, "tau_cap"),
+    ],
+)
+def test_malformed_crossing_entry_is_refused(change, words, pristine: Path, tmp_path: Path):
+    entry = {**CROSSING_ENTRY, **change}
+    assert words in check_crossing(entry, 5)
+    with pytest.raises(ValueError, match=words):
+        save_seed(tmp_path / "new", F.random_seed(1), PROVENANCE, crossing=entry)
+    path = tmp_path / "seed"
+    shutil.copytree(pristine, path)
+    _edit_json(lambda d: d.update({CROSSING: entry}))(path)
+    with pytest.raises(SeedError) as info:
+        load_seed(path)
+    msg = str(info.value)
+    assert "malformed" in msg and "crossing" in msg and words in msg and "\n" not in msg
+    assert check_crossing(CROSSING_ENTRY, 5) is None and "object" in check_crossing([], 5)
 
 
 def test_shipped_default_seed_loads():

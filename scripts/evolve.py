@@ -281,6 +281,7 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
     import jaxais
     from jaxais import compilation_cache, envs, ga, host_devices, loop_kernels
     from jaxais.checkpointing import GACheckpointer
+    from jaxais.experiment import portable_path
     from jaxais.seed import save_seed
 
     logging.getLogger("absl").setLevel(logging.ERROR)  # orbax's info/warnings are not for users
@@ -292,7 +293,8 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
     n_devices = host_devices.enable()
     world = envs.load_world(args.world)
     sim_params = envs.default_params()
-    command = shlex.join([PROG, *argv])
+    # Recorded without this machine's directories (jaxais.experiment.portable_path).
+    command = shlex.join([PROG, *(portable_path(a) if a.startswith("/") else a for a in argv)])
     # What a resume must share with the run it continues (the generation count may grow).
     run_info = {
         "world": args.world,
@@ -413,7 +415,7 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
         "ga_wall_time_s": round(ga_wall, 3),
         "compile_time_s": round(compile_s, 3),
         "ga_compile_time_s": round(ga_compile, 3),
-        "compilation_cache": cache_dir,
+        "compilation_cache": cache_dir is not None,
         "devices": n_devices,
         "loop_kernel_bytes": loop_kernel_bytes,
         "wall_time_total_s": round(earlier_wall + wall, 3),

@@ -94,6 +94,14 @@ def _init_bout() -> Bout:
     return Bout(antigen=jnp.int32(0), left=jnp.int32(0), u=jnp.zeros(2))
 
 
+def _end_if(bout: Bout, penalised: jnp.ndarray) -> Bout:
+    """The bout ended by a penalty: the network selects again at once [ours]. Otherwise the
+    penalised antibody would act on, and the rewards of the rest of its bout (0 -> 0 scores
+    +0.05 per iteration) would undo the penalty before the next selection, which the paper's
+    penalties exist to force ("to break out of repeated behaviour cycles", section 4.4)."""
+    return bout.replace(left=jnp.where(penalised, 0, bout.left).astype(jnp.int32))
+
+
 def _next_bout(bout: Bout, pc: Percept, u: jnp.ndarray, hold: jnp.ndarray):
     """(select now?, the bout after this iteration's choice)."""
     select = (bout.left <= 0) | interrupts(pc.m, bout.antigen)
@@ -146,7 +154,7 @@ def ltl_controller(readings: Readings = DEFAULT) -> Controller:
         r = rl_score(pc.m_prev, pc.m, pc.v_prev, pc.v, pc.centroid)
         r = r - jnp.where(fire, PENALTY_NON_IDIOTYPIC, 0.0)
         L = jnp.where(scored, jnp.clip(state.L + r, 0.0, L_MAX), state.L)
-        return state.replace(L=L, counters=counters)
+        return state.replace(L=L, counters=counters, bout=_end_if(state.bout, fire))
 
     def act(u, state: LTLState, pc: Percept, antibodies):
         del antibodies
@@ -310,6 +318,7 @@ def stl_controller(
             I=I,
             counters=counters,
             replaced=replaced,
+            bout=_end_if(s.bout, fire),
         )
 
     def act(u, s: STLState, pc: Percept, system: System):

@@ -572,3 +572,22 @@ def test_encounter_penalty_catches_a_robot_hovering_at_a_wall():
             m_prev = m
         fired[count] = hits
     assert fired[True] == [31] and fired[False] == []
+
+
+def test_a_penalty_ends_the_bout_so_the_network_selects_again():
+    """After 250 iterations of antigen 0 the acting antibody is penalised and its bout ends: the
+    next act selects again (another set), instead of letting the rest of the bout's rewards
+    undo the penalty (SPEC 6-7 [ours])."""
+    sys_ = _bout_system(hold=31)
+    P = np.full((F.X, F.Y), 0.5)
+    P[0, 0], P[1, 0] = 1.0, 0.9  # set 0 wins antigen 0, set 1 is next
+    s = F.state(sys_, P, acting=0, held=0, left=20, unseen_run=250)
+    s = F.learn_fn()(F.uniforms(0), s, F.percept(m=0, m_prev=0, t=300), sys_)
+    assert int(s.bout.left) == 0 and float(s.P[0, 0]) < float(s.P[1, 0])
+    s, _ = act(s, F.percept(m=0, t=300), sys_)
+    assert int(s.acting) == 1 and int(s.bout.left) == 30
+    # Without a penalty the bout runs on.
+    calm = F.state(sys_, P, acting=0, held=0, left=20, unseen_run=10)
+    calm = F.learn_fn()(F.uniforms(0), calm, F.percept(m=0, m_prev=0, t=300), sys_)
+    calm, _ = act(calm, F.percept(m=0, t=300), sys_)
+    assert int(calm.acting) == 0 and int(calm.bout.left) == 19

@@ -9,6 +9,7 @@ for a commented example.
 
 from __future__ import annotations
 
+import difflib
 import math
 import tomllib
 from dataclasses import dataclass
@@ -19,10 +20,37 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
+from . import geometry
 from .params import MATERIALS
 from .struct import device_array, pytree_dataclass, static_field
 
 BUILTIN_WORLDS = ("ga_maze", "world1", "world2", "real")
+
+MAX_SURFACES = geometry._INDEX_MASK + 1
+"""Surfaces the ray caster tells apart (``geometry.cast_rays``): a robot's camera and IR rays
+meet the walls (the 4 outer ones included), the boxes, the pillars, the goal and the wandering
+e-pucks, counted with the padding of a :class:`Capacity`. A world with more is refused."""
+MAX_ARENA_SIDE = 100.0
+"""Largest arena side, m [ours]: far beyond the paper's arenas (1.5 m), and float32 positions
+still resolve 8 um there."""
+MAX_HEIGHT = 10.0
+"""Largest height of a wall, box, pillar or goal, m."""
+MAX_HEADING = 2.0 * math.pi
+"""Largest magnitude of a start heading bound, rad."""
+
+_KEYS: dict[str, tuple[str, ...]] = {
+    "": ("name", "arena", "robot", "goal", "walls", "boxes", "pillars", "wanderers", "noise"),
+    "arena": ("width", "height", "wall_height"),
+    "robot": ("start_region", "start_heading"),
+    "goal": ("shape", "half_size", "radius", "height", "region"),
+    "walls": ("from", "to", "material", "height"),
+    "boxes": ("half_size", "center", "region", "material", "height"),
+    "pillars": ("center", "radius", "material", "height"),
+    "wanderers": ("region",),
+    "noise": ("ir_relative_std", "camera_miss_prob", "camera_shift_prob", "wheel_relative_std"),
+}
+"""The world format (``worlds/world1.toml`` documents it): the keys of each table, by path
+(``""`` is the top level; ``walls`` etc. are arrays of tables)."""
 
 
 class WorldError(ValueError):
@@ -101,6 +129,9 @@ class Capacity:
     pillars: int = 1
 
 
+_HALF_ARENA = " (half the arena's shorter side)"
+
+
 def _fail(src: str, field: str, msg: str) -> WorldError:
     return WorldError(f"{src}: field '{field}': {msg}")
 
@@ -120,27 +151,26 @@ class _Reader:
         value = table[key]
         if kind == "number":
             if isinstance(value, bool) or not isinstance(value, int | float):
-                raise _fail(self.src, field, f"expected a number, got {value!r}")
-            if not math.isfinite(value):
-                raise _fail(self.src, field, f"expected a finite number, got {value!r}")
+                raise _fail(self.src, field, f"expected a number, got {_show(value)}")
+            if not _finite(value):
+                raise _fail(self.src, field, f"expected a finite number, got {_show(value)}")
             return float(value)
         if kind == "int":
             if isinstance(value, bool) or not isinstance(value, int):
-                raise _fail(self.src, field, f"expected an integer, got {value!r}")
+                raise _fail(self.src, field, f"expected an integer, got {_show(value)}")
             return value
         if kind == "str":
             if not isinstance(value, str):
-                raise _fail(self.src, field, f"expected a string, got {value!r}")
+                raise _fail(self.src, field, f"expected a string, got {_show(value)}")
             return value
         if kind.startswith("vec"):
             n = int(kind[3:])
             ok = isinstance(value, list) and len(value) == n
             ok = ok and all(
-                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-                for v in value
+                isinstance(v, int | float) and not isinstance(v, bool) and _finite(v) for v in value
             )
             if not ok:
-                raise _fail(self.src, field, f"expected a list of {n} numbers, got {value!r}")
+                raise _fail(self.src, field, f"expected a list of {n} numbers, got {_show(value)}")
             return [float(v) for v in value]
         if kind == "table":
             if not isinstance(value, dict):
@@ -152,11 +182,46 @@ class _Reader:
             return value
         raise AssertionError(kind)
 
-    def positive(self, table: dict, key: str, path: str, default: Any = ...) -> float:
+    def known(self, table: dict, path: str) -> None:
+        """Refuse keys the world format does not have (a misspelt ``[[pilars]]`` would
+        otherwise drop its pillars without a word)."""
+        allowed = _KEYS[path.split("[", 1)[0]]
+        for key in table:
+            if key not in allowed:
+                kind = "table" if isinstance(table[key], dict | list) and not path else "key"
+                close = difflib.get_close_matches(key, allowed, n=1, cutoff=0.7)
+                hint = f" (did you mean '{close[0]}'?)" if close else ""
+                raise _fail(
+                    self.src,
+                    f"{path}.{key}" if path else key,
+                    f"unknown {kind}{hint}; allowed: {', '.join(allowed)}",
+                )
+
+    def positive(
+        self,
+        table: dict,
+        key: str,
+        path: str,
+        default: Any = ...,
+        hi: float = MAX_HEIGHT,
+        why: str = "",
+    ) -> float:
+        """A number in (0, hi] m (``why`` says where ``hi`` comes from)."""
         value = self.get(table, key, path, "number", default)
-        if value <= 0:
-            raise _fail(self.src, f"{path}.{key}", f"must be positive, got {value}")
+        if not 0 < value <= hi:
+            raise _fail(self.src, f"{path}.{key}", f"must lie in (0, {hi:g}] m{why}, got {value:g}")
         return value
+
+    def half_size(self, table: dict, path: str, hi: float) -> list[float]:
+        """A [hx, hy] pair, each in (0, hi] m."""
+        half = self.get(table, "half_size", path, "vec2")
+        if not all(0 < h <= hi for h in half):
+            raise _fail(
+                self.src,
+                f"{path}.half_size",
+                f"each half size must lie in (0, {hi:g}] m{_HALF_ARENA}, got {half}",
+            )
+        return half
 
     def material(self, table: dict, path: str, default: str) -> int:
         name = self.get(table, "material", path, "str", default)
@@ -181,6 +246,20 @@ class _Reader:
                 f"{hi_y:g}] to keep {margin:g} m from the walls)",
             )
         return r
+
+
+def _show(value: Any, limit: int = 40) -> str:
+    """``repr(value)``, cut short: a TOML integer may have hundreds of digits."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[: limit - 3]}..."
+
+
+def _finite(value: int | float) -> bool:
+    """Whether a TOML number is finite as a float (TOML integers have no size limit)."""
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
 
 
 def _pad(rows: list, n: int, width: int | None, fill: float = 0.0) -> np.ndarray:
@@ -211,15 +290,54 @@ def _region_has_room(region, radius, segs, pillars, boxes, n: int = 24) -> bool:
     return bool(np.any(gap >= radius))
 
 
+def _check_surface_count(src, name, segs, boxes, pillars, wanderers, padded: int) -> None:
+    """Refuse a world whose robot would see more than :data:`MAX_SURFACES` surfaces.
+
+    A robot's rays meet the segments, boxes and pillars (``padded`` of them, with the padding of
+    the world's :class:`Capacity`), the goal and every wanderer (``sim.sense``).
+    """
+    total = padded + len(wanderers) + 1
+    if total <= MAX_SURFACES:
+        return
+    count = lambda n, one, many: f"{n} {one if n == 1 else many}"
+    parts = [
+        count(len(segs), "wall", "walls") + " with the 4 outer ones",
+        count(len(boxes), "box", "boxes"),
+    ]
+    parts += [
+        count(len(pillars), "pillar", "pillars"),
+        count(len(wanderers), "wanderer", "wanderers"),
+        "the goal",
+    ]
+    padding = padded - len(segs) - len(boxes) - len(pillars)
+    if padding:
+        parts.append(count(padding, "padding slot", "padding slots"))
+    raise WorldError(
+        f"{src}: world {name!r} has {total} surfaces ({', '.join(parts)}); at most "
+        f"{MAX_SURFACES} are supported (the ray caster's limit): remove at least "
+        f"{total - MAX_SURFACES} walls, boxes, pillars or wanderers"
+    )
+
+
 def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radius: float = 0.037):
-    """Build a :class:`World` from a parsed TOML document; ``src`` names it in errors."""
+    """Build a :class:`World` from a parsed TOML document; ``src`` names it in errors.
+
+    Raises:
+        WorldError: one line naming ``src`` and the offending field: a missing, unknown or
+            mistyped key, a size out of its range (arena sides in (0, 100] m, heights in
+            (0, 10] m, half sizes and radii up to half the arena's shorter side), an object off
+            the arena, or more surfaces than :data:`MAX_SURFACES`.
+    """
     rd = _Reader(src)
+    rd.known(doc, "")
     name = rd.get(doc, "name", "", "str")
     arena_t = rd.get(doc, "arena", "", "table")
-    width = rd.positive(arena_t, "width", "arena")
-    height = rd.positive(arena_t, "height", "arena")
+    rd.known(arena_t, "arena")
+    width = rd.positive(arena_t, "width", "arena", hi=MAX_ARENA_SIDE)
+    height = rd.positive(arena_t, "height", "arena", hi=MAX_ARENA_SIDE)
     wall_h = rd.positive(arena_t, "wall_height", "arena")
     arena = [0.0, 0.0, width, height]
+    max_half = 0.5 * min(width, height)
 
     # Outer walls first, then the file's own segments.
     segs = [[0, 0, width, 0], [width, 0, width, height], [width, height, 0, height]]
@@ -228,6 +346,7 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
     seg_h = [wall_h] * 4
     for k, w in enumerate(rd.get(doc, "walls", "", "tables", [])):
         path = f"walls[{k}]"
+        rd.known(w, path)
         a = rd.get(w, "from", path, "vec2")
         b = rd.get(w, "to", path, "vec2")
         for p, key in ((a, "from"), (b, "to")):
@@ -242,9 +361,8 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
     box_half, box_region, box_mat, box_h = [], [], [], []
     for k, bx in enumerate(rd.get(doc, "boxes", "", "tables", [])):
         path = f"boxes[{k}]"
-        half = rd.get(bx, "half_size", path, "vec2")
-        if min(half) <= 0:
-            raise _fail(src, f"{path}.half_size", f"must be positive, got {half}")
+        rd.known(bx, path)
+        half = rd.half_size(bx, path, max_half)
         if ("center" in bx) == ("region" in bx):
             raise _fail(src, path, "give exactly one of 'center' (fixed) or 'region' (random)")
         margin = max(half)
@@ -263,8 +381,9 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
     pillars, pil_mat, pil_h = [], [], []
     for k, p in enumerate(rd.get(doc, "pillars", "", "tables", [])):
         path = f"pillars[{k}]"
+        rd.known(p, path)
         c = rd.get(p, "center", path, "vec2")
-        r = rd.positive(p, "radius", path)
+        r = rd.positive(p, "radius", path, hi=max_half, why=_HALF_ARENA)
         if not (0 <= c[0] <= width and 0 <= c[1] <= height):
             raise _fail(src, f"{path}.center", f"{c} is outside the arena")
         pillars.append(c + [r])
@@ -272,27 +391,39 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
         pil_h.append(rd.positive(p, "height", path, wall_h))
 
     goal_t = rd.get(doc, "goal", "", "table")
+    rd.known(goal_t, "goal")
     goal_shape = rd.get(goal_t, "shape", "goal", "str")
-    if goal_shape == "box":
-        goal_half = rd.get(goal_t, "half_size", "goal", "vec2")
-        if min(goal_half) <= 0:
-            raise _fail(src, "goal.half_size", f"must be positive, got {goal_half}")
-    elif goal_shape == "ball":
-        r = rd.positive(goal_t, "radius", "goal")
-        goal_half = [r, r]
-    else:
+    if goal_shape not in ("box", "ball"):
         raise _fail(src, "goal.shape", f"expected 'box' or 'ball', got {goal_shape!r}")
+    size_key, other = ("half_size", "radius") if goal_shape == "box" else ("radius", "half_size")
+    if other in goal_t:
+        raise _fail(
+            src, f"goal.{other}", f"a {goal_shape!r} goal is sized by {size_key}, not {other}"
+        )
+    if goal_shape == "box":
+        goal_half = rd.half_size(goal_t, "goal", max_half)
+    else:
+        r = rd.positive(goal_t, "radius", "goal", hi=max_half, why=_HALF_ARENA)
+        goal_half = [r, r]
     goal_h = rd.positive(goal_t, "height", "goal")
     goal_region = rd.region(goal_t, "region", "goal", arena, max(goal_half))
 
     robot_t = rd.get(doc, "robot", "", "table")
+    rd.known(robot_t, "robot")
     start_region = rd.region(robot_t, "start_region", "robot", arena, body_radius)
     heading = rd.get(robot_t, "start_heading", "robot", "vec2", [-math.pi, math.pi])
     if heading[0] > heading[1]:
         raise _fail(src, "robot.start_heading", f"needs min <= max, got {heading}")
+    if max(abs(h) for h in heading) > MAX_HEADING:
+        raise _fail(
+            src,
+            "robot.start_heading",
+            f"each bound must lie in [-{MAX_HEADING:.4f}, {MAX_HEADING:.4f}] rad, got {heading}",
+        )
 
     wander_regions = []
     for k, wd in enumerate(rd.get(doc, "wanderers", "", "tables", [])):
+        rd.known(wd, f"wanderers[{k}]")
         wander_regions.append(rd.region(wd, "region", f"wanderers[{k}]", arena, body_radius))
 
     noise_t = rd.get(doc, "noise", "", "table", {})
@@ -304,12 +435,18 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
             "noise.pixel_flip_prob",
             "per-pixel flips invent targets; use camera_miss_prob and camera_shift_prob",
         )
+    rd.known(noise_t, "noise")
     for key in ("ir_relative_std", *probabilities, "wheel_relative_std"):
         noise[key] = rd.get(noise_t, key, "noise", "number", 0.0)
     for key, value in noise.items():
         hi = 1.0 if key in probabilities else 10.0
         if not 0.0 <= value <= hi:
             raise _fail(src, f"noise.{key}", f"must lie in [0, {hi:g}], got {value}")
+
+    n_s = max(len(segs), capacity.segments)
+    n_b = max(len(box_half), capacity.boxes, 1)
+    n_c = max(len(pillars), capacity.pillars, 1)
+    _check_surface_count(src, name, segs, box_half, pillars, wander_regions, n_s + n_b + n_c)
 
     fixed_boxes = [
         (r[0], r[1], h) for r, h in zip(box_region, box_half, strict=True) if r[:2] == r[2:]
@@ -326,9 +463,6 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
                 "boxes; move or enlarge the region",
             )
 
-    n_s = max(len(segs), capacity.segments)
-    n_b = max(len(box_half), capacity.boxes, 1)
-    n_c = max(len(pillars), capacity.pillars, 1)
     f32 = lambda a: device_array(a, np.float32)
     i32 = lambda a: device_array(a, np.int32)
     valid = lambda n_real, n: device_array(np.arange(n) < n_real)

@@ -8,12 +8,18 @@ and threads.
 Colours: walls dark grey, marker paint light blue, the goal dark blue; the robot's start
 region is a dashed green rectangle, the goal region dashed blue, the wanderers' regions dashed
 grey and the regions of randomly placed boxes dotted grey.
+
+Boxes and the goal are drawn where a run had them: pass its ``State`` (after reset), or a
+*placement*, any object with ``boxes`` [B, 2] and ``goal`` [2] (``jaxais.trials.Placement``,
+what ``run_trials`` keeps of each trial). Only without either do they sit at their regions'
+centres, which for randomly placed ones is where no run had them.
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from types import SimpleNamespace
 from typing import Any
 
 import jax
@@ -57,14 +63,26 @@ def _region_rect(region: np.ndarray, **kw: Any) -> Rectangle:
     return Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, **kw)
 
 
-def _is_batched(state: State) -> bool:
-    return np.ndim(state.pose) > 1
+Placed = Any
+"""A ``State`` or a placement: an object with ``boxes`` [B, 2] and ``goal`` [2] (and, for a
+``State``, ``wanderers`` [W, 3]); with a leading robot axis when batched."""
 
 
-def _unstack(state: State) -> list[State]:
-    """A batched ``State`` (leading robot axis) as a list of single-robot states (NumPy)."""
-    n = np.shape(state.pose)[0]
-    return [jax.tree.map(lambda x, i=i: np.asarray(x)[i], state) for i in range(n)]
+def _is_placed(x: Any) -> bool:
+    return hasattr(x, "boxes") and hasattr(x, "goal")
+
+
+def _is_batched(state: Placed) -> bool:
+    return np.ndim(state.goal) > 1
+
+
+def _unstack(state: Placed) -> list[Placed]:
+    """A batched ``State`` or placement (leading robot axis) as a list of single ones (NumPy)."""
+    n = np.shape(state.goal)[0]
+    if isinstance(state, State):
+        return [jax.tree.map(lambda x, i=i: np.asarray(x)[i], state) for i in range(n)]
+    boxes, goal = np.asarray(state.boxes), np.asarray(state.goal)
+    return [SimpleNamespace(boxes=boxes[i], goal=goal[i]) for i in range(n)]
 
 
 def _draw_static(ax: Axes, world: World, show_regions: bool) -> None:
@@ -134,17 +152,20 @@ def _draw_static(ax: Axes, world: World, show_regions: bool) -> None:
 def _draw_objects(
     ax: Axes,
     world: World,
-    state: State | None,
+    state: Placed | None,
     *,
     alpha: float = 1.0,
     show_wanderers: bool = True,
     body_radius: float = BODY_RADIUS,
     wanderer_label: str | None = None,
+    edge: str = "k",
 ) -> None:
-    """Boxes and the goal (at ``state``'s positions, else their regions' centres); wanderers."""
+    """Boxes and the goal (at ``state``'s positions, else their regions' centres), outlined in
+    ``edge``; a ``State``'s wanderers."""
     region_centre = lambda r: 0.5 * (r[..., :2] + r[..., 2:])
     boxes = _np(state.boxes) if state is not None else region_centre(_np(world.box_region))
     goal = _np(state.goal) if state is not None else region_centre(_np(world.goal_region))
+    lw = 0.5 if edge == "k" else 1.2
     for (cx, cy), (hx, hy), m, ok in zip(
         boxes,
         _np(world.box_half),
@@ -160,19 +181,19 @@ def _draw_objects(
                     2 * hx,
                     2 * hy,
                     facecolor=colour,
-                    edgecolor="k",
-                    lw=0.5,
+                    edgecolor=edge,
+                    lw=lw,
                     alpha=alpha,
                     zorder=3,
                 )
             )
     gh = _np(world.goal_half)
-    style = dict(facecolor=MATERIAL_COLOURS[GOAL], edgecolor="k", lw=0.5, alpha=alpha, zorder=3)
+    style = dict(facecolor=MATERIAL_COLOURS[GOAL], edgecolor=edge, lw=lw, alpha=alpha, zorder=3)
     if world.goal_shape == "ball":
         ax.add_patch(Circle(tuple(goal), gh[0], **style))
     else:
         ax.add_patch(Rectangle(tuple(goal - gh), 2 * gh[0], 2 * gh[1], **style))
-    if state is not None and show_wanderers:
+    if state is not None and show_wanderers and hasattr(state, "wanderers"):
         for k, (x, y, _) in enumerate(_np(state.wanderers)):
             ax.add_patch(
                 Circle(
@@ -201,7 +222,7 @@ def _frame_axes(ax: Axes, world: World) -> None:
 def draw_world(
     ax: Axes,
     world: World,
-    state: State | None = None,
+    state: Placed | None = None,
     *,
     show_regions: bool = True,
     show_wanderers: bool = True,
@@ -214,8 +235,9 @@ def draw_world(
         ax: the axes to draw on (its limits and aspect are set to the arena).
         world: the world (padding entries, ``*_valid == False``, are skipped).
         state: one robot's ``State`` (no batch axis): boxes, goal and wanderers are drawn where
-            it has them. Without a state, each box and the goal sit at the centre of their
-            regions and no wanderers are drawn.
+            it has them; or a placement (``jaxais.trials.Placement``): boxes and goal only.
+            Without either, each box and the goal sit at the centre of their regions and no
+            wanderers are drawn.
         show_regions: draw the start, goal, wanderer and random-box regions (dashed/dotted).
         show_wanderers: draw ``state``'s wanderers as grey discs.
         alpha: opacity of the boxes, goal and wanderers.
@@ -226,6 +248,8 @@ def draw_world(
     """
     if state is not None and _is_batched(state):
         raise ValueError("draw_world takes one robot's State; index a batched State first")
+    if state is not None and not _is_placed(state):
+        raise TypeError(f"draw_world: state must have boxes and goal, got {type(state).__name__}")
     _draw_static(ax, world, show_regions)
     _draw_objects(
         ax, world, state, alpha=alpha, show_wanderers=show_wanderers, body_radius=body_radius
@@ -257,12 +281,12 @@ def draw_trajectory(ax: Axes, xy: Any, label: str | None = None, **kw: Any) -> L
     return line
 
 
-def _states_list(states: State | Sequence[State] | None) -> list[State]:
+def _states_list(states: Placed | Sequence[Placed] | None) -> list[Placed]:
     if states is None:
         return []
-    if isinstance(states, State):
+    if _is_placed(states):
         return _unstack(states) if _is_batched(states) else [states]
-    out: list[State] = []
+    out: list[Placed] = []
     for s in states:
         out.extend(_states_list(s))
     return out
@@ -276,7 +300,7 @@ def _new_figure(figsize: tuple[float, float], layout: str | None = "constrained"
 
 def world_figure(
     world: World,
-    states: State | Sequence[State] | None = None,
+    states: Placed | Sequence[Placed] | None = None,
     trajectories: Any = None,
     title: str | None = None,
     *,
@@ -287,9 +311,11 @@ def world_figure(
 
     Args:
         world: the world.
-        states: a ``State``, a batched ``State`` (leading robot axis) or a list of them. The
-            first robot's boxes, goal and wanderers are drawn solid; further robots' (which may
-            differ in worlds with random placement) faintly.
+        states: a ``State``, a batched ``State`` (leading robot axis), a placement
+            (``jaxais.trials.Placement``) or a list of them, one per trajectory. The first
+            robot's boxes, goal and wanderers are drawn solid; further robots' (which may
+            differ in worlds with random placement) faintly. With several, each robot's boxes
+            and goal are outlined in its trajectory's colour.
         trajectories: a [T, 2+] array, a [N, T, 2+] array or a list of [T_i, 2+] arrays.
         title: the axes title (default: the world's name).
         labels: legend labels of the trajectories (default ``robot 0``, ``robot 1``, ...).
@@ -310,7 +336,9 @@ def world_figure(
         for i, s in enumerate(robots):
             first = i == 0
             label = "wanderer (at start)" if first else None
-            _draw_objects(ax, world, s, alpha=1.0 if first else 0.25, wanderer_label=label)
+            edge = ROBOT_COLOURS[i % len(ROBOT_COLOURS)] if len(robots) > 1 else "k"
+            alpha = 1.0 if first else 0.25
+            _draw_objects(ax, world, s, alpha=alpha, wanderer_label=label, edge=edge)
     else:
         _draw_objects(ax, world, None)
     if trajectories is not None:
@@ -343,7 +371,7 @@ def animate(
     out_path: str | os.PathLike[str],
     fps: float = 25,
     *,
-    state: State | None = None,
+    state: Placed | None = None,
     dt: float | None = None,
     title: str | None = None,
     dpi: float = 80,
@@ -362,7 +390,7 @@ def animate(
         wanderers: [T, W, 3] (or [T, R, W, 3]) wanderer poses, or None.
         out_path: the GIF file (name ending in .gif: Pillow picks the format from it).
         fps: frames per second.
-        state: the first robot's ``State`` (no batch axis) for box and goal positions (they do
+        state: the first robot's ``State`` or placement for box and goal positions (they do
             not move during a run); without it they sit at their regions' centres.
         dt: simulated seconds between frames, for a clock in the title (none if None).
         title: title prefix (default: the world's name).

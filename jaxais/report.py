@@ -23,8 +23,10 @@ from . import claims, stats
 
 __all__ = ["load_paper_tables", "ordering_differences", "write_report"]
 
-WorldDrawer = Callable[[Any, str], None]
-"""``world_drawer(ax, world_name)`` draws a world's walls and obstacles on a matplotlib Axes."""
+WorldDrawer = Callable[..., None]
+"""``world_drawer(ax, world_name)`` draws a world's walls and obstacles on a matplotlib Axes;
+``world_drawer(ax, world_name, placement)`` with the boxes and goal where one trial had them
+(a ``jaxais.trials.Placement``), when the report is given placements."""
 
 _T3_COLS = (("c", "c", 1), ("tau", "τ (s)", 0), ("f", "f", 0))  # key, header, decimals
 _T5_COLS = (("c", "c cap", 0), ("tau", "τ cap", 0), ("total", "total", 0))
@@ -465,6 +467,7 @@ def _trajectory_figure(
     trajectories: Mapping[str, np.ndarray],
     drawer: WorldDrawer | None,
     path: Path,
+    placements: Mapping[str, Any] | None = None,
 ) -> None:
     systems = _rows(trajectories)
     cols = min(4, len(systems))
@@ -473,7 +476,12 @@ def _trajectory_figure(
     axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
     for ax, s in zip(axes, systems, strict=False):
         if drawer is not None:
-            drawer(ax, world)
+            # The boxes and goal where this trial had them (random per trial in some worlds).
+            placement = (placements or {}).get(s)
+            if placement is None:
+                drawer(ax, world)
+            else:
+                drawer(ax, world, placement)
         xy = np.asarray(trajectories[s], dtype=float).reshape(-1, 2)
         ax.plot(xy[:, 0], xy[:, 1], lw=1.0, color="tab:blue")
         if len(xy):
@@ -524,6 +532,7 @@ def write_report(
     example_trajectories: Mapping[str, Mapping[str, np.ndarray]] | None = None,
     world_drawer: WorldDrawer | None = None,
     claims_ledger: Sequence[Mapping[str, Any]] | None = None,
+    example_placements: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> Path:
     """Write ``out_dir/report.md`` and its figures in ``out_dir/figures/``.
 
@@ -546,9 +555,12 @@ def write_report(
         config: the run configuration (shown as JSON).
         timings: ``None`` or ``{stage: seconds or nested dict}``.
         example_trajectories: ``{world: {system: xy [T, 2]}}`` drawn to ``figures/traj_{world}``.
-        world_drawer: ``world_drawer(ax, world_name)`` draws the world under each trajectory.
+        world_drawer: ``world_drawer(ax, world_name)`` draws the world under each trajectory
+            (``world_drawer(ax, world_name, placement)`` where ``example_placements`` has one).
         claims_ledger: :func:`jaxais.claims.claims` of ``results_by_world`` (computed here at
             the 99 % level when ``None``).
+        example_placements: ``{world: {system: placement}}``: where each example trajectory's
+            trial had its boxes and goal (``jaxais.trials.Placement``), passed to the drawer.
 
     Returns:
         The path of ``report.md``.
@@ -569,7 +581,8 @@ def write_report(
     for world, trajectories in (example_trajectories or {}).items():
         if trajectories:
             name = f"figures/traj_{world}.png"
-            _trajectory_figure(world, trajectories, world_drawer, out / name)
+            placements = (example_placements or {}).get(world)
+            _trajectory_figure(world, trajectories, world_drawer, out / name, placements)
             figures.append((f"{world}: example trajectories", name))
     ltl_fig = "figures/ltl_fitness.png"
     if not (ltl_summary and _ltl_figure(ltl_summary, out / ltl_fig)):

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import jax
@@ -30,6 +30,20 @@ more than 100 collisions fails it, and Table 3 uses c capped at 100."""
 _COMPILED: dict = {}
 
 
+@dataclass(frozen=True)
+class Placement:
+    """Where a trial's world put the objects it places at random (they never move in a run).
+
+    Attributes:
+        boxes: [B, 2] box centres, padded like ``World.box_region`` (a fixed box at its
+            centre; padding rows far outside the arena: mask with ``World.box_valid``).
+        goal: [2] goal centre.
+    """
+
+    boxes: np.ndarray
+    goal: np.ndarray
+
+
 @dataclass
 class TrialSet:
     """The trials of one system in one world.
@@ -41,10 +55,13 @@ class TrialSet:
             "collisions", "time"; both can hold), trapped_s, idiotypic_difference_rate,
             iterations, replaced.
         trajectories: [n] arrays [T_i, 3] of poses sampled every ``chunk`` iterations, or None.
+        placements: [n] :class:`Placement`: each trial's boxes and goal, to draw its trajectory
+            in the world it ran in.
     """
 
     records: list[dict[str, Any]]
     trajectories: list[np.ndarray] | None
+    placements: list[Placement] = field(default_factory=list)
 
 
 def base_label(name: str) -> str:
@@ -112,15 +129,22 @@ def run_trials(
             after "@", e.g. ``"SIE@hold=1"``: then the random streams of the plain label) ->
             System.
         n_trials: trials per system (or per label).
-        seed: the run's seed.
+        seed: the run's seed, in [0, 2**32).
         config: caps and recording (``config.record`` keeps trajectories).
         progress: optional tqdm-like object with ``update(n)``, advanced in simulated iterations.
         timings: optional dict collecting ``compile_s`` and ``run_s``.
 
     Returns:
         label -> :class:`TrialSet`.
+
+    Raises:
+        ValueError: an unknown label, fewer than one trial, or a seed outside [0, 2**32).
     """
     sim_params = envs.default_params() if sim_params is None else sim_params
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
+        raise ValueError(f"seed must be an integer, got {seed!r}")
+    if not 0 <= seed < 2**32:  # jax.random.key and the host derivation would wrap it
+        raise ValueError(f"seed must be in [0, 2**32), got {seed}")
     counts = {k: n_trials if isinstance(n_trials, int) else n_trials[k] for k in systems}
     for name, n in counts.items():
         if base_label(name) not in LABELS:
@@ -160,10 +184,12 @@ def run_trials(
     replaced = np.asarray(ctrl.replaced)
     chunks = np.asarray(batch.runs.t) // config.chunk
     poses = np.asarray(batch.poses)
+    # Boxes and the goal stay where reset put them: the final state holds the start placement.
+    placed_boxes, placed_goal = np.asarray(batch.runs.sim.boxes), np.asarray(batch.runs.sim.goal)
 
     out, start = {}, 0
     for name in systems:
-        records, trajectories = [], []
+        records, trajectories, placements = [], [], []
         for i in range(start, start + counts[name]):
             by_c, by_t = bool(res["failed_collisions"][i]), bool(res["failed_time"][i])
             records.append(
@@ -188,7 +214,8 @@ def run_trials(
             )
             if config.record:
                 trajectories.append(poses[i, : chunks[i] + 2])
-        out[name] = TrialSet(records, trajectories if config.record else None)
+            placements.append(Placement(boxes=placed_boxes[i], goal=placed_goal[i]))
+        out[name] = TrialSet(records, trajectories if config.record else None, placements)
         start += counts[name]
     return out
 

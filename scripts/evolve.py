@@ -35,7 +35,6 @@ from __future__ import annotations
 import argparse
 import importlib
 import shlex
-import signal
 import sys
 import threading
 import time
@@ -131,11 +130,6 @@ def _config(args: argparse.Namespace):
         )
     except ConfigError as err:
         raise UserError(f"--{err.field.replace('_', '-')} {err.reason}") from None
-
-
-def _sigterm(signum: int, frame: Any) -> None:
-    # Handled like Ctrl-C: the wrapper reports "interrupted"; checkpoints are already complete.
-    raise KeyboardInterrupt
 
 
 class _CompileClock:
@@ -264,11 +258,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UserError(f"{out}: exists and is not a directory")
-    previous = signal.signal(signal.SIGTERM, _sigterm)
-    try:
-        return _evolve(args, argv, config, out)
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    # SIGINT and SIGTERM are jaxais.cli's (one line; checkpoints are written whole or not).
+    return _evolve(args, argv, config, out)
 
 
 def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dict[str, Any]:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import subprocess
 import sys
 import time
@@ -77,6 +78,28 @@ def _ltl_summary(seed_dir: Path) -> dict | None:
     return None
 
 
+def _check_fresh_ltl_dir(ltl_dir: Path, args: argparse.Namespace) -> None:
+    """Refuse to run the LTL into a folder an earlier ``--evolve`` left (evolve.py would refuse
+    too, with advice for its own flags), saying how to go on without losing that run."""
+    if not ltl_dir.exists() or (ltl_dir.is_dir() and not any(ltl_dir.iterdir())):
+        return
+    if not ltl_dir.is_dir():
+        raise UserError(f"{ltl_dir} exists and is not a folder; remove it to run the LTL there")
+    if (ltl_dir / "seed").is_dir():
+        raise UserError(
+            f"{ltl_dir} exists from an earlier --evolve run; remove it, or pass --seeds "
+            f"{ltl_dir / 'seed'} instead of --evolve to reuse its seed"
+        )
+    generations = [] if args.generations is None else ["--generations", str(args.generations)]
+    resume = shlex.join(
+        ["scripts/evolve.py", "--out", str(ltl_dir), "--seed", str(args.seed), *generations]
+    )
+    raise UserError(
+        f"{ltl_dir} holds an unfinished LTL run; remove it, or finish it with "
+        f"'{resume} --resume' and then pass --seeds {ltl_dir / 'seed'} instead of --evolve"
+    )
+
+
 @main_wrapper("reproduce.py")
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
@@ -93,6 +116,8 @@ def main(argv: list[str] | None = None) -> None:
     if args.generations is not None and args.generations < 1:
         raise UserError(f"--generations must be >= 1, got {args.generations}")
     out = Path(args.out)
+    if args.evolve:
+        _check_fresh_ltl_dir(out / "ltl", args)
     out.mkdir(parents=True, exist_ok=True)
     check_writable_dir(out)
 
@@ -137,7 +162,7 @@ def main(argv: list[str] | None = None) -> None:
     network = NetworkParams()
     params = envs.default_params()
     config = EpisodeConfig(tau_cap=args.tau_cap, collision_cap=args.collision_cap, record=True)
-    results_by_world, trajectories, configs = {}, {}, {}
+    results_by_world, trajectories, placements, configs = {}, {}, {}, {}
     (out / "trials").mkdir(exist_ok=True)
     for name in worlds:
         world = envs.load_world(name)
@@ -157,6 +182,7 @@ def main(argv: list[str] | None = None) -> None:
         configs[name] = cfg
         results_by_world[name] = {k: v.records for k, v in results.items()}
         trajectories[name] = {k: v.trajectories[0][:, :2] for k, v in results.items()}
+        placements[name] = {k: v.placements[0] for k, v in results.items()}
         for label, trial_set in results.items():
             doc = results_document(label, name, args.seed, trial_set, cfg)
             atomic_write_json(out / "trials" / f"{name}_{label}.json", doc)
@@ -191,8 +217,9 @@ def main(argv: list[str] | None = None) -> None:
         {k: v for k, v in run.items() if k != "timings_s"},
         timings,
         trajectories,
-        lambda ax, world_name: draw_world(ax, loaded[world_name]),
+        lambda ax, world_name, placement=None: draw_world(ax, loaded[world_name], placement),
         claims_ledger=ledger,
+        example_placements=placements,
     )
     verdicts = ", ".join(
         f"{h} {'supported' if v['supported'] else 'not supported'}"

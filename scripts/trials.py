@@ -101,8 +101,13 @@ def main(argv: list[str] | None = None) -> None:
 
         trajs = results[name].trajectories
         labels = [f"trial {i}" for i in range(len(trajs))]
+        # Each trial's boxes and goal where its world placed them (outlined in its colour).
         fig = world_figure(
-            world, trajectories=trajs, title=f"{name} in {world.name}", labels=labels
+            world,
+            states=results[name].placements,
+            trajectories=trajs,
+            title=f"{name} in {world.name}",
+            labels=labels,
         )
         save_figure(fig, args.plot)
     s = doc["summary"]

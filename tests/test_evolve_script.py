@@ -221,8 +221,8 @@ def test_interrupted_run_resumes_exactly(tmp_path: Path, monkeypatch, capsys, fu
 
     monkeypatch.setattr(ga, "step", step_then_sigterm)
     handler = signal.getsignal(signal.SIGTERM)
-    last = expect_exit(capsys, "--generations", "3", "--out", str(out), status=130)
-    assert last == "evolve.py: error: interrupted"
+    last = expect_exit(capsys, "--generations", "3", "--out", str(out), status=143)
+    assert last == "evolve.py: error: terminated"
     assert signal.getsignal(signal.SIGTERM) is handler  # restored
     assert not (out / "seed").exists() and not (out / "summary.json").exists()
     monkeypatch.setattr(ga, "step", real_step)

@@ -73,16 +73,63 @@ def test_render_bad_world_path(tmp_path):
     assert out.read_bytes() == b"old"  # a failed run leaves an earlier output alone
 
 
+SMALL_WORLD = """
+name = "small"
+[arena]
+width = 1.0
+height = 1.0
+wall_height = 0.1
+[robot]
+start_region = [0.1, 0.1, 0.4, 0.4]
+[goal]
+shape = "box"
+half_size = [0.05, 0.05]
+height = 0.1
+region = [0.6, 0.6, 0.9, 0.9]
+"""
+"""A valid world file: 7 surfaces (4 walls, a padding box and pillar, the goal)."""
+
+
+def many_walls(n: int) -> str:
+    """:data:`SMALL_WORLD` with ``n`` short walls more."""
+    return SMALL_WORLD + "".join(
+        f"[[walls]]\nfrom = [{0.05 + 0.004 * k:.3f}, 0.95]\nto = [{0.05 + 0.004 * k:.3f}, 1.0]\n"
+        for k in range(n)
+    )
+
+
 @pytest.mark.parametrize(
-    "text, word",
-    [("name = [unclosed\n", "TOML"), ('name = "x"\n[arena]\nwidth = 1.0\n', "arena.height")],
-)
-def test_render_malformed_world(tmp_path, text, word):
+    "text, words",
+    [
+        ("name = [unclosed\n", ["TOML"]),
+        ('name = "x"\n[arena]\nwidth = 1.0\n', ["arena.height"]),
+        # More surfaces than the ray caster tells apart (it asserted inside JAX before).
+        (many_walls(200), ["has 207 surfaces", "at most 64 are supported", "remove at least 143"]),
+        (SMALL_WORLD.replace("[robot]", "[[pilars]]\ncenter = [0.5, 0.5]\nradius = 0.05\n[robot]"),
+         ["'pilars': unknown table (did you mean 'pillars'?)"]),
+        (SMALL_WORLD.replace("width = 1.0", "width = 1e29"), ["arena.width", "(0, 100] m"]),
+    ],
+)  # fmt: skip
+def test_render_malformed_world(tmp_path, text, words):
     world = tmp_path / "bad.toml"
     world.write_text(text)
-    proc = run_script("render.py", "--world", world, "--steps", 5, "--out", tmp_path / "w.png")
-    assert_user_error(proc, "render.py", word)
-    assert not (tmp_path / "w.png").exists()
+    out = tmp_path / "w.png"
+    out.write_bytes(b"old")
+    proc = run_script("render.py", "--world", world, "--steps", 5, "--out", out)
+    assert_user_error(proc, "render.py", *words)
+    assert out.read_bytes() == b"old" and sorted(p.name for p in tmp_path.iterdir()) == [
+        "bad.toml",
+        "w.png",
+    ]
+
+
+def test_render_world_just_within_the_surface_limit(tmp_path):
+    world = tmp_path / "full.toml"
+    world.write_text(many_walls(57))  # 64 surfaces: the most a world may have
+    out = tmp_path / "w.png"
+    proc = run_script("render.py", "--world", world, "--steps", 5, "--robots", 1, "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    assert out.read_bytes()[:8] == PNG_MAGIC
 
 
 @pytest.mark.parametrize(
@@ -299,3 +346,67 @@ def test_world_figure_without_state(tmp_path):
     ax = fig.axes[0]
     assert ax.get_aspect() == 1.0
     assert [t.get_text() for t in ax.get_legend().get_texts()][-1] == "robot 0"
+
+
+def _patch_centres(ax) -> dict[str, list[tuple[float, float]]]:
+    """Centres of the drawn rectangles and circles, by kind."""
+    from matplotlib.patches import Circle, Rectangle
+
+    out: dict[str, list[tuple[float, float]]] = {"rect": [], "circle": []}
+    for p in ax.patches:
+        if isinstance(p, Rectangle) and p.get_fill():
+            out["rect"].append((p.get_x() + p.get_width() / 2, p.get_y() + p.get_height() / 2))
+        elif isinstance(p, Circle):
+            out["circle"].append(tuple(p.center))
+    return out
+
+
+def test_figures_draw_boxes_and_goal_where_the_trial_had_them(tmp_path):
+    """``real`` places its 4 boxes and its goal ball at random: a trial's placement, not the
+    regions' centres (where they would all sit on one spot)."""
+    import numpy as np
+    from matplotlib.colors import to_rgb
+    from matplotlib.figure import Figure
+
+    from jaxais import envs, plotting, report
+    from jaxais.trials import Placement
+
+    world = envs.load_world("real")
+    valid = np.asarray(world.box_valid)
+    n_boxes = int(valid.sum())
+    boxes = np.asarray(world.box_region)[:, :2].copy()
+    boxes[valid] = [[0.3 + 0.15 * k, 0.4 + 0.1 * k] for k in range(n_boxes)]
+    placement = Placement(boxes=boxes, goal=np.array([0.9, 1.0]))
+
+    ax = Figure().add_subplot()
+    plotting.draw_world(ax, world, placement)
+    drawn = _patch_centres(ax)
+    for b in boxes[valid]:
+        assert any(np.allclose(b, c) for c in drawn["rect"]), (b, drawn["rect"])
+    assert any(np.allclose([0.9, 1.0], c) for c in drawn["circle"])
+    centre = np.asarray(world.box_region)[valid][0]
+    assert not any(np.allclose(0.5 * (centre[:2] + centre[2:]), c) for c in drawn["rect"])
+
+    # world_figure: one placement per trajectory, each outlined in its trajectory's colour.
+    other = Placement(boxes=boxes + 0.05, goal=np.array([0.3, 1.0]))
+    traj = np.stack([np.linspace(0.2, 1.0, 20), np.full(20, 0.5)], axis=1)
+    fig = plotting.world_figure(world, states=[placement, other], trajectories=[traj, traj + 0.1])
+    drawn = _patch_centres(fig.axes[0])
+    for goal in ([0.9, 1.0], [0.3, 1.0]):
+        assert any(np.allclose(goal, c) for c in drawn["circle"])
+    edges = {tuple(p.get_edgecolor()[:3]) for p in fig.axes[0].patches if p.get_fill()}
+    assert {to_rgb(plotting.ROBOT_COLOURS[0]), to_rgb(plotting.ROBOT_COLOURS[1])} <= edges
+    plotting.save_figure(fig, tmp_path / "two.png")
+    assert (tmp_path / "two.png").read_bytes()[:8] == PNG_MAGIC
+
+    # The report's trajectory figure hands each system's placement to the world drawer.
+    calls = []
+    report._trajectory_figure(
+        "real",
+        {"SIE": traj, "HDC": traj},
+        lambda ax, name, placement=None: calls.append((name, placement)),
+        tmp_path / "traj.png",
+        {"SIE": placement},
+    )
+    assert sorted(calls, key=lambda c: c[1] is None) == [("real", placement), ("real", None)]
+    assert (tmp_path / "traj.png").read_bytes()[:8] == PNG_MAGIC

@@ -268,3 +268,29 @@ def test_reproduce_user_errors(tmp_path: Path):
     )
     assert_user_error(missing, "reproduce.py", "no such seed directory")
     assert not (out / "tables.json").exists()
+
+
+def test_trials_script_bad_worlds_and_seeds_are_one_line(tmp_path: Path):
+    """Worlds the simulator cannot run and seeds that would wrap: exit status 2, one line, no
+    output file (before this, a crowded world ended in an AssertionError inside JAX)."""
+    world1 = (ROOT / "envs" / "worlds" / "world1.toml").read_text()
+    walls = "".join(
+        f"[[walls]]\nfrom = [{0.1 + 0.005 * k:.3f}, 1.45]\nto = [{0.1 + 0.005 * k:.3f}, 1.5]\n"
+        for k in range(200)
+    )
+    (tmp_path / "crowded.toml").write_text(world1 + walls)
+    (tmp_path / "misspelt.toml").write_text(world1.replace("\n[[pillars]]\n", "\n[[pilars]]\n", 1))
+    out = tmp_path / "r.json"
+    cases = [
+        (["--world", tmp_path / "crowded.toml"], ["has 215 surfaces", "at most 64"]),
+        (["--world", tmp_path / "misspelt.toml"], ["'pilars': unknown table", "'pillars'"]),
+        (["--seed", -1], ["--seed must be in [0, 2**32), got -1"]),
+        (["--seed", 2**32], ["--seed must be in [0, 2**32), got 4294967296"]),
+    ]
+    procs = [
+        _start("trials.py", "--system", "HDC", "--trials", 2, "--tau-cap", 5, *args, "--out", out)
+        for args, _ in cases
+    ]
+    for (_, words), proc in zip(cases, procs, strict=True):
+        assert_user_error(_finish(proc), "trials.py", *words)
+    assert not out.exists()

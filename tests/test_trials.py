@@ -466,3 +466,37 @@ def test_summarise_by_hand():
     )
     records[0]["idiotypic_difference_rate"] = None
     assert summarise(records)["idiotypic_difference_rate"] is None
+
+
+def test_run_trials_rejects_seeds_outside_their_range():
+    """jax.random.key and the host derivation would wrap such a seed onto another one."""
+    sie = {"SIE": F.systems()["SIE"]}
+    for seed in (-1, 2**32, 2**40):
+        with pytest.raises(ValueError, match=r"seed must be in \[0, 2\*\*32\), got"):
+            run_trials(F.world(), sie, 2, seed, F.CONFIG)
+    for seed in (1.5, "0", True):
+        with pytest.raises(ValueError, match="seed must be an integer"):
+            run_trials(F.world(), sie, 2, seed, F.CONFIG)
+
+
+def test_trial_sets_keep_where_each_trial_had_its_boxes_and_goal():
+    """Placements: the boxes and goal of each trial's start state (reset places the goal and
+    random boxes anew per trial), the same for every system's trial i."""
+    res = trials(SIE_HDC, 0)
+    runs, _ = start_runs()  # SIE trials 0, 1 then HDC trials 0, 1, from the same reset keys
+    world = F.world()
+    goal_region = np.asarray(world.goal_region)
+    for ts in res.values():
+        assert len(ts.placements) == len(ts.records) == 2
+        for i, placement in enumerate(ts.placements):
+            sim = F.unstack(runs.sim, i)
+            assert placement.boxes.shape == (world.box_half.shape[0], 2)
+            np.testing.assert_allclose(placement.goal, sim.goal, rtol=1e-6)
+            np.testing.assert_allclose(placement.boxes, sim.boxes, rtol=1e-6)
+            assert np.all(placement.goal >= goal_region[:2]) and np.all(
+                placement.goal <= goal_region[2:]
+            )
+    assert not np.array_equal(res["SIE"].placements[0].goal, res["SIE"].placements[1].goal)
+    for a, b in zip(res["SIE"].placements, res["HDC"].placements, strict=True):
+        np.testing.assert_array_equal(a.goal, b.goal)
+        np.testing.assert_array_equal(a.boxes, b.boxes)

@@ -274,3 +274,144 @@ def test_missing_file_fails_naming_it(tmp_path) -> None:
     assert str(path) in str(err.value) and "\n" not in str(err.value)
     with pytest.raises(envs.WorldError, match="world3"):
         envs.load_world("world3")
+
+
+# ---------------------------------------------------------------------------------- bad input
+
+
+def _load_text(tmp_path, text: str, name: str = "bad.toml") -> envs.World:
+    path = tmp_path / name
+    path.write_text(text)
+    return envs.load_world(path)
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "field", "words"),
+    [
+        # A misspelt table or key would silently drop what it holds.
+        ("[[pillars]]", "[[pilars]]", "pilars", ["unknown table", "did you mean 'pillars'?"]),
+        ("[goal]", "[goals]", "goals", ["unknown table", "did you mean 'goal'?"]),
+        ('name = "tiny"', 'name = "tiny"\ncolour = "red"', "colour", ["unknown key", "noise"]),
+        ("wall_height = 0.1", "wall_height = 0.1\ndepth = 2.0", "arena.depth", ["wall_height"]),
+        ("[robot]", "[robot]\nstart_pose = [0, 0]", "robot.start_pose", ["start_heading"]),
+        ("height = 0.1\nregion", "hieght = 0.1\nregion", "goal.hieght", ["did you mean"]),
+        ('material = "marker"', 'material = "marker"\nwidth = 1', "walls[0].width", ["from, to"]),
+        ("radius = 0.04", "radius = 0.04\nheigth = 1", "pillars[0].heigth", ["center, radius"]),
+        (
+            "region = [0.1, 0.6, 0.4, 0.9]",
+            "region = [0.1, 0.6, 0.4, 0.9]\nspeed = 2",
+            "wanderers[0].speed",
+            ["region"],
+        ),  # noqa: E501
+        (
+            'name = "tiny"',
+            'name = "tiny"\n[noise]\nir_std = 0.1',
+            "noise.ir_std",
+            ["ir_relative_std"],
+        ),  # noqa: E501
+        ('shape = "box"', 'shape = "box"\nradius = 0.05', "goal.radius", ["half_size"]),
+        # Absurd sizes.
+        ("width = 1.0", "width = 1e29", "arena.width", ["(0, 100] m", "1e+29"]),
+        ("width = 1.0", "width = 0.0", "arena.width", ["(0, 100] m"]),
+        ("height = 1.0", "height = -2.0", "arena.height", ["(0, 100] m"]),
+        ("width = 1.0", "width = nan", "arena.width", ["finite"]),
+        ("width = 1.0", "width = inf", "arena.width", ["finite"]),
+        ("width = 1.0", "width = " + "9" * 400, "arena.width", ["finite", "..."]),
+        ("wall_height = 0.1", "wall_height = 1e9", "arena.wall_height", ["(0, 10] m"]),
+        ("radius = 0.04", "radius = 3.0", "pillars[0].radius", ["(0, 0.5] m"]),
+        ("radius = 0.04", "radius = 0.0", "pillars[0].radius", ["(0, 0.5] m"]),
+        ("half_size = [0.05, 0.05]", "half_size = [5.0, 0.05]", "goal.half_size", ["0.5] m"]),
+        ("to = [0.5, 0.3]", "to = [0.5, 0.3]\nheight = -1.0", "walls[0].height", ["(0, 10] m"]),
+        ("[robot]", "[robot]\nstart_heading = [-1e29, 0.0]", "robot.start_heading", ["rad"]),
+        ("[0.1, 0.1, 0.4, 0.4]", "[0.1, 0.1, inf, 0.4]", "robot.start_region", ["4 numbers"]),
+    ],
+)
+def test_bad_world_gets_one_line_naming_the_field(tmp_path, old, new, field, words) -> None:
+    assert old in VALID
+    with pytest.raises(envs.WorldError) as err:
+        _load_text(tmp_path, VALID.replace(old, new, 1))
+    message = str(err.value)
+    assert "\n" not in message and len(message) < 300, message
+    assert f"field '{field}'" in message, message
+    for word in words:
+        assert word in message, (word, message)
+
+
+def test_unknown_keys_list_the_allowed_ones(tmp_path) -> None:
+    with pytest.raises(envs.WorldError) as err:
+        _load_text(tmp_path, VALID.replace("[[pillars]]", "[[pilars]]"))
+    allowed = "allowed: name, arena, robot, goal, walls, boxes, pillars, wanderers, noise"
+    assert str(err.value).endswith(allowed)
+
+
+def test_every_documented_key_is_accepted(tmp_path) -> None:
+    """A world that uses every key of the format (world1.toml's header) loads."""
+    text = VALID.replace("[robot]\n", "[robot]\nstart_heading = [-1.0, 1.0]\n")
+    text = text.replace('material = "marker"\n', 'material = "marker"\nheight = 0.2\n')
+    text += (
+        '[[boxes]]\ncenter = [0.8, 0.2]\nhalf_size = [0.03, 0.03]\nmaterial = "marker"\n'
+        "height = 0.05\n"
+        "[[boxes]]\nregion = [0.6, 0.1, 0.9, 0.3]\nhalf_size = [0.02, 0.02]\n"
+        '[[pillars]]\ncenter = [0.9, 0.9]\nradius = 0.03\nmaterial = "wall"\nheight = 0.2\n'
+        "[noise]\nir_relative_std = 0.1\ncamera_miss_prob = 0.1\ncamera_shift_prob = 0.1\n"
+        "wheel_relative_std = 0.1\n"
+    )
+    world = _load_text(tmp_path, text, "full.toml")
+    assert int(world.box_valid.sum()) == 2 and int(world.pillar_valid.sum()) == 2
+    assert world.wheel_noise == 0.1 and float(world.seg_height[4]) == pytest.approx(0.2)
+    ball = VALID.replace('shape = "box"\nhalf_size = [0.05, 0.05]', 'shape = "ball"\nradius = 0.05')
+    assert _load_text(tmp_path, ball, "ball.toml").goal_shape == "ball"
+
+
+def test_size_bounds_are_inclusive(tmp_path) -> None:
+    big = VALID.replace("width = 1.0", "width = 100").replace("height = 1.0", "height = 100")
+    world = _load_text(
+        tmp_path,
+        big.replace("radius = 0.04", "radius = 50.0").replace(
+            "center = [0.7, 0.2]", "center = [50.0, 50.0]"
+        ),
+    )
+    assert float(world.arena[2]) == 100.0 and float(world.pillar[0, 2]) == 50.0
+    with pytest.raises(envs.WorldError, match="arena.width"):
+        _load_text(tmp_path, big.replace("width = 100", "width = 100.001"))
+
+
+def _crowded(n_walls: int, wanderers: int = 1) -> str:
+    """VALID with ``n_walls`` extra short walls along the south wall's inside."""
+    walls = "".join(
+        f"[[walls]]\nfrom = [{0.55 + 0.002 * k:.3f}, 0.0]\nto = [{0.55 + 0.002 * k:.3f}, 0.02]\n"
+        for k in range(n_walls)
+    )
+    extra = "[[wanderers]]\nregion = [0.1, 0.6, 0.4, 0.9]\n" * (wanderers - 1)
+    return VALID + walls + extra
+
+
+def test_more_surfaces_than_the_ray_caster_handles_are_refused(tmp_path, sim) -> None:
+    # VALID: 5 walls (4 outer), 1 padding box, 1 pillar, 1 wanderer, the goal = 9 surfaces.
+    limit = envs.world.MAX_SURFACES
+    assert limit == 64
+    ok = _load_text(tmp_path, _crowded(limit - 9), "ok.toml")
+    assert ok.seg.shape[0] + ok.box_half.shape[0] + ok.pillar.shape[0] + ok.n_wanderers + 1 == 64
+    # The limit is the ray caster's: a robot in that world senses (traced, not compiled) ...
+    state = jax.eval_shape(envs.reset, jax.random.key(0), ok, sim.params)
+    jax.eval_shape(envs.observe, jax.random.key(0), state, ok, sim.params)
+    # ... and one surface more (padding it in by hand) is too many for it.
+    more = ok.replace(
+        pillar=jax.numpy.concatenate([ok.pillar, ok.pillar]),
+        pillar_material=jax.numpy.concatenate([ok.pillar_material, ok.pillar_material]),
+        pillar_height=jax.numpy.concatenate([ok.pillar_height, ok.pillar_height]),
+        pillar_valid=jax.numpy.concatenate([ok.pillar_valid, ok.pillar_valid]),
+    )
+    with pytest.raises(AssertionError, match="64 surfaces"):
+        jax.eval_shape(envs.observe, jax.random.key(0), state, more, sim.params)
+    # Such a world is refused when it loads, in one line naming the count and the limit.
+    for text, total in ((_crowded(limit - 8), 65), (_crowded(200), 209), (_crowded(50, 7), 65)):
+        with pytest.raises(envs.WorldError) as err:
+            _load_text(tmp_path, text)
+        message = str(err.value)
+        assert "\n" not in message and str(tmp_path / "bad.toml") in message
+        assert f"has {total} surfaces" in message and "at most 64 are supported" in message
+        assert f"remove at least {total - 64} walls" in message
+    # Padding counts too: a Capacity that pads past the limit is refused as well.
+    with pytest.raises(envs.WorldError, match="padding slots"):
+        envs.load_world(tmp_path / "ok.toml", envs.Capacity(pillars=5))

@@ -1,0 +1,244 @@
+"""Bad input and interruptions end a script with one line, a non-zero status and no traceback,
+and leave what is already written alone: Ctrl-C and SIGTERM wherever they land (jaxais.cli's
+handlers), and ``reproduce.py --evolve`` into a folder an earlier run left.
+
+World files (tests/test_worlds.py), trial seeds (tests/test_trials.py) and the scripts' own
+flags (tests/test_scripts_*.py) are tested beside what they check.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+from _python import run_python
+
+ROOT = Path(__file__).resolve().parent.parent
+EMPTY_WORLD = ROOT / "tests" / "worlds" / "empty.toml"
+"""No visible goal: a run lasts until its time cap, so a signal always finds it running."""
+
+
+def _error_lines(stderr: str) -> list[str]:
+    """stderr's lines, progress bars (tqdm's carriage returns) split apart, blanks dropped."""
+    return [line.strip() for line in re.split(r"[\r\n]+", stderr) if line.strip()]
+
+
+def _assert_one_line_exit(proc, prog: str, status: int, message: str) -> None:
+    lines = _error_lines(proc.stderr)
+    assert proc.returncode == status, proc.stderr[-3000:]
+    assert "Traceback" not in proc.stderr and "Exception ignored" not in proc.stderr, proc.stderr
+    assert [line for line in lines if "error:" in line] == [f"{prog}: error: {message}"], lines
+    assert lines[-1] == f"{prog}: error: {message}", lines
+
+
+# ---------------------------------------------------------------------------------- signals
+
+
+@pytest.mark.parametrize("delay", [0.2, 0.5, 1.0, 2.0, 3.0])
+def test_trials_script_interrupted_at_any_moment_says_one_line(tmp_path: Path, delay: float):
+    """SIGINT and SIGTERM (two runs side by side) at 0.2 s (Python's imports), 0.5 s (JAX's),
+    1-2 s (the world, the compile) and 3 s (the trials): status 130 or 143, one line, no
+    traceback, and an earlier results file is left as it was, with no temporary files."""
+    procs = {}
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        out_dir = tmp_path / signum.name
+        out_dir.mkdir()
+        (out_dir / "r.json").write_text("earlier results\n")
+        args = ["--system", "HDC", "--world", EMPTY_WORLD, "--trials", 2, "--tau-cap", 4000]
+        procs[signum] = subprocess.Popen(
+            [sys.executable, "scripts/trials.py", *map(str, args), "--out", out_dir / "r.json"],
+            cwd=ROOT,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env={**os.environ, "JAXAIS_DEBUG": "", "JAXAIS_CACHE_DIR": "off"},
+        )
+    time.sleep(delay)
+    for signum, proc in procs.items():
+        proc.send_signal(signum)
+    for signum, proc in procs.items():
+        try:
+            out, err = proc.communicate(timeout=60)
+        finally:
+            proc.kill()
+        done = subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+        status, message = {
+            signal.SIGINT: (130, "interrupted"),
+            signal.SIGTERM: (143, "terminated"),
+        }[signum]
+        _assert_one_line_exit(done, "trials.py", status, message)
+        out_dir = tmp_path / signum.name
+        assert [p.name for p in out_dir.iterdir()] == ["r.json"]
+        assert (out_dir / "r.json").read_text() == "earlier results\n"
+
+
+def _script(body: str, prelude: str = "") -> str:
+    """A script whose main (under main_wrapper, run by run_script) runs ``body``."""
+    return textwrap.dedent(
+        """
+        import gc, os, signal, sys, time, weakref
+        from jaxais.cli import main_wrapper, run_script
+        {prelude}
+
+        @main_wrapper("demo.py")
+        def main():
+        {body}
+
+        run_script(main)
+        """
+    ).format(prelude=prelude, body=textwrap.indent(textwrap.dedent(body), "    "))
+
+
+def _wait_loop(n: int = 200) -> str:
+    return f"for _ in range({n}):\n    time.sleep(0.01)\nprint('never interrupted')\n"
+
+
+CASES = {
+    "sigint": ("signal.raise_signal(signal.SIGINT)\n" + _wait_loop(), 130, "interrupted"),
+    "sigterm": ("signal.raise_signal(signal.SIGTERM)\n" + _wait_loop(), 143, "terminated"),
+    # The interrupt turned into another exception where it landed (jaxlib's import turns it
+    # into "ImportError: Encountered an error while initializing the extension").
+    "converted": (
+        "try:\n    signal.raise_signal(signal.SIGINT)\nexcept KeyboardInterrupt:\n"
+        "    raise ImportError('Encountered an error while initializing the extension')"
+        " from None\n",
+        130,
+        "interrupted",
+    ),
+    # Raised in a __del__, Python would print it and drop it: it is held, then delivered again.
+    "in __del__": (
+        "class Late:\n    def __del__(self):\n        signal.raise_signal(signal.SIGINT)\n"
+        "        print('__del__ finished')\n"
+        "Late()\n" + _wait_loop(),
+        130,
+        "interrupted",
+    ),
+    # Raised in a weakref callback it reaches sys.unraisablehook: delivered again from there.
+    "in a callback": (
+        "class Thing:\n    pass\n"
+        "t = Thing()\nr = weakref.ref(t, lambda ref: os.kill(os.getpid(), signal.SIGINT) or "
+        "[time.sleep(0.001) for _ in range(100)])\n"
+        "del t\n" + _wait_loop(),
+        130,
+        "interrupted",
+    ),
+    # A second signal while the first unwinds ends the process at once, with the same line.
+    "twice": (
+        "try:\n    signal.raise_signal(signal.SIGTERM)\nfinally:\n"
+        "    signal.raise_signal(signal.SIGTERM)\n    time.sleep(2)\n    print('cleanup ran')\n",
+        143,
+        "terminated",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_interrupt_anywhere_in_main_is_one_line(case: str):
+    body, status, message = CASES[case]
+    proc = run_python(_script(body), timeout=60)
+    _assert_one_line_exit(proc, "demo.py", status, message)
+    assert "never interrupted" not in proc.stdout and "cleanup ran" not in proc.stdout
+    if case == "in __del__":
+        assert "__del__ finished" in proc.stdout  # held: the __del__ ran to its end
+
+
+def test_interrupt_during_an_import_waits_for_the_import(tmp_path: Path):
+    """A signal in the middle of an import is held until the import is over (an interrupt
+    inside a C extension's initialisation printed tracebacks or crashed the interpreter)."""
+    (tmp_path / "slow_module.py").write_text(
+        "import signal, time\n"
+        "signal.raise_signal(signal.SIGINT)\n"
+        "for _ in range(10):\n    time.sleep(0.01)\n"
+        "print('import finished', flush=True)\n"
+    )
+    body = "import slow_module\nprint('after the import', flush=True)\n" + _wait_loop()
+    prelude = f"sys.path.insert(0, {str(tmp_path)!r})"
+    proc = run_python(_script(body, prelude), timeout=60)
+    _assert_one_line_exit(proc, "demo.py", 130, "interrupted")
+    assert "import finished" in proc.stdout and "never interrupted" not in proc.stdout
+
+
+def test_handlers_are_ours_only_while_a_wrapper_runs():
+    code = textwrap.dedent(
+        """
+        import signal, sys
+        from jaxais import cli
+        before = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
+        hook = sys.unraisablehook
+        with cli.main_wrapper("demo.py"):
+            inside = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
+            assert inside == (cli._on_signal, cli._on_signal), inside
+        assert (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) == before
+        assert sys.unraisablehook is hook
+        # A signal the process was started with ignored (nohup, a background job) stays so.
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        with cli.main_wrapper("demo.py"):
+            assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+            assert signal.getsignal(signal.SIGTERM) is cli._on_signal
+            signal.raise_signal(signal.SIGINT)  # ignored
+        print("ok")
+        """
+    )
+    proc = run_python(code, timeout=60)
+    assert proc.returncode == 0 and proc.stdout == "ok\n", proc.stderr
+
+
+# ---------------------------------------------------------------------------------- reproduce.py
+
+
+def _reproduce(*args: object) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "scripts/reproduce.py", *map(str, args)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "JAXAIS_DEBUG": ""},
+    )
+
+
+def _tree(path: Path) -> dict[str, bytes]:
+    return {
+        str(p.relative_to(path)): p.read_bytes() if p.is_file() else b"" for p in path.rglob("*")
+    }
+
+
+def test_reproduce_evolve_into_an_earlier_ltl_folder_says_what_to_do(tmp_path: Path):
+    """evolve.py would refuse the folder with advice for its own --resume, which reproduce.py
+    does not have: reproduce.py answers first, before any work, and touches nothing."""
+    finished, unfinished = tmp_path / "finished", tmp_path / "unfinished"
+    (finished / "ltl" / "seed").mkdir(parents=True)
+    (finished / "ltl" / "seed" / "meta.json").write_text("{}")
+    (finished / "tables.json").write_text("earlier tables\n")
+    (unfinished / "ltl" / "checkpoints").mkdir(parents=True)
+    tiny = ("--trials", 2, "--tau-cap", 5, "--worlds", "world1", "--generations", 1)
+    before = _tree(tmp_path)
+
+    proc = _reproduce("--evolve", "--out", finished, *tiny)
+    ltl = finished / "ltl"
+    _assert_one_line_exit(
+        proc,
+        "reproduce.py",
+        2,
+        f"{ltl} exists from an earlier --evolve run; remove it, or pass --seeds {ltl / 'seed'} "
+        "instead of --evolve to reuse its seed",
+    )
+    proc = _reproduce("--evolve", "--seed", 7, "--out", unfinished, *tiny)
+    ltl = unfinished / "ltl"
+    _assert_one_line_exit(
+        proc,
+        "reproduce.py",
+        2,
+        f"{ltl} holds an unfinished LTL run; remove it, or finish it with 'scripts/evolve.py "
+        f"--out {ltl} --seed 7 --generations 1 --resume' and then pass --seeds {ltl / 'seed'} "
+        "instead of --evolve",
+    )
+    assert "--resume" not in proc.stderr.replace("--generations 1 --resume'", "")
+    assert _tree(tmp_path) == before

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from _records import trial
 
 from jaxais import claims, stats
 
@@ -19,26 +20,6 @@ CLEAR = {
     "URL-R2": (45, 2100),
     "HDC": (2, 1300),
 }
-
-
-def trial(tau: float, c: int = 0) -> dict:
-    """A record of the current schema: c > 100 fails by collisions, tau = 4000 by time."""
-    capped = min(c, 100)
-    by_c, by_tau = c > 100, tau >= 4000
-    return {
-        "tau": float(tau),
-        "collisions": int(c),
-        "collisions_capped": int(capped),
-        "fitness": (8 * capped + tau) / 2,
-        "failed": by_c or by_tau,
-        "failed_collisions": by_c,
-        "failed_time": by_tau,
-        "failed_by": [k for k, hit in (("collisions", by_c), ("time", by_tau)) if hit],
-        "trapped_s": 0.0,
-        "idiotypic_difference_rate": None,
-        "iterations": int(tau / 0.032),
-        "replaced": 0,
-    }
 
 
 def system(c: int, tau: float, n: int = 8, spread: float = 40.0) -> list[dict]:

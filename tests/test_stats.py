@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from _records import trial
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats as sps
@@ -39,27 +40,6 @@ def two_tailed_p_df5(t: float) -> float:
     th = math.atan(abs(t) / math.sqrt(5))
     a = 2 / math.pi * (th + math.sin(th) * math.cos(th) * (1 + 2 / 3 * math.cos(th) ** 2))
     return 1.0 - a
-
-
-def trial(tau: float, c: int = 0, rate: float | None = None, trapped: float = 0.0) -> dict:
-    """A record of the current schema (SPEC 9): c > 100 fails by collisions, tau = 4000 by time,
-    both can hold; the means and f use c capped at 100."""
-    capped = min(c, 100)
-    by_c, by_tau = c > 100, tau >= 4000
-    return {
-        "tau": float(tau),
-        "collisions": int(c),
-        "collisions_capped": int(capped),
-        "fitness": (8 * capped + tau) / 2,
-        "failed": by_c or by_tau,
-        "failed_collisions": by_c,
-        "failed_time": by_tau,
-        "failed_by": [k for k, hit in (("collisions", by_c), ("time", by_tau)) if hit],
-        "trapped_s": float(trapped),
-        "idiotypic_difference_rate": rate,
-        "iterations": int(tau / 0.032),
-        "replaced": 0,
-    }
 
 
 def old_trial(tau: float, c: int = 0, failed_by: str | None = None) -> dict:

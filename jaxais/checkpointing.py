@@ -107,6 +107,14 @@ def _first_line(err: BaseException, limit: int = 200) -> str:
     return msg if len(msg) <= limit else msg[: limit - 3] + "..."
 
 
+def _write_failure(err: BaseException) -> str:
+    """The reason a write failed, short: the OS's words for a full disk, else the first line."""
+    text = str(err)
+    if "No space left on device" in text or "os_error_code='28'" in text:
+        return "No space left on device"
+    return _first_line(err)
+
+
 def _describe_difference(stored: dict[str, Any], given: dict[str, Any], where: str = "") -> str:
     """The first differing entry, e.g. ``"config.mutation was 0.05, now 0.1"``."""
     for k in sorted(set(stored) | set(given)):
@@ -211,9 +219,21 @@ class GACheckpointer:
         with contextlib.suppress(Exception):
             self.close()
 
+    @contextlib.contextmanager
+    def _writing(self):
+        """A failed write (e.g. a full disk) as one line naming the checkpoint directory."""
+        try:
+            yield
+        except Exception as err:  # noqa: BLE001 (orbax and tensorstore raise many kinds)
+            raise CheckpointError(
+                f"{self.directory}: could not write a checkpoint ({_write_failure(err)}); free "
+                "some space or choose another --out, then resume with --resume"
+            ) from None
+
     def close(self) -> None:
         """Wait for pending writes and release orbax's manager."""
-        self._manager.wait_until_finished()
+        with self._writing():
+            self._manager.wait_until_finished()
         self._manager.close()
 
     def latest_generation(self) -> int | None:
@@ -242,12 +262,14 @@ class GACheckpointer:
             "config": config.to_dict(),
             "extra": extra or {},
         }
-        self._manager.save(
-            generation,
-            args=ocp.args.Composite(
-                state=ocp.args.StandardSave(state_to_tree(state)), meta=ocp.args.JsonSave(meta)
-            ),
-        )
+        with self._writing():  # also reports a failure of the previous, background save
+            self._manager.save(
+                generation,
+                args=ocp.args.Composite(
+                    state=ocp.args.StandardSave(state_to_tree(state)),
+                    meta=ocp.args.JsonSave(meta),
+                ),
+            )
 
     def restore(
         self, config: GAConfig, generation: int | None = None

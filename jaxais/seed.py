@@ -37,6 +37,22 @@ CROSSING = "crossing"
 _FIELDS = ("type", "speed", "freq", "angle", "direction", "right_freq", "right_angle")
 
 
+SEED_FORMAT = "jaxais-seed/1"
+"""The ``format`` of the seed.json this version writes and reads."""
+
+
+def _bad_values(seed: Seed) -> str | None:
+    """What is wrong with a seed's τ, c or L (eq 1 needs τ + ρc > 0), or None."""
+    tau, c, L = (np.asarray(a, np.float64) for a in (seed.tau, seed.collisions, seed.L))
+    if not (np.all(np.isfinite(tau)) and np.all(tau > 0)):
+        return f"seed task times must be finite and > 0 s, got {tau.tolist()}"
+    if not (np.all(np.isfinite(c)) and np.all(c >= 0)):
+        return f"seed collision counts must be >= 0, got {c.tolist()}"
+    if not (np.all(np.isfinite(L)) and np.all(L >= 0)):
+        return "seed RL scores L must be finite and >= 0"
+    return None
+
+
 class SeedError(ValueError):
     """A seed directory is missing, incomplete or corrupt (the message is one line)."""
 
@@ -112,7 +128,7 @@ def seed_to_json(
                 "antibodies": to_dicts(one),
             }
         )
-    doc = {"format": "jaxais-seed/1", **provenance}
+    doc = {"format": SEED_FORMAT, **provenance}
     if crossing is not None:
         problem = check_crossing(crossing, len(sets))
         if problem:
@@ -190,9 +206,17 @@ def load_seed(path: str | Path | None = None) -> tuple[Seed, dict[str, Any]]:
     except Exception as err:  # noqa: BLE001 (any failure to read is a corrupt seed)
         msg = str(err).splitlines()[0] if str(err) else type(err).__name__
         raise SeedError(f"{path}: corrupt seed ({msg[:200]}); {hint}") from None
+    fmt = meta.get("format") if isinstance(meta, dict) else None
+    if fmt != SEED_FORMAT:
+        raise SeedError(
+            f"{path}: {SEED_JSON} has format {fmt!r}, this jaxais reads {SEED_FORMAT!r} ({hint})"
+        )
     x = seed.tau.shape[0]
     if seed.antibodies.type.shape != (x, 8) or seed.L.shape != (x, 8) or x < 1:
         raise SeedError(f"{path}: seed arrays have inconsistent shapes ({hint})")
+    problem = _bad_values(seed)
+    if problem:
+        raise SeedError(f"{path}: {problem} ({hint})")
     if not bool(np.all(within_limits(antibodies))):  # NumPy: host arrays
         raise SeedError(f"{path}: seed antibodies break Table 1's limits ({hint})")
     # The readable file must describe the same sets as the arrays, number for number (the JSON

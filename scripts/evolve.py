@@ -273,9 +273,14 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
     from jaxais import compilation_cache, envs, ga, host_devices, loop_kernels
     from jaxais.checkpointing import GACheckpointer
     from jaxais.experiment import portable_path
+    from jaxais.orbax_reads import forget_abandoned_reads
     from jaxais.seed import save_seed
 
-    logging.getLogger("absl").setLevel(logging.ERROR)  # orbax's info/warnings are not for users
+    # orbax reports a failed save to us as an exception, which becomes the one-line error; its
+    # own logs and its background threads' reports of the same failure (hundreds of lines on a
+    # full disk) are not for users.
+    logging.getLogger("absl").setLevel(logging.CRITICAL)
+    forget_abandoned_reads()
     # Orbax and matplotlib import in the background while JAX's backend starts, the world loads
     # and the GA compiles; the main thread's own imports then find them done (or wait for them).
     threading.Thread(target=_import_in_background, daemon=True).start()

@@ -169,3 +169,35 @@ def test_unfinished_save_leaves_the_last_complete_checkpoint(saved: Path):
         state, _ = ck.restore(TINY)
     assert int(state.generation) == 2
     assert not tmp.exists()  # tidied up when the run resumes
+
+
+@pytest.mark.parametrize(
+    ("failure", "reason"),
+    [
+        (
+            ValueError("RESOURCE_EXHAUSTED: Error writing ... [os_error_code='28']\nmore"),
+            "No space left on device",
+        ),
+        (OSError(28, "No space left on device"), "No space left on device"),
+        (RuntimeError("disk on fire\nand more"), "disk on fire"),
+    ],
+)
+def test_a_failed_write_is_one_line_naming_the_directory(tmp_path, monkeypatch, failure, reason):
+    """A full disk during a save (or during the background save a later call waits for) is one
+    CheckpointError line naming the directory, not orbax's report."""
+    state = tiny_run(0, 1)
+    with GACheckpointer(tmp_path / "ck", INFO, resume=False) as ck:
+
+        def fail(*args, **kwargs):
+            raise failure
+
+        monkeypatch.setattr(ck._manager, "save", fail)
+        with pytest.raises(CheckpointError) as info:
+            ck.save(state, TINY)
+        monkeypatch.setattr(ck._manager, "wait_until_finished", fail)
+        with pytest.raises(CheckpointError):
+            ck.close()
+        monkeypatch.undo()
+    msg = str(info.value)
+    assert "\n" not in msg and msg.startswith(str(tmp_path / "ck"))
+    assert f"({reason})" in msg and "--resume" in msg

@@ -180,6 +180,11 @@ CASES = {
     "seed.json without sets": (_edit_json(lambda d: d.pop("sets")), "malformed"),
     "seed.json with another behaviour type": (_edit_json(_set_type), "disagrees"),
     "seed.json with a set missing": (_edit_json(lambda d: d["sets"].pop()), "disagrees"),
+    "an unknown format version": (
+        _edit_json(lambda d: d.update(format="jaxais-seed/9")),
+        "has format 'jaxais-seed/9', this jaxais reads 'jaxais-seed/1'",
+    ),
+    "no format": (_edit_json(lambda d: d.pop("format")), "has format None"),
 }
 
 
@@ -232,6 +237,26 @@ def test_seed_breaking_table_1_or_with_bad_shapes_is_refused(tmp_path: Path):
     save_seed(tmp_path / "short", seed.replace(L=np.asarray(seed.L)[:, :7]), PROVENANCE)
     with pytest.raises(SeedError, match="inconsistent shapes"):
         load_seed(tmp_path / "short")
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "words"),
+    [
+        ("tau", -5.0, "task times must be finite and > 0 s"),
+        ("tau", 0.0, "task times must be finite and > 0 s"),
+        ("tau", np.inf, "task times must be finite and > 0 s"),
+        ("collisions", -1, "collision counts must be >= 0"),
+        ("L", -0.5, "RL scores L must be finite and >= 0"),
+    ],
+)
+def test_seed_with_impossible_tau_c_or_L_is_refused(field, value, words, tmp_path: Path):
+    seed = F.random_seed(5)
+    bad = np.array(getattr(seed, field))
+    bad.flat[1] = value
+    save_seed(tmp_path / "bad", seed.replace(**{field: bad}), PROVENANCE)
+    with pytest.raises(SeedError, match=words) as info:
+        load_seed(tmp_path / "bad")
+    assert "\n" not in str(info.value) and "scripts/evolve.py" in str(info.value)
 
 
 @pytest.mark.parametrize(

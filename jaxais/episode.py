@@ -140,7 +140,8 @@ class Run:
     Attributes:
         sim: simulator state. obs: last observation. ctrl: controller state. key: PRNG key.
         m_prev, v_prev: previous antigen and Vm. collisions: collisions so far (uncapped).
-        free: no obstacle seen since the last counted collision (the episode rule).
+        free: Vm has been under 250 (clear of obstacles) since the last counted collision, so
+            the next collision antigen starts a new contact episode (the episode rule).
         streak: consecutive iterations with more than finish_pixels goal pixels.
         anchor: [2] centre of the current trap disc. still: iterations spent within it.
         trapped: iterations counted as trapped (EpisodeConfig.trap_radius, trap_window).

@@ -32,7 +32,7 @@ import numpy as np
 
 from jaxais import claims, envs, stats
 from jaxais import trials as trials_module
-from jaxais.antibodies import Antibodies, from_dicts
+from jaxais.antibodies import Antibodies
 from jaxais.controllers import System
 from jaxais.envs.struct import device_array
 from jaxais.episode import EpisodeConfig
@@ -41,7 +41,7 @@ from jaxais.network import NetworkParams
 from jaxais.readings import HOLD, SIGMA0_FLOOR, Readings
 from jaxais.readings import readings as make_readings
 from jaxais.seed import Seed
-from jaxais.systems import HAND_DESIGNED, N_SETS, make_system, parse_label
+from jaxais.systems import HAND_DESIGNED, N_SETS, hand_designed_sets, make_system, parse_label
 from jaxais.trials import STL_CONFIG, TrialSet
 
 __all__ = [
@@ -209,8 +209,8 @@ def select(names: Sequence[str] | None) -> tuple[Variant, ...]:
 
 def hdc_antibodies(tracks: bool, x: int = N_SETS) -> Antibodies:
     """The HDC's [x, 8] antibodies (every set the same), tracking the target or not."""
-    one = from_dicts(TRACKING_HDC if tracks else HAND_DESIGNED)
-    return jax.tree.map(lambda a: device_array(np.stack([np.asarray(a)] * x)), one)
+    antibodies, _ = hand_designed_sets(x, TRACKING_HDC if tracks else HAND_DESIGNED)
+    return jax.tree.map(device_array, antibodies)
 
 
 def variant_systems(

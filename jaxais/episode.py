@@ -40,8 +40,9 @@ class EpisodeConfig:
         tau_cap: time cap, simulated seconds [paper: 4000 s STL, ours: 500 s LTL].
         collision_cap: collision cap [paper: 100]; a run with more collisions has failed.
         stop_at_collision_cap: end a run when it reaches the collision cap. The paper's STL runs
-            did not stop there (SPEC 9: in its Table 5 one run can breach both caps), so this is
-            off by default; the GA's evaluation turns it on (its LTL caps, SPEC 10).
+            did not stop there (its text speaks of failing robots with "thousands" of
+            collisions, and SPEC 9 reads its failure columns as overlapping), so this is off by
+            default; the GA's evaluation turns it on (its LTL caps, SPEC 10).
         collision_rule: "episode" counts one collision per contact episode: the antigen enters
             5-7 and the robot has been free of obstacles (Vm < 250) since the last counted one
             [ours, SPEC 9]; "entry" counts every entry into 5-7 from another antigen (the

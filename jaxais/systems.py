@@ -37,8 +37,8 @@ HAND_DESIGNED = [
     # [paper] The HDC "uses a simple random wander to search for the target, a backward turning
     # motion to escape collisions, and it steers the robot in the opposite direction of any
     # detected obstacles"; it names no tracking, so it wanders whether or not the target is seen
-    # and finishes when the finish rule fires while it happens to face the target (SPEC 8; the
-    # paper's tables fit a blind searcher: c about 2, tau about 1300 s). Attributes [ours].
+    # and finishes when the finish rule fires while it happens to face the target (SPEC 8).
+    # Attributes [ours].
     {"antigen": "target unseen", "type": "wander both", "S": 350, "F": 15, "A": 60, "Rf": 18,
      "Ra": 60},
     {"antigen": "target seen", "type": "wander both", "S": 350, "F": 15, "A": 60, "Rf": 18,
@@ -78,9 +78,11 @@ def random_sets(name: str, x: int = N_SETS) -> tuple[Antibodies, np.ndarray]:
     return antibodies, np.asarray(P.reshape(x, 8))
 
 
-def hand_designed_sets(x: int = N_SETS) -> tuple[Antibodies, np.ndarray]:
-    """HDC as a network: set 0 holds the hand-designed behaviours and alone has P = 1."""
-    one = from_dicts(HAND_DESIGNED)
+def hand_designed_sets(
+    x: int = N_SETS, behaviours: list[dict] = HAND_DESIGNED
+) -> tuple[Antibodies, np.ndarray]:
+    """HDC as a network: every set holds ``behaviours``; set 0 alone has P = 1."""
+    one = from_dicts(behaviours)
     antibodies = jax.tree.map(lambda a: np.stack([np.asarray(a)] * x), one)
     P = np.zeros((x, 8), np.float32)
     P[0] = 1.0

@@ -26,17 +26,11 @@ import pytest
 
 from jaxais import envs, ga
 from jaxais.antibodies import from_dicts
+from jaxais.systems import HAND_DESIGNED
 
-# [ours] Sensible obstacle and collision avoidance: steer away from a detected obstacle, back out
-# of a collision while turning away from it (the hand-designed controller's, jaxais.systems).
-AVOID = [
-    {"antigen": "obstacle right", "type": "forward turn", "S": 250, "A": 90, "D": "left"},
-    {"antigen": "obstacle rear", "type": "forward turn", "S": 300, "A": 20, "D": "left"},
-    {"antigen": "obstacle left", "type": "forward turn", "S": 250, "A": 90, "D": "right"},
-    {"antigen": "collision right", "type": "reverse turn", "S": 300, "A": 60, "D": "right"},
-    {"antigen": "collision rear", "type": "forward turn", "S": 300, "A": 40, "D": "left"},
-    {"antigen": "collision left", "type": "reverse turn", "S": 300, "A": 60, "D": "left"},
-]
+# Obstacle and collision avoidance: the hand-designed controller's (steer away from a detected
+# obstacle, back out of a collision while turning away from it).
+AVOID = HAND_DESIGNED[2:]
 WANDER = {"type": "wander both", "S": 400, "F": 25, "A": 70, "Rf": 35, "Ra": 70}
 TRACKER = [
     {"antigen": "target unseen", **WANDER},

@@ -111,9 +111,17 @@ def error_message(err: BaseException) -> str:
     return text or type(err).__name__
 
 
+def _error_line(prog: str, message: str) -> str:
+    """``"{prog}: error: {message}"`` as written to stderr: on a line of its own even when a
+    progress bar (tqdm, which leaves the cursor at the end of its line) is on the screen."""
+    bars = getattr(sys.modules.get("tqdm"), "tqdm", None)
+    open_bar = any(not getattr(bar, "disable", True) for bar in getattr(bars, "_instances", ()))
+    return ("\n" if open_bar else "") + f"{prog}: error: {_one_line(message)}\n"
+
+
 def fail(prog: str, message: str, status: int = EXIT_USAGE) -> NoReturn:
     """Print ``"{prog}: error: {message}"`` (one line) on stderr and exit with ``status``."""
-    sys.stderr.write(f"{prog}: error: {_one_line(message)}\n")
+    sys.stderr.write(_error_line(prog, message))
     sys.stderr.flush()
     raise SystemExit(status)
 
@@ -234,7 +242,7 @@ def _leave_now(signum: int) -> NoReturn:
     _SignalState.leaving = True
     status, message = _STATUS[signum]
     try:
-        os.write(2, f"{_SignalState.prog}: error: {message}\n".encode())
+        os.write(2, _error_line(_SignalState.prog, message).encode())
     finally:
         os._exit(status)
 
@@ -403,7 +411,7 @@ def run_script(main: Callable[[], object]) -> NoReturn:
             raise
         _SignalState.leaving = True
         status, message = interrupt
-        sys.stderr.write(f"{prog}: error: {message}\n")
+        sys.stderr.write(_error_line(prog, message))
         code = status
     _SignalState.leaving = True  # done: a late signal changes nothing
     if code is None:

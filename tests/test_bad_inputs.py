@@ -190,6 +190,29 @@ def test_handlers_are_ours_only_while_a_wrapper_runs():
     assert proc.returncode == 0 and proc.stdout == "ok\n", proc.stderr
 
 
+def test_error_while_a_progress_bar_is_open_starts_its_own_line():
+    """A signal that ends the process at once (no unwinding) finds the bar still open: the
+    error line must not be glued to it, and without a bar no blank line is added."""
+    code = textwrap.dedent(
+        """
+        import sys
+        from tqdm import tqdm
+        from jaxais import cli
+        import os
+        assert cli._error_line("demo.py", "interrupted") == "demo.py: error: interrupted\\n"
+        bar = tqdm(total=10, file=sys.stderr, desc="run")
+        bar.update(1)
+        try:
+            cli.fail("demo.py", "interrupted", status=130)
+        except SystemExit as stop:
+            os._exit(stop.code)  # as run_script and a signal's exit do: the bar is not closed
+        """
+    )
+    proc = run_python(code, timeout=60)
+    assert proc.returncode == 130, proc.stderr
+    assert proc.stderr.splitlines()[-1] == "demo.py: error: interrupted", proc.stderr
+
+
 # ---------------------------------------------------------------------------------- reproduce.py
 
 

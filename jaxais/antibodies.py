@@ -47,7 +47,6 @@ __all__ = [
     "USES",
     "WANDER_BOTH",
     "WANDER_SINGLE",
-    "antibodies_from_uniform",
     "antibody_distance",
     "attribute_matrix",
     "canonical",
@@ -191,14 +190,15 @@ def canonical(ab: Antibodies) -> Antibodies:
     return from_matrix(ab.type, jnp.where(uses, attribute_matrix(ab), 0.0))
 
 
-def _attributes_from_uniform(type_: jnp.ndarray, u: jnp.ndarray) -> jnp.ndarray:
+def _to_attributes(type_: jnp.ndarray, u: jnp.ndarray) -> jnp.ndarray:
     """[..., N_ATTRIBUTES] canonical attributes for ``type_`` from uniforms ``u`` in [0, 1)."""
     values = jnp.asarray(_LO)[type_] + jnp.asarray(_RANGE)[type_] * u
     values = jnp.where(_IS_D, jnp.floor(2.0 * u), values)  # D: 0 or 1, each with probability 1/2
     return jnp.where(jnp.asarray(USES)[type_], values, 0.0)
 
 
-def _type_from_uniform(u: jnp.ndarray) -> jnp.ndarray:
+def _to_type(u: jnp.ndarray) -> jnp.ndarray:
+    """[...] int32 types, uniform over 0-5, from uniforms ``u`` [...] in [0, 1)."""
     # The clip only guards float rounding at u -> 1.
     return jnp.minimum(jnp.floor(N_TYPES * u), N_TYPES - 1).astype(jnp.int32)
 
@@ -229,13 +229,7 @@ def sample_attributes(key: jax.Array, type_: jnp.ndarray) -> Antibodies:
     """
     type_ = jnp.asarray(type_, jnp.int32)
     u = _uniform(key, type_.shape + (N_ATTRIBUTES,))
-    return from_matrix(type_, _attributes_from_uniform(type_, u))
-
-
-def antibodies_from_uniform(u: jnp.ndarray) -> Antibodies:
-    """Random antibodies from i.i.d. uniforms ``u`` [..., 7] (type, then the six attributes)."""
-    type_ = _type_from_uniform(u[..., 0])
-    return from_matrix(type_, _attributes_from_uniform(type_, u[..., 1:]))
+    return from_matrix(type_, _to_attributes(type_, u))
 
 
 def sample_antibodies(key: jax.Array, shape: int | tuple[int, ...] = (N_ANTIGENS,)) -> Antibodies:
@@ -243,10 +237,13 @@ def sample_antibodies(key: jax.Array, shape: int | tuple[int, ...] = (N_ANTIGENS
 
     Args:
         key: typed PRNG key.
-        shape: batch shape, e.g. ``(8,)`` for a set or ``(5, 8)`` for the STL's five sets.
+        shape: batch shape, e.g. ``()`` for one antibody, ``(8,)`` for a set or ``(5, 8)`` for
+            the STL's five sets.
     """
     shape = (shape,) if isinstance(shape, int) else tuple(shape)
-    return antibodies_from_uniform(_uniform(key, shape + (1 + N_ATTRIBUTES,)))
+    u = _uniform(key, shape + (1 + N_ATTRIBUTES,))  # the type, then the six attributes
+    type_ = _to_type(u[..., 0])
+    return from_matrix(type_, _to_attributes(type_, u[..., 1:]))
 
 
 def mutate(key: jax.Array, ab: Antibodies, rate: float | jnp.ndarray = 0.05) -> Antibodies:
@@ -269,10 +266,10 @@ def mutate(key: jax.Array, ab: Antibodies, rate: float | jnp.ndarray = 0.05) -> 
     u = _uniform(key, ab.shape + (2 * n,))
     hit = u[..., :n] < rate
     type_hit, attr_hit = hit[..., 0], hit[..., 1:]
-    new_type = jnp.where(type_hit, _type_from_uniform(u[..., n]), ab.type)
+    new_type = jnp.where(type_hit, _to_type(u[..., n]), ab.type)
     # One fresh draw for the final type serves both cases: a whole-antibody redraw after a type
     # mutation, and single-attribute redraws (same type, so the same limits) otherwise.
-    fresh = _attributes_from_uniform(new_type, u[..., n + 1 :])
+    fresh = _to_attributes(new_type, u[..., n + 1 :])
     attributes = jnp.where(type_hit[..., None] | attr_hit, fresh, attribute_matrix(ab))
     return from_matrix(new_type, attributes)
 

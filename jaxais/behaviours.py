@@ -39,7 +39,6 @@ __all__ = [
     "MAX_WHEEL_SPEED",
     "STATIC_TURN_REDUCTION",
     "wheel_speeds",
-    "wheel_speeds_from_uniform",
 ]
 
 
@@ -64,7 +63,8 @@ def wheel_speeds(
       (right) of column 7; straight when centred or when there are no blue pixels.
 
     Args:
-        key: typed PRNG key; one ``uniform(key, (2,))`` draw (used by the wander types only).
+        key: typed PRNG key; one ``uniform(key, (2,))`` draw (used by the wander types only), so
+            the same key gives the same turn decision (a bout keeps its key for that).
         ab: one antibody (scalar fields).
         blue_pixels: [] int number of blue pixels.
         blue_centroid: [] float mean column of the blue pixels (0 = leftmost, 14 = rightmost).
@@ -72,16 +72,7 @@ def wheel_speeds(
     Returns:
         [2] float32 (left, right) speeds, clipped to +-``MAX_WHEEL_SPEED``.
     """
-    return wheel_speeds_from_uniform(jax.random.uniform(key, (2,)), ab, blue_pixels, blue_centroid)
-
-
-def wheel_speeds_from_uniform(
-    u: jnp.ndarray,
-    ab: Antibodies,
-    blue_pixels: jnp.ndarray,
-    blue_centroid: jnp.ndarray,
-) -> jnp.ndarray:
-    """:func:`wheel_speeds` given its random draw ``u`` [2] of uniforms in [0, 1)."""
+    u = jax.random.uniform(key, (2,))
     t = ab.type
     speed = jnp.asarray(ab.speed, jnp.float32)
     angle = jnp.asarray(ab.angle, jnp.float32)

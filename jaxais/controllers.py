@@ -16,18 +16,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxais import prng
-from jaxais.antibodies import Antibodies, antibodies_from_uniform, take
+from jaxais.antibodies import Antibodies, sample_antibodies, take
 from jaxais.antigens import is_collision, is_obstacle_or_collision
-from jaxais.behaviours import wheel_speeds_from_uniform
+from jaxais.behaviours import wheel_speeds
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.episode import Controller, Percept
 from jaxais.network import (
     NetworkParams,
     idiotopes,
-    idiotypic_select_from_uniform,
+    idiotypic_select,
     rescale_paratopes,
-    select_alpha_from_uniform,
+    select_alpha,
 )
 from jaxais.readings import DEFAULT, Readings
 from jaxais.reinforcement import (
@@ -81,17 +80,19 @@ class Bout:
     Attributes:
         antigen: [] int32 the antigen it was selected for (its antibody column).
         left: [] int32 iterations of the bout still to act after this one.
-        u: [2] the behaviour's uniforms, drawn at selection (a wander's turn decision holds for
-            the bout, so F % is the share of bouts, i.e. of time, spent turning).
+        key: the behaviour's PRNG key, from its selection: every iteration of the bout draws
+            the same numbers from it, so a wander's turn decision holds for the bout and F % is
+            the share of bouts, i.e. of time, spent turning.
     """
 
     antigen: jnp.ndarray
     left: jnp.ndarray
-    u: jnp.ndarray
+    key: jax.Array
 
 
-def _init_bout() -> Bout:
-    return Bout(antigen=jnp.int32(0), left=jnp.int32(0), u=jnp.zeros(2))
+def _init_bout(key: jax.Array) -> Bout:
+    """A bout that has ended (the first act selects; ``key`` is never drawn from)."""
+    return Bout(antigen=jnp.int32(0), left=jnp.int32(0), key=key)
 
 
 def _end_if(bout: Bout, penalised: jnp.ndarray) -> Bout:
@@ -102,13 +103,13 @@ def _end_if(bout: Bout, penalised: jnp.ndarray) -> Bout:
     return bout.replace(left=jnp.where(penalised, 0, bout.left).astype(jnp.int32))
 
 
-def _next_bout(bout: Bout, pc: Percept, u: jnp.ndarray, hold: jnp.ndarray):
-    """(select now?, the bout after this iteration's choice)."""
+def _next_bout(bout: Bout, pc: Percept, key: jax.Array, hold: jnp.ndarray):
+    """(select now?, the bout after this iteration's choice: a new one keeps ``key``)."""
     select = (bout.left <= 0) | interrupts(pc.m, bout.antigen)
     new = Bout(
         antigen=jnp.where(select, pc.m, bout.antigen).astype(jnp.int32),
         left=jnp.where(select, hold - 1, bout.left - 1).astype(jnp.int32),
-        u=jnp.where(select, u, bout.u),
+        key=jnp.where(select, key, bout.key),
     )
     return select, new
 
@@ -139,14 +140,13 @@ def ltl_controller(readings: Readings = DEFAULT) -> Controller:
     """
 
     def init(key, antibodies):
-        del key
         n = antibodies.type.shape[0]
         return LTLState(
-            antibodies=antibodies, L=jnp.zeros(n), counters=init_counters(), bout=_init_bout()
+            antibodies=antibodies, L=jnp.zeros(n), counters=init_counters(), bout=_init_bout(key)
         )
 
-    def learn(u, state: LTLState, pc: Percept, antibodies):
-        del u, antibodies
+    def learn(key, state: LTLState, pc: Percept, antibodies):
+        del key, antibodies  # RL draws nothing
         scored = _scored(state.L.shape, (state.bout.antigen,)) & (pc.t > 0)
         counters, fire = update_penalty(
             state.counters, pc.m, readings.count_encounters, readings.encounter_gap
@@ -156,14 +156,14 @@ def ltl_controller(readings: Readings = DEFAULT) -> Controller:
         L = jnp.where(scored, jnp.clip(state.L + r, 0.0, L_MAX), state.L)
         return state.replace(L=L, counters=counters, bout=_end_if(state.bout, fire))
 
-    def act(u, state: LTLState, pc: Percept, antibodies):
+    def act(key, state: LTLState, pc: Percept, antibodies):
         del antibodies
-        _, bout = _next_bout(state.bout, pc, u, readings.hold)
+        _, bout = _next_bout(state.bout, pc, key, readings.hold)
         ab = take(state.antibodies, bout.antigen)
-        wheels = wheel_speeds_from_uniform(bout.u, ab, pc.blue_pixels, pc.centroid)
+        wheels = wheel_speeds(bout.key, ab, pc.blue_pixels, pc.centroid)
         return state.replace(bout=bout), wheels
 
-    return Controller(init=init, learn=learn, act=act, n_uniform=lambda params: 2)
+    return Controller(init=init, learn=learn, act=act)
 
 
 # ---------------------------------------------------------------------------------- STL
@@ -204,7 +204,6 @@ class STLState:
             antigen column is ``bout.antigen``. bout: the behaviour acting now.
         differences: selections with alpha != beta. selections: selections made (one per bout).
         replaced: antibodies replaced so far.
-        key: PRNG key of the periodic idiotope draws.
     """
 
     antibodies: Antibodies
@@ -218,7 +217,6 @@ class STLState:
     differences: jnp.ndarray
     selections: jnp.ndarray
     replaced: jnp.ndarray
-    key: jax.Array
 
 
 def stl_controller(
@@ -245,7 +243,7 @@ def stl_controller(
 
     def init(key, system: System):
         P = jnp.asarray(system.paratopes, jnp.float32)
-        k_idiotope, key = jax.random.split(key)
+        k_idiotope, k_bout = jax.random.split(key)
         return STLState(
             antibodies=system.antibodies,
             P=P,
@@ -255,29 +253,15 @@ def stl_controller(
             N=jnp.full(P.shape, system.network.initial_clones, jnp.float32),
             counters=init_counters(),
             acting=jnp.int32(0),
-            bout=_init_bout(),
+            bout=_init_bout(k_bout),
             differences=jnp.int32(0),
             selections=jnp.int32(0),
             replaced=jnp.int32(0),
-            key=key,
         )
 
-    def draws(system: System):
-        """Layout of one iteration's uniforms: (name, size) in order."""
-        x = system.paratopes.shape[-2]
-        return (("new", 7), ("new_p", 1), ("select", 2 * x), ("behave", 2))
-
-    def n_uniform(system: System) -> int:
-        return sum(n for _, n in draws(system))
-
-    def split(u, system: System) -> dict:
-        out, start = {}, 0
-        for name, n in draws(system):
-            out[name], start = u[start : start + n], start + n
-        return out
-
-    def learn(u, s: STLState, pc: Percept, system: System):
-        u = split(u, system)
+    def learn(key, s: STLState, pc: Percept, system: System):
+        # Split whether or not replacement is built in, so the idiotope's draws are the same.
+        k_idiotope, k_antibody, k_paratope = jax.random.split(key, 3)
         P, antibodies, replaced = s.P, s.antibodies, s.replaced
         rd = system.readings
         counters, fire = update_penalty(s.counters, pc.m, rd.count_encounters, rd.encounter_gap)
@@ -295,23 +279,18 @@ def stl_controller(
                 weak = (P < REPLACE_BELOW) & system.replacement & on
                 first = _scored(P.shape, jnp.unravel_index(jnp.argmax(weak), P.shape))
                 first = first & jnp.any(weak)
-                fresh = antibodies_from_uniform(u["new"])
+                fresh = sample_antibodies(k_antibody, ())
                 antibodies = jax.tree.map(
                     lambda old, new: jnp.where(first, new, old), antibodies, fresh
                 )
                 lo, hi = REPLACEMENT_P
-                P = jnp.where(first, lo + (hi - lo) * u["new_p"][0], P)
+                P = jnp.where(first, jax.random.uniform(k_paratope, minval=lo, maxval=hi), P)
                 replaced = replaced + jnp.any(weak).astype(jnp.int32)
 
         # The idiotope is redrawn every idiotope_period iterations. The test is on the batch's
-        # tick (unbatched), so under vmap this stays a branch taken once per period. Its draw
-        # uses the unrolled hash: the same numbers, without rolled loops in the branch.
+        # tick (unbatched), so under vmap this stays a branch taken once per period.
         due = (pc.tick % system.network.idiotope_period == 0) & (pc.tick > 0)
-        I = jax.lax.cond(
-            due,
-            lambda: idiotopes(jax.random.fold_in(prng.unrolled(s.key), pc.tick), P),
-            lambda: s.I,
-        )
+        I = jax.lax.cond(due, lambda: idiotopes(k_idiotope, P), lambda: s.I)
         return s.replace(
             antibodies=antibodies,
             P=P,
@@ -321,14 +300,11 @@ def stl_controller(
             bout=_end_if(s.bout, fire),
         )
 
-    def act(u, s: STLState, pc: Percept, system: System):
-        u = split(u, system)
-        select, bout = _next_bout(s.bout, pc, u["behave"], system.readings.hold)
-        tiebreaks = u["select"].reshape(2, -1)
+    def act(key, s: STLState, pc: Percept, system: System):
+        k_select, k_bout = jax.random.split(key)
+        select, bout = _next_bout(s.bout, pc, k_bout, system.readings.hold)
         if idiotypic:
-            alpha, beta, N = idiotypic_select_from_uniform(
-                tiebreaks, s.P, s.I, s.N, pc.m, system.network
-            )
+            alpha, beta, N = idiotypic_select(k_select, s.P, s.I, s.N, pc.m, system.network)
             idio = system.idiotypic
             chosen = jnp.where(idio, beta, alpha)
             differ = idio & (alpha != beta) & select
@@ -337,13 +313,13 @@ def stl_controller(
                 differences=s.differences + differ.astype(jnp.int32),
             )
         else:  # no run in the batch is idiotypic: stage 1 alone, the clones never change
-            chosen = select_alpha_from_uniform(tiebreaks[0], s.P, pc.m)
+            chosen = select_alpha(k_select, s.P, pc.m)  # idiotypic_select's alpha for this key
         acting = jnp.where(select, chosen, s.acting).astype(jnp.int32)
         s = s.replace(acting=acting, bout=bout, selections=s.selections + select.astype(jnp.int32))
         ab = take(s.antibodies, (acting, bout.antigen))
-        return s, wheel_speeds_from_uniform(bout.u, ab, pc.blue_pixels, pc.centroid)
+        return s, wheel_speeds(bout.key, ab, pc.blue_pixels, pc.centroid)
 
-    return Controller(init=init, learn=learn, act=act, n_uniform=n_uniform)
+    return Controller(init=init, learn=learn, act=act)
 
 
 LTL = ltl_controller()

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.extend.core import jaxpr_as_fun
 
-from jaxais import envs, prng
+from jaxais import envs
 from jaxais.antigens import OBSTACLE_THRESHOLD, antigen, is_collision
 from jaxais.envs.struct import pytree_dataclass
 
@@ -118,20 +118,17 @@ class Percept:
 
 
 class Controller(NamedTuple):
-    """A controller as pure functions of one robot.
+    """A controller as pure functions of one robot, key first.
 
-    init(key, params) -> cstate; learn(u, cstate, percept, params) -> cstate (scores the
-    antibody that acted last); act(u, cstate, percept, params) -> (cstate, wheels [2]).
-    ``params`` is the controller's own pytree (antibodies, flags, constants). Randomness comes
-    as uniforms ``u`` [n_uniform(params)] per iteration, shared by learn and act, which each
-    know their own slice: the loop draws them a chunk of iterations at a time, which keeps the
-    compiled loop small and fast (one vectorised draw instead of a dozen small ones per step).
+    init(key, params) -> cstate; learn(key, cstate, percept, params) -> cstate (scores the
+    antibody that acted last); act(key, cstate, percept, params) -> (cstate, wheels [2]).
+    ``params`` is the controller's own pytree (antibodies, flags, constants); every key is a
+    typed PRNG key of its own (the loop gives learn and act one each per iteration).
     """
 
     init: Callable[..., Any]
     learn: Callable[..., Any]
     act: Callable[..., Any]
-    n_uniform: Callable[[Any], int]
 
 
 @pytree_dataclass
@@ -139,7 +136,8 @@ class Run:
     """One run in progress.
 
     Attributes:
-        sim: simulator state. obs: last observation. ctrl: controller state. key: PRNG key.
+        sim: simulator state. obs: last observation. ctrl: controller state.
+        key: the run's PRNG key; iteration t draws from ``fold_in(key, t)`` (:func:`advance`).
         m_prev, v_prev: previous antigen and Vm. collisions: collisions so far (uncapped).
         free: Vm has been under 250 (clear of obstacles) since the last counted collision, so
             the next collision antigen starts a new contact episode (the episode rule).
@@ -203,9 +201,8 @@ def start(
 
 
 def iterate(
+    key: jax.Array,
     run: Run,
-    sim_noise: envs.StepNoise,
-    u: jnp.ndarray,
     tick: jnp.ndarray,
     world: envs.World,
     sim_params: envs.SimParams,
@@ -213,12 +210,13 @@ def iterate(
     ctrl_params: Any,
     config: EpisodeConfig,
 ) -> Run:
-    """One iteration of one run, given its random draws; a run that has ended is unchanged.
+    """One iteration of one run; a run that has ended is unchanged.
 
     Args:
-        sim_noise: the simulator step's draws. u: [n_uniform] the controller's uniforms.
+        key: this iteration's PRNG key, split between learn, act and the simulator step.
         tick: iterations since the batch started (unbatched; see :class:`Percept`).
     """
+    k_learn, k_act, k_sim = jax.random.split(key, 3)
     obs = run.obs
     m = antigen(obs.ir, obs.blue_pixels)
     if config.collision_rule == "episode":  # one per contact episode (EpisodeConfig)
@@ -249,9 +247,9 @@ def iterate(
         t=run.t,
         tick=tick,
     )
-    ctrl = controller.learn(u, run.ctrl, percept, ctrl_params)
-    ctrl, wheels = controller.act(u, ctrl, percept, ctrl_params)
-    sim, new_obs = envs.step_with_noise(run.sim, wheels, sim_noise, world, sim_params)
+    ctrl = controller.learn(k_learn, run.ctrl, percept, ctrl_params)
+    ctrl, wheels = controller.act(k_act, ctrl, percept, ctrl_params)
+    sim, new_obs = envs.step(k_sim, run.sim, wheels, world, sim_params)
     new_obs = _carried(new_obs)
     # Trapped time: a stay within trap_radius of the anchor counts, whole, once it lasts the
     # window (at the window all of it is added, then one iteration at a time).
@@ -329,25 +327,15 @@ def advance(
     ctrl_params: Any,
     config: EpisodeConfig,
 ) -> Batch:
-    """Advance every run by up to ``config.segment`` iterations, stopping early once all ended."""
-    step_all = jax.vmap(iterate, in_axes=(0, 0, 0, None, None, None, None, 0, None))
-    n_chunks = max(1, config.segment // config.chunk)
-    n_u = controller.n_uniform(ctrl_params)
+    """Advance every run by up to ``config.segment`` iterations, stopping early once all ended.
 
-    def draws(key):
-        """One run's draws for a chunk: StepNoise [chunk, ...] and uniforms [chunk, n_u]."""
-        # The same draws as with ``key`` itself, without the hash's rolled loops (jaxais.prng).
-        new_key, k_sim, k_ctrl = jax.random.split(prng.unrolled(key), 3)
-        noise = jax.vmap(envs.sample_step_noise, in_axes=(0, None))(
-            jax.random.split(k_sim, config.chunk), world
-        )
-        u = jax.random.uniform(k_ctrl, (config.chunk * n_u,)).reshape(config.chunk, n_u)
-        return prng.like(new_key, key), noise, u
+    Iteration t of a run draws from ``fold_in(run.key, t)``: its numbers do not depend on the
+    chunk and segment sizes, nor on the other runs of the batch.
+    """
+    step_all = jax.vmap(iterate, in_axes=(0, 0, None, None, None, None, 0, None))
+    n_chunks = max(1, config.segment // config.chunk)
 
     def chunk(batch: Batch) -> Batch:
-        keys, noise, u = jax.vmap(draws)(batch.runs.key)
-        runs = batch.runs.replace(key=keys)
-
         def body(i, r):
             # jax.numpy's helpers are jit-wrapped: traced under vmap, each call is traced and
             # batched as a nested program (half of this loop's tracing time). Under disable_jit
@@ -357,9 +345,8 @@ def advance(
             # unroll.
             with jax.disable_jit():
                 return step_all(
+                    jax.vmap(jax.random.fold_in)(r.key, r.t),
                     r,
-                    jax.tree.map(lambda a: a[:, i], noise),
-                    u[:, i],
                     batch.chunks * config.chunk + i,
                     world,
                     sim_params,
@@ -368,7 +355,7 @@ def advance(
                     config,
                 )
 
-        runs = jax.lax.fori_loop(0, config.chunk, body, runs)
+        runs = jax.lax.fori_loop(0, config.chunk, body, batch.runs)
         poses = batch.poses
         if config.record:
             idx = jnp.minimum(batch.chunks + 1, poses.shape[1] - 1)

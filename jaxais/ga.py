@@ -616,12 +616,8 @@ def roulette(key: jax.Array, weights: jnp.ndarray, n: int) -> jnp.ndarray:
     Returns:
         [n] int32 indices into ``weights``.
     """
-    return _roulette(jax.random.uniform(key, (n,)), weights)
-
-
-def _roulette(u: jnp.ndarray, weights: jnp.ndarray) -> jnp.ndarray:
-    """:func:`roulette` from uniforms ``u`` [...] in [0, 1)."""
     cdf = jnp.cumsum(weights)
+    u = jax.random.uniform(key, (n,))
     # side="right": u falls in [cdf[i-1], cdf[i]) -> i, so a zero-weight robot is never drawn.
     idx = jnp.searchsorted(cdf, u * cdf[-1], side="right")
     return jnp.minimum(idx, weights.shape[0] - 1).astype(jnp.int32)
@@ -637,18 +633,13 @@ def crossover(
 
     Args:
         key: typed PRNG key (tie-breaks).
-        a, b: [8] the parents' sets. La, Lb: [8] their cumulative RL scores.
+        a, b: [..., 8] the parents' sets (any batch shape: pairs of parents).
+        La, Lb: [..., 8] their cumulative RL scores.
 
     Returns:
-        [8] the child's set.
+        [..., 8] the children's sets.
     """
-    return _crossover(jax.random.uniform(key, La.shape), a, La, b, Lb)
-
-
-def _crossover(
-    u: jnp.ndarray, a: Antibodies, La: jnp.ndarray, b: Antibodies, Lb: jnp.ndarray
-) -> Antibodies:
-    """:func:`crossover` with tie-break uniforms ``u`` (shape of ``La``); any batch shape."""
+    u = jax.random.uniform(key, La.shape)
     from_a = (La > Lb) | ((La == Lb) & (u < 0.5))
     return jax.tree.map(lambda x, y: jnp.where(from_a, x, y), a, b)
 
@@ -684,21 +675,18 @@ def _breed(
     """:func:`next_generation` with the mutation rate as a (traceable) number."""
     P, R = population.shape[:2]
     n_elite, n_child = elitism, R - elitism
-    k_u, k_mut = jax.random.split(key)
-    # One draw for all roulette spins and crossover tie-breaks: every random primitive costs
-    # compile time on CPU, which dominates this small program (cf. antibodies._uniform).
-    u = jax.random.uniform(k_u, (P * n_child * (2 + N_ANTIGENS),))
-    u = u.reshape(P, n_child, 2 + N_ANTIGENS)
+    k_parents, k_ties, k_mut = jax.random.split(key, 3)
     rows = jnp.arange(P)[:, None]
 
     # Stable sort: among equal f the lowest index is the elite (deterministic).
     order = jnp.argsort(evaluation.fitness, axis=1, stable=True)[:, :n_elite]  # [P, e]
     elites = jax.tree.map(lambda x: x[rows, order], population)
     weights = selection_weights(evaluation.tau, evaluation.collisions)  # [P, R]
-    parents = jax.vmap(_roulette)(u[..., :2], weights)  # [P, n_child, 2]
-    pa, pb = parents[..., 0], parents[..., 1]
-    children = _crossover(
-        u[..., 2:],
+    spin = lambda k, w: roulette(k, w, 2 * n_child).reshape(2, n_child)
+    parents = jax.vmap(spin)(jax.random.split(k_parents, P), weights)  # [P, 2, n_child]
+    pa, pb = parents[:, 0], parents[:, 1]
+    children = crossover(
+        k_ties,
         jax.tree.map(lambda x: x[rows, pa], population),
         evaluation.L[rows, pa],
         jax.tree.map(lambda x: x[rows, pb], population),

@@ -34,9 +34,6 @@ __all__ = [
     "concentrations",
     "idiotopes",
     "idiotypic_select",
-    "idiotypic_select_from_uniform",
-    "idiotopes_from_uniform",
-    "tiebreak_argmax",
     "initial_clones",
     "network_params",
     "random_tiebreak_argmax",
@@ -123,33 +120,24 @@ def network_params(**overrides: float | int) -> NetworkParams:
     return NetworkParams(**overrides).validate()
 
 
-def tiebreak_argmax(u: jax.Array, values: jax.Array) -> jax.Array:
-    """Index of the largest value; among exact ties, the one with the largest ``u``.
-
-    Args:
-        u: [x] i.i.d. uniforms (each tied index is then equally likely to win).
-        values: [x] scores.
-
-    Returns:
-        int32 scalar index.
-    """
+def _argmax_ties(values: jax.Array, u: jax.Array) -> jax.Array:
+    """Index of the largest of ``values`` [x]; among exact ties, the one with the largest of the
+    i.i.d. uniforms ``u`` [x] (so each tied index is equally likely to win)."""
     values = jnp.asarray(values)
-    is_max = values == jnp.max(values)
-    return jnp.argmax(jnp.where(is_max, u, -1.0)).astype(jnp.int32)
+    return jnp.argmax(jnp.where(values == jnp.max(values), u, -1.0)).astype(jnp.int32)
 
 
 def random_tiebreak_argmax(key: jax.Array, values: jax.Array) -> jax.Array:
     """Index of the largest value, chosen uniformly at random among exact ties.
 
     Args:
-        key: PRNG key.
+        key: PRNG key (one uniform per value).
         values: [x] scores.
 
     Returns:
         int32 scalar index.
     """
-    values = jnp.asarray(values)
-    return tiebreak_argmax(jax.random.uniform(key, values.shape), values)
+    return _argmax_ties(values, jax.random.uniform(key, jnp.shape(values)))
 
 
 def relative_fitness(tau: jax.Array, collisions: jax.Array, rho: float = 8.0) -> jax.Array:
@@ -198,15 +186,10 @@ def idiotopes(key: jax.Array, P: jax.Array) -> jax.Array:
     Returns:
         I: [x, y] float32 of 0.0 / 1.0.
     """
+    P = jnp.asarray(P, jnp.float32)
     # Drawn flat and reshaped: same i.i.d. scores, and XLA compiles a 1-D threefry about twice
     # as fast as a 2-D one on CPU.
-    P = jnp.asarray(P, jnp.float32)
-    return idiotopes_from_uniform(jax.random.uniform(key, (P.size,)), P)
-
-
-def idiotopes_from_uniform(u: jax.Array, P: jax.Array) -> jax.Array:
-    """:func:`idiotopes` given its random draw ``u`` [x * y] of i.i.d. uniforms."""
-    P = jnp.asarray(P, jnp.float32)
+    u = jax.random.uniform(key, (P.size,))
     sigma = jnp.mean(P, axis=0)
     # No entry equal to its column's maximum is below the exact mean; this second test stops
     # float rounding of the mean from making every entry of a constant column a candidate.
@@ -271,20 +254,14 @@ def select_alpha(key: jax.Array, P: jax.Array, antigen: jax.Array | int) -> jax.
     """Selection stage 1: the set whose antibody for ``antigen`` has the highest paratope.
 
     Args:
-        key: PRNG key for ties [ours].
+        key: PRNG key for ties [ours]: one ``uniform(key, (x,))`` draw.
         P: [x, y] paratopes.
         antigen: index m of the presenting antigen.
 
     Returns:
         n: int32 set index of alpha = A_nm.
     """
-    x = jnp.shape(P)[0]
-    return select_alpha_from_uniform(jax.random.uniform(key, (x,)), P, antigen)
-
-
-def select_alpha_from_uniform(u: jax.Array, P: jax.Array, antigen: jax.Array | int) -> jax.Array:
-    """:func:`select_alpha` given its tie-break uniforms ``u`` [x]."""
-    return tiebreak_argmax(u, jnp.asarray(P, jnp.float32)[:, antigen])
+    return random_tiebreak_argmax(key, jnp.asarray(P, jnp.float32)[:, antigen])
 
 
 def stimulation_suppression(
@@ -327,7 +304,10 @@ def idiotypic_select(
     the highest activation lambda = C_im * S2 (eq 10). An idiotypic difference is alpha != beta.
 
     Args:
-        key: PRNG key (split into one subkey per stage's tie-break).
+        key: PRNG key of both stages' tie-breaks: one ``uniform(key, (2 * x,))`` draw (one
+            hash, not a split and two), whose first x values are :func:`select_alpha`'s draw
+            from ``key`` (JAX's threefry numbers a draw's values by their index), so alpha is
+            ``select_alpha(key, P, antigen)``.
         P: [x, y] paratopes. I: [x, y] idiotopes. N: [x, y] clone counts.
         antigen: index m of the presenting antigen.
         params: network constants (b, k1, k2, k3, Phi are used).
@@ -337,24 +317,11 @@ def idiotypic_select(
         beta: int32 set index of the stage-3 winner, the antibody that acts.
         N_new: [x, y] float32 clone counts; only column ``antigen`` differs from ``N``.
     """
-    key_alpha, key_beta = jax.random.split(key)
-    x = jnp.shape(P)[0]
-    u = jnp.stack([jax.random.uniform(key_alpha, (x,)), jax.random.uniform(key_beta, (x,))])
-    return idiotypic_select_from_uniform(u, P, I, N, antigen, params)
-
-
-def idiotypic_select_from_uniform(
-    u: jax.Array,
-    P: jax.Array,
-    I: jax.Array,
-    N: jax.Array,
-    antigen: jax.Array | int,
-    params: NetworkParams,
-) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """:func:`idiotypic_select` given its random draws ``u`` [2, x] (the two tie-breaks)."""
     P = jnp.asarray(P, jnp.float32)
     N = jnp.asarray(N, jnp.float32)
-    alpha = select_alpha_from_uniform(u[0], P, antigen)
+    x = P.shape[0]
+    u = jax.random.uniform(key, (2 * x,))
+    alpha = _argmax_ties(P[:, antigen], u[:x])
     eps, delta = stimulation_suppression(
         P, I, concentrations(N, params.Phi), alpha, params.k1, params.k2
     )
@@ -365,5 +332,5 @@ def idiotypic_select_from_uniform(
     in_column = jnp.arange(N.shape[1]) == antigen
     N_new = jnp.where(in_column[None, :], column[:, None], N)
     activation = concentrations(N_new, params.Phi)[:, antigen] * s2
-    beta = tiebreak_argmax(u[1], activation)
+    beta = _argmax_ties(activation, u[x:])
     return alpha, beta, N_new

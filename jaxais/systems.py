@@ -28,7 +28,8 @@ SYSTEMS = ("SIE", "SRL", "UIE", "URL", "HDC")
 RANDOM_SETS = {"R1": 1, "R2": 2}
 """The fixed random initial sets R1 and R2: PRNG seeds of their draws [ours]."""
 LABELS = ("SIE", "SRL", "UIE-R1", "URL-R1", "UIE-R2", "URL-R2", "HDC")
-"""System labels as in the paper's tables; the index is each label's stable stream id."""
+"""System labels as in the paper's tables (a label's random stream comes from its name,
+:func:`jaxais.trials.stream_id`, not from its place here)."""
 UNSEEDED_P = (0.25, 0.75)
 """Range of the unseeded systems' initial paratopes [paper]."""
 N_SETS = 5

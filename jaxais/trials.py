@@ -2,23 +2,25 @@
 
 Randomness is split so results do not depend on what else shares a batch: trial i's world
 placement comes from (seed, i) alone, so every system meets the same start configurations (common
-random numbers), and its dynamics from (seed, system label, i). A label may carry a variant tag
-after "@" (``"SIE@hold=1"``): the same system with other data (``scripts/ablate.py`` batches
-several variants of one system), which meets the same worlds and random streams as the plain label.
+random numbers), and its dynamics from (seed, system label, i), where the label enters by a hash
+of its name (:func:`stream_id`), not by its place in a list: adding, removing or reordering
+systems changes no other system's trials. A label may carry a variant tag after "@"
+(``"SIE@hold=1"``): the same system with other data (``scripts/ablate.py`` batches several
+variants of one system), which meets the same worlds and random streams as the plain label.
 """
 
 from __future__ import annotations
 
 import functools
+import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
-from jaxais import envs, prng
+from jaxais import envs
 from jaxais.controllers import System, stl_for
 from jaxais.episode import EpisodeConfig, outcome, rollout
 from jaxais.systems import LABELS
@@ -69,46 +71,39 @@ def base_label(name: str) -> str:
     return name.split("@", 1)[0]
 
 
+def stream_id(system_label: str) -> int:
+    """The number that names a label's random stream: a CRC-32 of its base label (a stable
+    hash, unlike Python's ``hash``), in [0, 2**31)."""
+    return zlib.crc32(base_label(system_label).encode()) & 0x7FFFFFFF
+
+
 def trial_keys(seed: int, system_label: str, n: int) -> tuple[jax.Array, jax.Array]:
     """(reset keys, run keys), each [n], of a system's trials."""
     return batch_keys(seed, ((system_label, n),))
 
 
 def batch_keys(seed: int, plan: tuple[tuple[str, int], ...]) -> tuple[jax.Array, jax.Array]:
-    """(reset keys, run keys) of several systems' trials, in ``plan``'s (label, n) order.
+    """(reset keys, run keys), each [sum of n], of several systems' trials in ``plan``'s
+    (label, n) order.
 
-    Trial i of every system meets the same world (its reset key depends on i alone); each label
-    has its own stream of run keys. Derived on the host with NumPy where that gives JAX's keys
-    (:func:`jaxais.prng.host_keys_match`; compiling the derivation took 0.3 s of every
-    ``trials.py`` start on a 2-core CPU), else by one compiled program.
+    From ``k_worlds, k_systems = split(key(seed))``: trial i's reset key is
+    ``fold_in(k_worlds, i)`` for every system (the same world); its run key is
+    ``fold_in(stream, i)`` with ``stream = fold_in(k_systems, stream_id(label))``, which depends
+    on the label's name alone.
     """
-    if not prng.host_keys_match(seed):
-        return _batch_keys_compiled(seed, plan)
-    resets, runs = _derive_keys(prng.host_key(seed), prng.host_fold_in, plan)
-    wrap = lambda parts: jax.random.wrap_key_data(np.concatenate(parts))
-    return wrap(resets), wrap(runs)
+    streams = np.concatenate([np.full(n, stream_id(label), np.uint32) for label, n in plan])
+    trials = np.concatenate([np.arange(n, dtype=np.uint32) for _, n in plan])
+    return _derive_keys(np.uint32(seed), streams, trials)
 
 
-def _derive_keys(base, fold_in, plan):
-    """The derivation of :func:`batch_keys` from the seed's key ``base``, given
-    ``fold_in(key, data [n]) -> keys [n]``: ([reset keys] per label, [run keys] per label)."""
-    worlds = fold_in(base, [0])[0]
-    resets, runs = [], []
-    for system_label, n in plan:
-        resets.append(fold_in(worlds, np.arange(n)))
-        stream = fold_in(base, [1 + LABELS.index(base_label(system_label))])[0]
-        runs.append(fold_in(stream, np.arange(n)))
-    return resets, runs
-
-
-@functools.partial(envs.jit, quick_compile=True, static_argnums=(0, 1))
-def _batch_keys_compiled(
-    seed: int, plan: tuple[tuple[str, int], ...]
-) -> tuple[jax.Array, jax.Array]:
-    """:func:`batch_keys` with ``jax.random`` (any seed, any default PRNG implementation)."""
-    fold_in = lambda key, data: jax.vmap(lambda d: jax.random.fold_in(key, d))(jnp.asarray(data))
-    resets, runs = _derive_keys(jax.random.key(seed), fold_in, plan)
-    return jnp.concatenate(resets), jnp.concatenate(runs)
+@functools.partial(envs.jit, quick_compile=True)
+def _derive_keys(seed: jax.Array, streams: jax.Array, trials: jax.Array):
+    """:func:`batch_keys` given the seed and, per trial, its stream id and index ([n] uint32):
+    one small program per batch size, whatever the seed and the systems."""
+    k_worlds, k_systems = jax.random.split(jax.random.key(seed))
+    fold_each = jax.vmap(jax.random.fold_in, in_axes=(None, 0))
+    run_streams = fold_each(k_systems, streams)
+    return fold_each(k_worlds, trials), jax.vmap(jax.random.fold_in)(run_streams, trials)
 
 
 def run_trials(
@@ -143,7 +138,7 @@ def run_trials(
     sim_params = envs.default_params() if sim_params is None else sim_params
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
         raise ValueError(f"seed must be an integer, got {seed!r}")
-    if not 0 <= seed < 2**32:  # jax.random.key and the host derivation would wrap it
+    if not 0 <= seed < 2**32:  # batch_keys would wrap it onto another seed
         raise ValueError(f"seed must be in [0, 2**32), got {seed}")
     counts = {k: n_trials if isinstance(n_trials, int) else n_trials[k] for k in systems}
     for name, n in counts.items():

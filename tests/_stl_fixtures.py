@@ -38,10 +38,6 @@ CONFIG = EpisodeConfig(
 """Short caps: 625 iterations at most, stopped at 5 collisions (the GA's option, so both caps
 are met in short runs)."""
 X, Y = 5, 8
-N_UNIFORM = 7 + 1 + 2 * X + 2
-"""Uniforms per iteration of the STL controller for a 5 x 8 network (see ``stl_controller``:
-a replacement antibody, its P, the two tie-breaks, the behaviour)."""
-SLICES = {"new": slice(0, 7), "new_p": slice(7, 8), "behave": slice(N_UNIFORM - 2, N_UNIFORM)}
 
 
 @functools.cache
@@ -197,10 +193,11 @@ def state(
     obstacle_run: int = 0,
     clear_run: int = 1,
     antibodies=None,
-    key: int = 0,
+    bout_key: int = 0,
 ) -> STLState:
     """A hand-made network state (sigma0 defaults to the column means of P); the antibody
-    acting is A[acting, held], with ``left`` iterations of its bout to go."""
+    acting is A[acting, held], with ``left`` iterations of its bout (whose key is
+    ``jax.random.key(bout_key)``) to go."""
     P = jnp.asarray(P, jnp.float32)
     return STLState(
         antibodies=sys_.antibodies if antibodies is None else antibodies,
@@ -214,17 +211,11 @@ def state(
             clear_run=jnp.int32(clear_run),
         ),
         acting=jnp.int32(acting),
-        bout=Bout(antigen=jnp.int32(held), left=jnp.int32(left), u=jnp.zeros(2, jnp.float32)),
+        bout=Bout(antigen=jnp.int32(held), left=jnp.int32(left), key=jax.random.key(bout_key)),
         differences=jnp.int32(0),
         selections=jnp.int32(0),
         replaced=jnp.int32(0),
-        key=jax.random.key(key),
     )
-
-
-def uniforms(seed: int) -> jnp.ndarray:
-    """One iteration's controller uniforms [N_UNIFORM]."""
-    return jnp.asarray(np.random.default_rng(seed).random(N_UNIFORM), jnp.float32)
 
 
 # ---------------------------------------------------------------------------------- episode
@@ -239,23 +230,16 @@ def start_fn():
 @functools.cache
 def iterate_fn():
     """Unbatched ``iterate`` (STL controller, :data:`CONFIG`), jitted once."""
-    return jit(iterate, static_argnums=(6, 8))
+    return jit(iterate, static_argnums=(5, 7))
 
 
 @functools.cache
 def iterate_batch_fn():
-    """``vmap(iterate)`` over BATCH runs, jitted once."""
+    """``vmap(iterate)`` over BATCH runs (keys and runs batched), jitted once."""
     return jit(
-        jax.vmap(iterate, in_axes=(0, 0, 0, None, None, None, None, 0, None)),
-        static_argnums=(6, 8),
+        jax.vmap(iterate, in_axes=(0, 0, None, None, None, None, 0, None)),
+        static_argnums=(5, 7),
     )
-
-
-@functools.cache
-def noise_fn():
-    """[BATCH] step noises from [BATCH] keys."""
-    w = world()
-    return jit(jax.vmap(lambda k: envs.sample_step_noise(k, w)))
 
 
 BATCH_LABELS = ("SIE", "UIE-R1", "URL-R1", "HDC")
@@ -272,8 +256,7 @@ def start_runs(reset_keys: jax.Array, run_keys: jax.Array, params: System | None
     return start_fn()(reset_keys, run_keys, world(), sim_params(), STL, params)
 
 
-def step_one(run, key: jax.Array, u: jnp.ndarray, params: System, tick=None, config=CONFIG):
-    """One unbatched iteration with noise drawn from ``key`` (the tick defaults to run.t)."""
-    noise = unstack(noise_fn()(jax.random.split(key, BATCH)), 0)
+def step_one(run, key: jax.Array, params: System, tick=None, config=CONFIG):
+    """One unbatched iteration from ``key`` (the tick defaults to run.t)."""
     tick = run.t if tick is None else jnp.int32(tick)
-    return iterate_fn()(run, noise, u, tick, world(), sim_params(), STL, params, config)
+    return iterate_fn()(key, run, tick, world(), sim_params(), STL, params, config)

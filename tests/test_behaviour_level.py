@@ -89,9 +89,8 @@ def _ltl(robot: Robot) -> Controller:
 
 CONTROLLER = Controller(
     init=lambda key, r: _ltl(r).init(key, r.antibodies),
-    learn=lambda u, s, pc, r: _ltl(r).learn(u, s, pc, r.antibodies),
-    act=lambda u, s, pc, r: _ltl(r).act(u, s, pc, r.antibodies),
-    n_uniform=lambda r: 2,
+    learn=lambda key, s, pc, r: _ltl(r).learn(key, s, pc, r.antibodies),
+    act=lambda key, s, pc, r: _ltl(r).act(key, s, pc, r.antibodies),
 )
 
 
@@ -116,22 +115,16 @@ def _start_batch(reset_keys, run_keys, poses, world, sim_params, robots):
 def _loop(runs, n_steps, world, sim_params, robots):
     """``n_steps`` iterations of every run; the trace holds, per iteration t, the pose, Vm and
     antigen the controller met at t (row 0: the start)."""
-    step_all = jax.vmap(episode.iterate, in_axes=(0, 0, 0, None, None, None, None, 0, None))
-
-    def draws(key):
-        key, k_sim, k_ctrl = jax.random.split(key, 3)
-        return key, envs.sample_step_noise(k_sim, world), jax.random.uniform(k_ctrl, (2,))
+    step_all = jax.vmap(episode.iterate, in_axes=(0, 0, None, None, None, None, 0, None))
 
     def body(t, carry):
         runs, trace = carry
-        keys, noise, u = jax.vmap(draws)(runs.key)
+        keys = jax.vmap(jax.random.fold_in)(runs.key, runs.t)  # as episode.advance
         row = (runs.sim.pose, runs.obs.vm, antigen(runs.obs.ir, runs.obs.blue_pixels))
         trace = jax.tree.map(
             lambda a, x: jax.lax.dynamic_update_index_in_dim(a, x, t, 0), trace, row
         )
-        runs = step_all(
-            runs.replace(key=keys), noise, u, t, world, sim_params, CONTROLLER, robots, CONFIG
-        )
+        runs = step_all(keys, runs, t, world, sim_params, CONTROLLER, robots, CONFIG)
         return runs, trace
 
     n = runs.t.shape[0]

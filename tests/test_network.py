@@ -464,6 +464,10 @@ def test_select_ties_are_random_and_key_deterministic():
     out = [idiotypic_select(jax.random.key(s), P, I, N, 2, PARAMS) for s in range(40)]
     assert {int(a) for a, _, _ in out} == set(range(X))
     assert {int(b) for _, b, _ in out} == set(range(X))
+    # Stage 1 breaks its ties as select_alpha does from the same key (the controller relies on
+    # it: a batch without idiotypic systems runs select_alpha alone, with the same alphas).
+    for s, (a, _, _) in enumerate(out):
+        assert int(select_alpha(jax.random.key(s), P, 2)) == int(a)
     again = idiotypic_select(jax.random.key(7), P, I, N, 2, PARAMS)
     for a, b in zip(out[7], again, strict=True):
         np.testing.assert_array_equal(a, b)

@@ -19,8 +19,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxais.antibodies import antibodies_from_uniform, take, within_limits
-from jaxais.behaviours import wheel_speeds_from_uniform
+from jaxais.antibodies import sample_antibodies, take, within_limits
+from jaxais.behaviours import wheel_speeds
 from jaxais.controllers import interrupts
 from jaxais.network import idiotopes
 from jaxais.readings import LITERAL, readings
@@ -31,15 +31,16 @@ seeds = st.integers(0, 2**31 - 1)
 antigens = st.integers(0, 7)
 
 
-def learn(s, pc, sys_, u_seed: int = 0):
-    """``STL.learn`` on ``s`` whose acting antibody was selected for ``pc.m_prev`` (as under the
-    literal per-iteration reading that ``F.system`` uses)."""
+def learn(s, pc, sys_, key_seed: int = 0):
+    """``STL.learn`` with ``jax.random.key(key_seed)`` on ``s`` whose acting antibody was
+    selected for ``pc.m_prev`` (as under the literal per-iteration reading that ``F.system``
+    uses)."""
     s = s.replace(bout=s.bout.replace(antigen=pc.m_prev))
-    return F.learn_fn()(F.uniforms(u_seed), s, pc, sys_)
+    return F.learn_fn()(jax.random.key(key_seed), s, pc, sys_)
 
 
-def act(s, pc, sys_, u_seed: int = 0):
-    return F.act_fn()(F.uniforms(u_seed), s, pc, sys_)
+def act(s, pc, sys_, key_seed: int = 0):
+    return F.act_fn()(jax.random.key(key_seed), s, pc, sys_)
 
 
 def P_of(s) -> np.ndarray:
@@ -268,9 +269,10 @@ def test_replacement_one_weak_antibody_per_iteration():
     s, P = _weak_state(sys_)
     pc = F.percept(m=0, m_prev=0, t=7)  # scores A[0, 0]; columns 3 and 6 untouched
     seen = []
-    for step, u_seed in enumerate((11, 12, 13)):
-        u = np.asarray(F.uniforms(u_seed))
-        out = learn(s, pc, sys_, u_seed)
+    for step, key_seed in enumerate((11, 12, 13)):
+        # learn's key splits into the idiotope's, the new antibody's and its P's keys.
+        _, k_antibody, k_paratope = jax.random.split(jax.random.key(key_seed), 3)
+        out = learn(s, pc, sys_, key_seed)
         changed = _changed(out.antibodies, s.antibodies)
         seen.append(np.argwhere(changed).tolist())
         if step < 2:
@@ -278,10 +280,10 @@ def test_replacement_one_weak_antibody_per_iteration():
             assert changed.sum() == 1 and changed[i, j]
             new = take(out.antibodies, (i, j))
             assert bool(within_limits(new))
-            assert tree_close(new, antibodies_from_uniform(jnp.asarray(u[F.SLICES["new"]])))
+            assert tree_close(new, sample_antibodies(k_antibody, ()))
             assert 0.25 <= P_of(out)[i, j] <= 0.75
             np.testing.assert_allclose(
-                P_of(out)[i, j], 0.25 + 0.5 * u[F.SLICES["new_p"]][0], rtol=1e-6
+                P_of(out)[i, j], 0.25 + 0.5 * float(jax.random.uniform(k_paratope)), rtol=1e-6
             )
         assert int(out.replaced) == min(step + 1, 2)
         s = out
@@ -351,9 +353,10 @@ def test_non_idiotypic_selection_acts_with_alpha(seed, m, blue, centroid):
     assert int(out.acting) == alpha
     np.testing.assert_array_equal(out.N, s.N)
     assert int(out.differences) == 0 and int(out.selections) == 1
-    # The winner's behaviour drives the wheels.
-    u = F.uniforms(seed % 101)[F.SLICES["behave"]]
-    expected = wheel_speeds_from_uniform(u, take(sys_.antibodies, (alpha, m)), blue, centroid)
+    # The winner's behaviour drives the wheels, with the new bout's (fresh) key.
+    assert not tree_equal(out.bout.key, s.bout.key)
+    ab = take(sys_.antibodies, (alpha, m))
+    expected = wheel_speeds(out.bout.key, ab, blue, centroid)
     np.testing.assert_allclose(np.asarray(wheels), np.asarray(expected), rtol=1e-6)
 
 
@@ -442,7 +445,8 @@ def test_clone_counts_are_floored_at_zero_under_sustained_suppression():
 
 def test_idiotope_is_recomputed_only_every_period():
     """Eq (3) is redrawn when the batch tick is a positive multiple of the period, from the
-    state's key folded with the tick, on the paratopes after this iteration's learning."""
+    first of the three keys learn splits its key into, on the paratopes after this iteration's
+    learning."""
     sys_ = F.system()
     period = sys_.network.idiotope_period
     assert period == 120
@@ -454,11 +458,11 @@ def test_idiotope_is_recomputed_only_every_period():
         np.testing.assert_array_equal(out.I, stale, err_msg=f"t={t}")
     draws = set()
     for t in (120, 240, 360):
-        s = F.state(sys_, P, I=stale, key=9)
-        out = learn(s, F.percept(m=0, m_prev=0, t=t), sys_, t)
+        out = learn(F.state(sys_, P, I=stale), F.percept(m=0, m_prev=0, t=t), sys_, t)
         I = np.asarray(out.I)
         assert np.all(I.sum(axis=1) <= 1), t
-        np.testing.assert_array_equal(I, idiotopes(jax.random.fold_in(s.key, t), out.P))
+        k_idiotope = jax.random.split(jax.random.key(t), 3)[0]
+        np.testing.assert_array_equal(I, idiotopes(k_idiotope, out.P))
         draws.add(I.tobytes())
     assert len(draws) > 1  # a fresh draw each period
 
@@ -495,7 +499,7 @@ def _bout_system(hold: int = 4):
 
 
 def test_a_selected_behaviour_acts_for_its_bout_then_is_selected_again():
-    """With hold h the antibody selected for an antigen keeps acting, with the behaviour draws
+    """With hold h the antibody selected for an antigen keeps acting, with the behaviour key
     of its selection, for h iterations (SPEC 5 [ours]); calmer antigens do not cut it short."""
     sys_ = _bout_system(hold=4)
     P = np.full((F.X, F.Y), 0.5)
@@ -505,15 +509,16 @@ def test_a_selected_behaviour_acts_for_its_bout_then_is_selected_again():
     wheels = []
     # A collision selects A[3, 5]; the robot then backs away: 2 (obstacle) and 0 (clear) follow.
     for k, m in enumerate([5, 2, 0, 0, 0, 0], start=1):
-        s, w = act(s, F.percept(m=m, t=k), sys_, u_seed=k)
+        s, w = act(s, F.percept(m=m, t=k), sys_, key_seed=k)
         wheels.append(np.asarray(w))
         assert int(s.acting) == (3 if k <= 4 else 1)
         assert int(s.bout.antigen) == (5 if k <= 4 else 0)
+        if k == 1:
+            bout_key = s.bout.key
+        assert tree_equal(s.bout.key, bout_key) == (k <= 4)
     assert int(s.selections) == 2
-    expected = wheel_speeds_from_uniform(
-        F.uniforms(1)[F.SLICES["behave"]], take(sys_.antibodies, (3, 5)), 0, 7.0
-    )
-    for w in wheels[:4]:  # the reverse turn's draws are those of its selection
+    expected = wheel_speeds(bout_key, take(sys_.antibodies, (3, 5)), 0, 7.0)
+    for w in wheels[:4]:  # the behaviour draws from the key of its selection
         np.testing.assert_allclose(w, expected, rtol=1e-6)
 
 
@@ -532,7 +537,7 @@ def test_rl_scores_the_held_antibody_after_the_antigen_changed():
     sys_ = _bout_system()
     P = column_P(5, [0.2, 0.4, 0.6, 0.3, 0.5])
     s = F.state(sys_, P, acting=2, held=5, left=2)
-    out = F.learn_fn()(F.uniforms(0), s, F.percept(m=0, m_prev=2, v=0, v_prev=900, t=5), sys_)
+    out = F.learn_fn()(jax.random.key(0), s, F.percept(m=0, m_prev=2, v=0, v_prev=900, t=5), sys_)
     expected = P.copy()
     expected[:, 5] = np.array([0.2, 0.4, 0.7, 0.3, 0.5]) * (0.4 / 0.42)  # 2-7 -> 0: +0.10
     np.testing.assert_allclose(P_of(out), expected, rtol=1e-6)
@@ -551,7 +556,7 @@ def test_sigma0_floor_keeps_a_zero_column_learnable():
         assert float(s.sigma0[1]) == pytest.approx(floor)
         s = s.replace(acting=jnp.int32(2), bout=s.bout.replace(antigen=jnp.int32(1)))
         pc = F.percept(m=1, m_prev=0, t=3)  # 0 -> 1 scores +0.10 on A[2, 1]
-        runs[floor] = P_of(F.learn_fn()(F.uniforms(0), s, pc, sys_))[:, 1]
+        runs[floor] = P_of(F.learn_fn()(jax.random.key(0), s, pc, sys_))[:, 1]
     np.testing.assert_array_equal(runs[0.0], 0.0)
     np.testing.assert_allclose(runs[0.05], [0, 0, 0.25, 0, 0], atol=1e-6)
 
@@ -582,12 +587,12 @@ def test_a_penalty_ends_the_bout_so_the_network_selects_again():
     P = np.full((F.X, F.Y), 0.5)
     P[0, 0], P[1, 0] = 1.0, 0.9  # set 0 wins antigen 0, set 1 is next
     s = F.state(sys_, P, acting=0, held=0, left=20, unseen_run=250)
-    s = F.learn_fn()(F.uniforms(0), s, F.percept(m=0, m_prev=0, t=300), sys_)
+    s = F.learn_fn()(jax.random.key(0), s, F.percept(m=0, m_prev=0, t=300), sys_)
     assert int(s.bout.left) == 0 and float(s.P[0, 0]) < float(s.P[1, 0])
     s, _ = act(s, F.percept(m=0, t=300), sys_)
     assert int(s.acting) == 1 and int(s.bout.left) == 30
     # Without a penalty the bout runs on.
     calm = F.state(sys_, P, acting=0, held=0, left=20, unseen_run=10)
-    calm = F.learn_fn()(F.uniforms(0), calm, F.percept(m=0, m_prev=0, t=300), sys_)
+    calm = F.learn_fn()(jax.random.key(0), calm, F.percept(m=0, m_prev=0, t=300), sys_)
     calm, _ = act(calm, F.percept(m=0, t=300), sys_)
     assert int(calm.acting) == 0 and int(calm.bout.left) == 19

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import zlib
 from types import SimpleNamespace
 
 import _stl_fixtures as F
@@ -84,8 +85,7 @@ def drive(run, params, steps: list[dict], config=F.CONFIG, seed: int = 0) -> lis
     out = []
     for k, mods in enumerate(steps):
         run = with_obs(run, **mods)
-        key, u = jax.random.key(1000 * seed + k), F.uniforms(seed + k)
-        run = F.step_one(run, key, u, params, config=config)
+        run = F.step_one(run, jax.random.key(1000 * seed + k), params, config=config)
         out.append(run)
     return out
 
@@ -172,7 +172,7 @@ def test_an_ended_run_never_changes():
     assert status(done) == FINISHED
     for k, mods in enumerate([{"antigen": 5}, {"goal": 45}, {"antigen": 0, "goal": 0}, {}]):
         before = with_obs(done, **mods)
-        after = F.step_one(before, jax.random.key(77 + k), F.uniforms(77 + k), params)
+        after = F.step_one(before, jax.random.key(77 + k), params)
         assert tree_equal(after, before)
 
 
@@ -214,12 +214,11 @@ def test_vmapped_iterate_equals_a_loop_of_single_iterations():
     idiotopes_before = np.asarray(runs.ctrl.I)
     for k in range(12):
         tick = jnp.int32(first_tick + k)
-        noise = F.noise_fn()(jax.random.split(jax.random.key(500 + k), F.BATCH))
-        u = jnp.stack([F.uniforms(100 * k + i) for i in range(F.BATCH)])
-        runs = F.iterate_batch_fn()(runs, noise, u, tick, w, sp, STL, params, F.CONFIG)
+        keys = jax.random.split(jax.random.key(500 + k), F.BATCH)
+        runs = F.iterate_batch_fn()(keys, runs, tick, w, sp, STL, params, F.CONFIG)
         for i in range(F.BATCH):
             singles[i] = F.iterate_fn()(
-                singles[i], F.unstack(noise, i), u[i], tick, w, sp, STL, single_params[i], F.CONFIG
+                keys[i], singles[i], tick, w, sp, STL, single_params[i], F.CONFIG
             )
     for i in range(F.BATCH):
         batched = F.unstack(runs, i)
@@ -237,33 +236,24 @@ def test_vmapped_iterate_equals_a_loop_of_single_iterations():
     np.testing.assert_array_equal(I[2], idiotopes_before[2])
 
 
-def test_task_loop_equals_iterate_with_jax_random_draws():
-    """One chunk of ``advance`` (its draws made with jaxais.prng's unrolled hash, its iteration
-    traced under jax.disable_jit) = ``iterate`` run chunk times on draws made by ``jax.random``
-    from the runs' own keys in advance's order: the same runs, bit for bit."""
-    chunk = F.BATCH  # so that F.noise_fn (compiled for BATCH keys) draws a chunk's noise
+def test_task_loop_equals_iterate_with_folded_keys():
+    """One chunk of ``advance`` (its iteration traced under jax.disable_jit) = ``iterate`` run
+    chunk times, iteration t of each run with the key ``fold_in(run.key, t)``: the same runs,
+    bit for bit."""
+    chunk = 4
     config = dataclasses.replace(F.CONFIG, chunk=chunk, segment=chunk, record=False)
     runs, params = start_runs()
     w, sp = F.world(), F.sim_params()
     batch = episode.Batch(runs=runs, poses=jnp.zeros((F.BATCH, 1, 3)), chunks=jnp.int32(0))
     advanced = F.jit(episode.advance, static_argnums=(3, 5))(batch, w, sp, STL, params, config)
 
-    n_u = STL.n_uniform(params)
-    keys, noises, us = [], [], []
-    for key in runs.key:
-        key, k_sim, k_ctrl = jax.random.split(key, 3)
-        keys.append(key)
-        noises.append(F.noise_fn()(jax.random.split(k_sim, chunk)))  # [chunk, ...]
-        us.append(jax.random.uniform(k_ctrl, (chunk * n_u,)).reshape(chunk, n_u))
     expected = runs
     for i in range(chunk):
-        noise = jax.tree.map(lambda *xs, i=i: jnp.stack([x[i] for x in xs]), *noises)
-        u = jnp.stack([x[i] for x in us])
+        keys = jax.vmap(jax.random.fold_in)(runs.key, expected.t)
         # F.CONFIG has the same caps; passing it reuses the compiled iterate.
-        expected = F.iterate_batch_fn()(
-            expected, noise, u, jnp.int32(i), w, sp, STL, params, F.CONFIG
-        )
-    assert tree_equal(advanced.runs, expected.replace(key=jnp.stack(keys)))
+        expected = F.iterate_batch_fn()(keys, expected, jnp.int32(i), w, sp, STL, params, F.CONFIG)
+    assert np.all(np.asarray(expected.t) == chunk)  # every run went on (keys of t = 0..3)
+    assert tree_equal(advanced.runs, expected)
     assert int(advanced.chunks) == 1
 
 
@@ -400,14 +390,40 @@ def test_all_systems_of_a_world_meet_the_same_start_placements():
         np.testing.assert_allclose(res["SIE"].trajectories[i][0], sims[i].pose, rtol=1e-6)
 
 
-def test_batch_keys_on_the_host_equal_the_compiled_derivation():
-    plan = (("SIE", 3), ("HDC", 2), ("UIE-R2", 4))
+def test_batch_keys_follow_the_documented_derivation_from_names():
+    """Reset keys from (seed, i); run keys from (seed, a CRC-32 of the base label, i), written
+    out here with plain ``jax.random`` calls; nothing depends on ``LABELS`` (its order, or a
+    label added to it)."""
+    plan = (("SIE", 3), ("HDC", 2), ("UIE-R2", 4), ("SIE@hold=1", 2))
     for seed in (0, 3, 2**32 - 1):
-        host = trials_module.batch_keys(seed, plan)
-        compiled = trials_module._batch_keys_compiled(seed, plan)
-        for a, b in zip(host, compiled, strict=True):
-            assert jax.random.key_impl(a) == jax.random.key_impl(b)
-            np.testing.assert_array_equal(key_data(a), key_data(b))
+        k_worlds, k_systems = jax.random.split(jax.random.key(seed))
+        resets, runs = [], []
+        for label, n in plan:
+            name = label.split("@")[0].encode()
+            stream = jax.random.fold_in(k_systems, zlib.crc32(name) & 0x7FFFFFFF)
+            resets += [jax.random.fold_in(k_worlds, i) for i in range(n)]
+            runs += [jax.random.fold_in(stream, i) for i in range(n)]
+        got = trials_module.batch_keys(seed, plan)
+        for keys, want in zip(got, (resets, runs), strict=True):
+            assert jax.random.key_impl(keys) == jax.random.key_impl(want[0])
+            np.testing.assert_array_equal(key_data(keys), key_data(jnp.stack(want)))
+
+
+def test_a_systems_trials_do_not_depend_on_the_list_of_systems(monkeypatch):
+    """A new label, placed first in a reordered LABELS and run before SIE in the batch, leaves
+    SIE's trials as they were; the new label, with HDC's data, gets trials of its own."""
+    plan = (("SIE", 2), ("HDC", 2))
+    before = trials_module.batch_keys(5, plan)
+    monkeypatch.setattr(trials_module, "LABELS", ("NEW", *reversed(trials_module.LABELS)))
+    after = trials_module.batch_keys(5, plan)
+    for a, b in zip(before, after, strict=True):
+        np.testing.assert_array_equal(key_data(a), key_data(b))
+    sys_ = F.systems()
+    res = run_trials(
+        F.world(), {"NEW": sys_["HDC"], "SIE": sys_["SIE"]}, 2, 0, F.CONFIG, F.sim_params()
+    )
+    assert same_trials(res["SIE"], trials(SIE_HDC, 0)["SIE"])
+    assert not same_trials(res["NEW"], trials(SIE_HDC, 0)["HDC"])
 
 
 def test_trial_keys_do_not_depend_on_the_number_of_trials():
@@ -469,7 +485,7 @@ def test_summarise_by_hand():
 
 
 def test_run_trials_rejects_seeds_outside_their_range():
-    """jax.random.key and the host derivation would wrap such a seed onto another one."""
+    """batch_keys would wrap such a seed onto another one."""
     sie = {"SIE": F.systems()["SIE"]}
     for seed in (-1, 2**32, 2**40):
         with pytest.raises(ValueError, match=r"seed must be in \[0, 2\*\*32\), got"):

@@ -545,9 +545,9 @@ def test_rollout_programs_per_world(tmp_path):
     # the same shapes but other values must get programs of its own, and the same world must
     # reuse its programs. Unspecialised, both worlds share one program, the world an argument.
     source = (Path(envs.__file__).parent / "worlds" / "ga_maze.toml").read_text()
-    assert "start_region = [0.08, 0.15, 0.3, 0.85]" in source
+    assert "start_region = [0.1, 0.08, 0.28, 0.3]" in source
     moved = tmp_path / "moved.toml"
-    moved.write_text(source.replace("[0.08, 0.15, 0.3, 0.85]", "[1.6, 0.15, 1.75, 0.85]"))
+    moved.write_text(source.replace("[0.1, 0.08, 0.28, 0.3]", "[1.6, 0.08, 1.75, 0.3]"))
     a, b = maze(), envs.load_world(moved)
     assert jax.tree.map(jnp.shape, a) == jax.tree.map(jnp.shape, b)
 

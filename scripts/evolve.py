@@ -13,16 +13,16 @@ The same arguments give the same seed, and a run resumed from its checkpoints en
 the seed of an uninterrupted one. SIGTERM and Ctrl-C stop the run with the last complete
 checkpoint intact.
 
-Each robot runs the maze from ``--starts`` random starts per generation (f, tau, c and L are
-means over them); after each generation every population's best robot runs again from
+Each robot runs the maze from ``--starts`` random starts per generation (f, tau, c and L are means
+over them); after each generation every population's best robot runs again from
 ``--success-starts`` fresh starts, which make the populations' bests (pooled while a set stays
-best), and the run stops once every population's best crossed the maze in at least
-``--success-rate`` of them and still does after ``--success-starts`` more (or at
-``--generations``). Then each seed set runs from ``--crossing-starts`` fresh starts whose keys
-the GA never used, and the fraction in which it crosses the maze (finishes within the time cap)
-is printed and stored in ``seed.json`` ("crossing") and ``summary.json``. ``--check-seed DIR``
-measures that for an existing seed directory (with ``--world``, ``--tau-cap``, ``--seed``) and
-prints it, writing nothing.
+best, and carried into the next generation as its elite), and the run stops once every population's
+best crossed the maze in at least ``--success-rate`` of them and still does after
+``--success-starts`` more (or at ``--generations``). Then each seed set runs from
+``--crossing-starts`` fresh starts whose keys the GA never used, and the fraction in which it
+crosses the maze (finishes within the time cap) is printed and stored in ``seed.json`` ("crossing")
+and ``summary.json``. ``--check-seed DIR`` measures that for an existing seed directory (with
+``--world``, ``--tau-cap``, ``--seed``) and prints it, writing nothing.
 
 ``--diversity`` runs the GA ``--diversity-seeds`` times (default 3; the main run is the first)
 with the given settings and as many times with one population of P x R robots, and compares the
@@ -70,26 +70,33 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--world", default="ga_maze", help="world name or .toml path (default ga_maze)")
     p.add_argument("--populations", type=int, default=5, help="independent populations [paper: 5]")
     p.add_argument("--robots", type=int, default=10, help="robots per population [paper: 10]")
-    p.add_argument("--generations", type=int, default=50, help="generation cap [ours: 50]")
+    p.add_argument("--generations", type=int, default=200, help="generation cap [ours: 200]")
     p.add_argument("--mutation", type=float, default=0.05, help="per-gene rate [paper: 0.05]")
     p.add_argument("--elitism", type=int, default=1, help="elite robots per population [ours: 1]")
     p.add_argument("--target-f", type=float, default=None, help="stop when every best f <= this")
     p.add_argument("--tau-cap", type=float, default=500.0, help="time cap, s [ours: 500]")
     p.add_argument("--collision-cap", type=int, default=100, help="collision cap [ours: 100]")
     p.add_argument(
-        "--starts", type=int, default=3, help="random starts per robot and generation [ours: 3]"
+        "--starts", type=int, default=1, help="random starts per robot and generation [ours: 1]"
     )
     p.add_argument(
         "--success-starts",
         type=int,
-        default=20,
-        help="fresh starts of each population's best per generation (0: no checks) [ours: 20]",
+        default=10,
+        help="fresh starts of each population's best per generation (0: no checks) [ours: 10]",
     )
     p.add_argument(
         "--success-rate",
         type=_rate_or_none,
         default=0.95,
         help="stop once every best crosses in this fraction of them ('none': never) [ours: 0.95]",
+    )
+    p.add_argument(
+        "--crossover",
+        choices=("uniform", "rl"),
+        default="uniform",
+        help="each antigen's antibody from either parent, or from the one with the higher RL"
+        " score L (SPEC 10's rule) [ours: uniform]",
     )
     p.add_argument(
         "--crossing-starts",
@@ -127,6 +134,7 @@ def _config(args: argparse.Namespace):
             starts=args.starts,
             success_starts=args.success_starts,
             success_rate=args.success_rate,
+            crossover=args.crossover,
         )
     except ConfigError as err:
         raise UserError(f"--{err.field.replace('_', '-')} {err.reason}") from None

@@ -150,9 +150,11 @@ def test_a_success_stop_needs_success_checks():
 
 def test_config_defaults_and_round_trip():
     c = ga.GAConfig()
-    assert (c.populations, c.robots, c.generations, c.mutation, c.elitism) == (5, 10, 50, 0.05, 1)
+    assert (c.populations, c.robots, c.generations, c.mutation, c.elitism) == (5, 10, 200, 0.05, 1)
     assert (c.tau_cap, c.collision_cap, c.target_f) == (500.0, 100, None)
-    assert (c.starts, c.success_starts, c.success_rate) == (3, 20, 0.95)
+    assert (c.starts, c.success_starts, c.success_rate, c.crossover) == (1, 10, 0.95, "uniform")
+    with pytest.raises(ga.ConfigError, match="crossover"):
+        ga.GAConfig(crossover="best")
     assert ga.GAConfig.from_dict(c.to_dict()) == c
     assert c.episode_config().tau_cap == 500.0
     assert c.episode_config().stop_at_collision_cap  # the LTL caps end a run (SPEC 10)
@@ -184,7 +186,7 @@ def test_roulette_never_draws_a_zero_weight():
 
 # ------------------------------------------------------------------------------- crossover
 
-_crossover = jax.jit(ga.crossover)
+_crossover = jax.jit(ga.crossover, static_argnames="rl_assisted")
 
 
 def test_crossover_takes_the_higher_scoring_antibody_per_antigen():
@@ -204,6 +206,19 @@ def test_crossover_takes_the_higher_scoring_antibody_per_antigen():
         from_a_counts += from_a
     # Ties go either way, about half the time each.
     assert np.all(np.abs(from_a_counts[ties] / n - 0.5) < 0.15)
+
+
+def test_uniform_crossover_ignores_the_scores():
+    sets = hand_sets([[0] * 8, [5] * 8])
+    a, b = (jax.tree.map(lambda x, i=i: x[i], sets) for i in (0, 1))
+    La, Lb = jnp.full(8, 100.0), jnp.zeros(8)  # RL-assisted would take all of a
+    n = 200
+    from_a = sum(
+        np.asarray(_crossover(jax.random.key(k), a, La, b, Lb, rl_assisted=False).type) == 0
+        for k in range(n)
+    )
+    # Each antigen from either parent, about half the time each (binomial sd 0.035; 4 sd).
+    assert np.all(np.abs(from_a / n - 0.5) < 0.15), from_a
 
 
 # ------------------------------------------------------------------------------- tell
@@ -248,8 +263,34 @@ def test_elite_survives_unchanged_and_children_come_from_parents():
     np.testing.assert_array_equal(np.asarray(new.fitness), f.astype(np.float32))
 
 
-def test_elite_survives_through_a_real_run():
-    state = tiny_run()
+def test_the_checked_best_becomes_the_elite():
+    """With checks, each population's checked best so far takes robot 0's place (the elite
+    slot) after breeding; a population without a checked best keeps its bred elite."""
+    state = fresh_state(7, MUT0)
+    state = ga.tell(jax.random.key(1), state, evaluation(np.full((2, 4), 3.0)), MUT0)
+    other = fresh_state(8, MUT0).population  # sets that are in neither population
+    best = state.best.replace(
+        antibodies=jax.tree.map(lambda x: x[:, 2], other),
+        starts=jnp.array([10, 0], jnp.int32),
+    )
+    new = ga._best_as_elite(state.replace(best=best))
+    for name in ("type", "speed", "freq", "angle", "direction", "right_freq", "right_angle"):
+        got, bred = getattr(new.population, name), getattr(state.population, name)
+        np.testing.assert_array_equal(got[0, 0], getattr(other, name)[0, 2])
+        np.testing.assert_array_equal(got[1, 0], bred[1, 0])
+        np.testing.assert_array_equal(got[:, 1:], bred[:, 1:])
+
+
+def test_the_checked_best_is_the_elite_through_a_real_run(success_run):
+    state = jax.tree.map(np.asarray, success_run.replace(key=jax.random.key_data(success_run.key)))
+    for a, b in zip(
+        jax.tree.leaves(state.population), jax.tree.leaves(state.best.antibodies), strict=True
+    ):
+        np.testing.assert_array_equal(a[:, 0], b)
+
+
+def test_elite_survives_through_a_real_run_without_checks():
+    state = ga.run(jax.random.key(0), NOCHECK, maze())
     state = jax.tree.map(np.asarray, state.replace(key=jax.random.key_data(state.key)))
     best = np.argmin(state.fitness, axis=1)
     for p in range(2):

@@ -10,7 +10,10 @@ stays free of JAX and a script can still set ``XLA_FLAGS`` before JAX starts)::
 Submodules: ``envs`` (the simulator), ``antigens``, ``antibodies``, ``behaviours``,
 ``reinforcement``, ``network`` (eqs 1-10), ``readings`` (our readings of the paper's open points),
 ``controllers``, ``episode`` (the task loop), ``ga`` (LTL), ``checkpointing``, ``seed``,
-``systems``, ``trials``, ``stats``, ``claims`` (the paper's 32 claims), ``report``, ``plotting``.
+``labels`` (the systems' names), ``systems``, ``trials``; and ``experiments``, the paper's
+experiments on top of them: ``experiments.protocol`` (its worlds, systems, trial counts and
+comparisons), ``experiments.records``, ``experiments.stats``, ``experiments.claims`` (the paper's
+32 claims), ``experiments.report``, ``experiments.ablation``, ``experiments.plotting``.
 """
 
 from __future__ import annotations
@@ -40,7 +43,7 @@ _EXPORTS = {
     "save_seed": "seed",
     "make_system": "systems",
     "run_trials": "trials",
-    "build_tables": "stats",
+    "build_tables": "experiments.stats",
 }
 __all__ = ["__version__", *sorted(_EXPORTS)]
 

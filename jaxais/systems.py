@@ -7,6 +7,9 @@
 | UIE  | random set R1 or R2 | yes | yes |
 | URL  | random set R1 or R2 | no  | yes |
 | HDC  | hand-designed, fixed, no learning | - | - |
+
+The names (``SYSTEMS``, ``RANDOM_SETS``, ``LABELS``, :func:`label`, :func:`parse_label`) live in
+:mod:`jaxais.labels`, which is free of JAX, and are re-exported here.
 """
 
 from __future__ import annotations
@@ -20,16 +23,11 @@ from jaxais import envs
 from jaxais.antibodies import Antibodies, from_dicts, sample_antibodies
 from jaxais.controllers import System
 from jaxais.envs.struct import device_array
+from jaxais.labels import LABELS, RANDOM_SETS, SYSTEMS, label, parse_label  # noqa: F401 (re-export)
 from jaxais.network import NetworkParams, relative_fitness, seed_paratopes
 from jaxais.readings import DEFAULT, Readings
 from jaxais.seed import Seed
 
-SYSTEMS = ("SIE", "SRL", "UIE", "URL", "HDC")
-RANDOM_SETS = {"R1": 1, "R2": 2}
-"""The fixed random initial sets R1 and R2: PRNG seeds of their draws [ours]."""
-LABELS = ("SIE", "SRL", "UIE-R1", "URL-R1", "UIE-R2", "URL-R2", "HDC")
-"""System labels as in the paper's tables (a label's random stream comes from its name,
-:func:`jaxais.trials.stream_id`, not from its place here)."""
 UNSEEDED_P = (0.25, 0.75)
 """Range of the unseeded systems' initial paratopes [paper]."""
 N_SETS = 5
@@ -52,21 +50,6 @@ HAND_DESIGNED = [
     {"antigen": "collision rear", "type": "forward turn", "S": 300, "A": 40, "D": "left"},
     {"antigen": "collision left", "type": "reverse turn", "S": 300, "A": 60, "D": "left"},
 ]  # fmt: skip
-
-
-def label(system: str, random_set: str | None = None) -> str:
-    """Table label of a system: ``UIE`` with R1 is ``UIE-R1``; seeded systems and HDC as is."""
-    return f"{system}-{random_set}" if system in ("UIE", "URL") else system
-
-
-def parse_label(name: str) -> tuple[str, str | None]:
-    """Inverse of :func:`label`: ``"URL-R2"`` -> ``("URL", "R2")``."""
-    system, _, random_set = name.partition("-")
-    if system not in SYSTEMS or (system in ("UIE", "URL")) != bool(random_set):
-        raise ValueError(f"unknown system {name!r} (one of {', '.join(LABELS)})")
-    if random_set and random_set not in RANDOM_SETS:
-        raise ValueError(f"unknown random set {random_set!r} (one of {', '.join(RANDOM_SETS)})")
-    return system, random_set or None
 
 
 def random_sets(name: str, x: int = N_SETS) -> tuple[Antibodies, np.ndarray]:

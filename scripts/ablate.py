@@ -4,15 +4,15 @@
     python scripts/ablate.py --out ablation/ --trials 10 --worlds world1 --variants ours,literal
 
 The engine's readings of what the paper leaves open ([ours] in SPEC 5-9) each have a named
-alternative, the earlier literal reading (jaxais.ablation.VARIANTS): "ours", one variant per
-reading switched, and "literal" (every old reading together). Each variant runs every system in
-every world with the paper's trial counts (30 per simulated world, 20 in `real`). Variants that
-differ only in traced data (the readings, the HDC's antibodies) run as one compiled batch per
-world; a variant with another episode rule or simulator parameters is its own batch. Every
-variant meets the same worlds and random streams (common random numbers). Writes
-DIR/ablation.json (per variant: settings, claims reproduced and held, SIE/HDC/URL-R1 mean f and
-failure rate per world), DIR/ablation.md (the table), DIR/ablation.png and DIR/run.json (the
-config, seeds, versions, batches and timings).
+alternative, the earlier literal reading (jaxais.experiments.ablation.VARIANTS): "ours", one
+variant per reading switched, and "literal" (every old reading together). Each variant runs every
+system in every world with the paper's trial counts (30 per simulated world, 20 in `real`;
+jaxais.experiments.protocol). Variants that differ only in traced data (the readings, the HDC's
+antibodies) run as one compiled batch per world; a variant with another episode rule or
+simulator parameters is its own batch. Every variant meets the same worlds and random streams
+(common random numbers). Writes DIR/ablation.json (per variant: settings, claims reproduced and
+held, SIE/HDC/URL-R1 mean f and failure rate per world), DIR/ablation.md (the table),
+DIR/ablation.png and DIR/run.json (the config, seeds, versions, batches and timings).
 """
 
 from __future__ import annotations
@@ -33,8 +33,7 @@ from jaxais.cli import (
     main_wrapper,
     run_script,
 )
-
-WORLDS = ("world1", "world2", "real")
+from jaxais.experiments import protocol
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -44,9 +43,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--trials",
         type=int,
         default=None,
-        help="trials per system and world (default: the paper's 30, 20 in real)",
+        help=f"trials per system and world (default: the paper's {protocol.SIMULATED_TRIALS}, "
+        f"{protocol.REAL_TRIALS} in {protocol.REAL_WORLD})",
     )
-    p.add_argument("--worlds", default=",".join(WORLDS), help="comma-separated subset of worlds")
+    p.add_argument(
+        "--worlds", default=",".join(protocol.WORLDS), help="comma-separated subset of worlds"
+    )
     p.add_argument(
         "--variants",
         default=None,
@@ -58,8 +60,18 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="LTL seed directory (default: the shipped checkpoints/default)",
     )
     p.add_argument("--seed", type=int, default=0, help="PRNG seed of the trials")
-    p.add_argument("--tau-cap", type=float, default=4000.0, help="time cap, s [paper: 4000]")
-    p.add_argument("--collision-cap", type=int, default=100, help="collision cap [paper: 100]")
+    p.add_argument(
+        "--tau-cap",
+        type=float,
+        default=protocol.TAU_CAP,
+        help=f"time cap, s [paper: {protocol.TAU_CAP:g}]",
+    )
+    p.add_argument(
+        "--collision-cap",
+        type=int,
+        default=protocol.COLLISION_CAP,
+        help=f"collision cap [paper: {protocol.COLLISION_CAP}]",
+    )
     p.add_argument(
         "--no-share",
         action="store_true",
@@ -72,9 +84,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     worlds = [w for w in args.worlds.split(",") if w]
-    unknown = sorted(set(worlds) - set(WORLDS))
+    unknown = sorted(set(worlds) - set(protocol.WORLDS))
     if unknown or not worlds:
-        raise UserError(f"--worlds: unknown world(s) {unknown} (choose from {', '.join(WORLDS)})")
+        raise UserError(
+            f"--worlds: unknown world(s) {unknown} (choose from {', '.join(protocol.WORLDS)})"
+        )
     if len(set(worlds)) != len(worlds):
         raise UserError(f"--worlds: a world is named twice in {args.worlds!r}")
     if not 0 <= args.seed < 2**32:
@@ -91,9 +105,10 @@ def main(argv: list[str] | None = None) -> None:
     # Imported after the cheap checks: a bad flag answers without loading JAX.
     from tqdm import tqdm
 
-    from jaxais import ablation, compilation_cache, envs, host_devices
-    from jaxais.experiment import load_ltl_seed, paper_trials, versions
-    from jaxais.plotting import save_figure
+    from jaxais import compilation_cache, envs, host_devices
+    from jaxais.experiments import ablation
+    from jaxais.experiments.plotting import save_figure
+    from jaxais.experiments.records import load_ltl_seed, versions
     from jaxais.trials import STL_CONFIG
 
     try:
@@ -106,7 +121,9 @@ def main(argv: list[str] | None = None) -> None:
     # Read once, and early: a missing or corrupt seed fails before any trial runs.
     ltl_seed, seed_info = load_ltl_seed(args.seeds)
     base = dataclasses.replace(STL_CONFIG, tau_cap=args.tau_cap, collision_cap=args.collision_cap)
-    n_trials = {w: args.trials if args.trials is not None else paper_trials(w) for w in worlds}
+    n_trials = {
+        w: args.trials if args.trials is not None else protocol.trials_for_world(w) for w in worlds
+    }
     calls = ablation.plan_calls(variants, base)
     dt = float(envs.default_params().dt)
     total = len(worlds) * len(calls) * base.max_iterations(dt)

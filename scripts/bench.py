@@ -132,8 +132,9 @@ class ScriptRun:
 
 
 SCRIPT_RUNS: tuple[ScriptRun, ...] = (
-    # The default LTL run (5 x 10 robots in ga_maze, 3 starts each, until every population's
-    # best crosses the maze; at most 50 generations), compilation included: under 2 minutes.
+    # The default LTL run (5 x 10 robots in ga_maze, one start each and 10 checks of every
+    # population's best, until every best crosses the maze; at most 200 generations),
+    # compilation included: under 2 minutes.
     ScriptRun("evolve", ("evolve.py",), "ltl", 120.0),
     # 30 SIE trials in world1 with the shipped LTL seed, compilation included.
     ScriptRun(

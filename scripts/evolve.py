@@ -280,7 +280,7 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
     import jaxais
     from jaxais import compilation_cache, envs, ga, host_devices, loop_kernels
     from jaxais.checkpointing import GACheckpointer
-    from jaxais.experiment import portable_path
+    from jaxais.experiments.records import portable_path
     from jaxais.orbax_reads import forget_abandoned_reads
     from jaxais.seed import save_seed
 
@@ -297,7 +297,7 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
     n_devices = host_devices.enable()
     world = envs.load_world(args.world)
     sim_params = envs.default_params()
-    # Recorded without this machine's directories (jaxais.experiment.portable_path).
+    # Recorded without this machine's directories (jaxais.experiments.records.portable_path).
     command = shlex.join([PROG, *(portable_path(a) if a.startswith("/") else a for a in argv)])
     # What a resume must share with the run it continues (the generation count may grow).
     run_info = {

@@ -163,7 +163,8 @@ def main(argv: list[str] | None = None) -> None:
     import jax
     import numpy as np
 
-    from jaxais import compilation_cache, envs, host_devices, plotting
+    from jaxais import compilation_cache, envs, host_devices
+    from jaxais.experiments import plotting
 
     compilation_cache.enable()
     host_devices.enable()

@@ -30,8 +30,7 @@ from jaxais.cli import (
     main_wrapper,
     run_script,
 )
-
-WORLDS = ("world1", "world2", "real")
+from jaxais.experiments import protocol
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -41,7 +40,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--trials",
         type=int,
         default=None,
-        help="trials per system and world (default: the paper's 30, 20 in real)",
+        help=f"trials per system and world (default: the paper's {protocol.SIMULATED_TRIALS}, "
+        f"{protocol.REAL_TRIALS} in {protocol.REAL_WORLD})",
     )
     src = p.add_mutually_exclusive_group()
     src.add_argument(
@@ -55,9 +55,21 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="run the LTL (scripts/evolve.py, defaults, PRNG seed --seed) first and use its seed",
     )
     p.add_argument("--seed", type=int, default=0, help="PRNG seed of the trials (and of --evolve)")
-    p.add_argument("--worlds", default=",".join(WORLDS), help="comma-separated subset of worlds")
-    p.add_argument("--tau-cap", type=float, default=4000.0, help="time cap, s [paper: 4000]")
-    p.add_argument("--collision-cap", type=int, default=100, help="collision cap [paper: 100]")
+    p.add_argument(
+        "--worlds", default=",".join(protocol.WORLDS), help="comma-separated subset of worlds"
+    )
+    p.add_argument(
+        "--tau-cap",
+        type=float,
+        default=protocol.TAU_CAP,
+        help=f"time cap, s [paper: {protocol.TAU_CAP:g}]",
+    )
+    p.add_argument(
+        "--collision-cap",
+        type=int,
+        default=protocol.COLLISION_CAP,
+        help=f"collision cap [paper: {protocol.COLLISION_CAP}]",
+    )
     p.add_argument(
         "--generations",
         type=int,
@@ -104,9 +116,11 @@ def _check_fresh_ltl_dir(ltl_dir: Path, args: argparse.Namespace) -> None:
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     worlds = [w for w in args.worlds.split(",") if w]
-    unknown = sorted(set(worlds) - set(WORLDS))
+    unknown = sorted(set(worlds) - set(protocol.WORLDS))
     if unknown or not worlds:
-        raise UserError(f"--worlds: unknown world(s) {unknown} (choose from {', '.join(WORLDS)})")
+        raise UserError(
+            f"--worlds: unknown world(s) {unknown} (choose from {', '.join(protocol.WORLDS)})"
+        )
     if not 0 <= args.seed < 2**32:
         raise UserError(f"--seed must be in [0, 2**32), got {args.seed}")
     if args.trials is not None and args.trials < 2:
@@ -123,20 +137,19 @@ def main(argv: list[str] | None = None) -> None:
 
     from tqdm import tqdm
 
-    from jaxais import claims, compilation_cache, envs, host_devices, report, stats
+    from jaxais import compilation_cache, envs, host_devices
     from jaxais.episode import EpisodeConfig
-    from jaxais.experiment import (
+    from jaxais.experiments import claims, report, stats
+    from jaxais.experiments.plotting import draw_world
+    from jaxais.experiments.records import (
         build_systems,
         load_ltl_seed,
-        paper_trials,
         portable_command,
-        protocol,
         results_document,
         run_config,
         versions,
     )
     from jaxais.network import NetworkParams
-    from jaxais.plotting import draw_world
     from jaxais.seed import default_seed_dir
     from jaxais.trials import run_trials
 
@@ -166,8 +179,8 @@ def main(argv: list[str] | None = None) -> None:
     (out / "trials").mkdir(exist_ok=True)
     for name in worlds:
         world = envs.load_world(name)
-        labels = list(protocol(name))
-        n = args.trials if args.trials is not None else paper_trials(name)
+        labels = list(protocol.systems_for_world(name))
+        n = args.trials if args.trials is not None else protocol.trials_for_world(name)
         systems, seed_info = build_systems(labels, seeds_dir, network, loaded)
         world_t: dict[str, float] = {}
         total = config.max_iterations(params.dt)

@@ -22,20 +22,26 @@ from jaxais.cli import (
     main_wrapper,
     run_script,
 )
-
-SYSTEMS = ("SIE", "SRL", "UIE", "URL", "HDC")
-WORLDS = ("world1", "world2", "real")
+from jaxais.experiments import protocol
+from jaxais.labels import RANDOM_SETS, SYSTEMS, label
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = ArgumentParser(prog="trials.py", description=__doc__.split("\n\n")[0])
     p.add_argument("--system", required=True, choices=SYSTEMS)
-    p.add_argument("--world", default="world1", help="world1, world2, real or a .toml path")
-    p.add_argument("--trials", type=int, default=30)
+    p.add_argument(
+        "--world", default=protocol.WORLDS[0], help=f"{', '.join(protocol.WORLDS)} or a .toml path"
+    )
+    p.add_argument(
+        "--trials",
+        type=int,
+        default=protocol.SIMULATED_TRIALS,
+        help=f"trials (default: {protocol.SIMULATED_TRIALS}, the paper's in a simulated world)",
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument(
         "--random-set",
-        choices=("R1", "R2"),
+        choices=tuple(RANDOM_SETS),
         default=None,
         help="the unseeded systems' fixed random set (default R1)",
     )
@@ -44,8 +50,18 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         default=None,
         help="LTL seed directory (default: the shipped checkpoints/default)",
     )
-    p.add_argument("--tau-cap", type=float, default=4000.0, help="time cap, s [paper: 4000]")
-    p.add_argument("--collision-cap", type=int, default=100, help="collision cap [paper: 100]")
+    p.add_argument(
+        "--tau-cap",
+        type=float,
+        default=protocol.TAU_CAP,
+        help=f"time cap, s [paper: {protocol.TAU_CAP:g}]",
+    )
+    p.add_argument(
+        "--collision-cap",
+        type=int,
+        default=protocol.COLLISION_CAP,
+        help=f"collision cap [paper: {protocol.COLLISION_CAP}]",
+    )
     p.add_argument("--out", required=True, help="results JSON file")
     p.add_argument("--plot", default=None, help="also draw the trajectories to this PNG")
     return p.parse_args(argv)  # fmt: skip
@@ -71,9 +87,8 @@ def main(argv: list[str] | None = None) -> None:
 
     from jaxais import compilation_cache, envs, host_devices
     from jaxais.episode import EpisodeConfig
-    from jaxais.experiment import build_systems, results_document, run_config
+    from jaxais.experiments.records import build_systems, results_document, run_config
     from jaxais.network import NetworkParams
-    from jaxais.systems import label
     from jaxais.trials import run_trials
 
     compilation_cache.enable()
@@ -97,7 +112,7 @@ def main(argv: list[str] | None = None) -> None:
     doc = results_document(name, world.name, args.seed, results[name], cfg)
     atomic_write_json(args.out, doc)
     if args.plot:
-        from jaxais.plotting import save_figure, world_figure
+        from jaxais.experiments.plotting import save_figure, world_figure
 
         trajs = results[name].trajectories
         labels = [f"trial {i}" for i in range(len(trajs))]

@@ -1,4 +1,4 @@
-"""The ablation of our readings (``jaxais.ablation``, ``scripts/ablate.py``).
+"""The ablation of our readings (``jaxais.experiments.ablation``, ``scripts/ablate.py``).
 
 The variants' settings and their batching are checked on data alone (a stand-in for
 ``run_trials`` records the batches). Real trials run in world1 with 2 trials, an 8 s time cap and
@@ -23,9 +23,9 @@ import jax
 import numpy as np
 import pytest
 
-from jaxais import ablation, envs
+from jaxais import envs
 from jaxais.antibodies import TYPE_NAMES, from_dicts
-from jaxais.experiment import protocol
+from jaxais.experiments import ablation, protocol
 from jaxais.readings import DEFAULT, LITERAL, readings
 from jaxais.systems import HAND_DESIGNED, LABELS, make_system
 from jaxais.trials import STL_CONFIG, TrialSet, run_trials
@@ -192,7 +192,8 @@ def test_traced_variants_share_one_batch_per_world():
     assert all(float(np.asarray(c[5].ir_noise).sum()) > 0 for i, c in enumerate(recorder.calls)
                if i % 5 != 3)  # fmt: skip
     real = [c for c in recorder.calls if c[0] == "real"]
-    assert real[1][1] == [f"{lab}@collision_rule=entry" for lab in protocol("real")]
+    real_labels = protocol.systems_for_world("real")
+    assert real[1][1] == [f"{lab}@collision_rule=entry" for lab in real_labels]
     assert all(c[2] == 3 for c in real)
     # Without sharing every variant runs its every system.
     unshared = Recorder()

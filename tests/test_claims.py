@@ -1,4 +1,4 @@
-"""Tests of jaxais.claims: the paper's 32 claims judged on hand-built results."""
+"""Tests of jaxais.experiments.claims: the paper's 32 claims judged on hand-built results."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from _records import trial
 
-from jaxais import claims, stats
+from jaxais.experiments import claims, protocol, stats
 
 # Per system: (capped-or-raw c, mean tau). SIE best on every metric, SRL < URL-R1, UIE-R1 < URL-R1.
 CLEAR = {
@@ -27,11 +27,11 @@ def system(c: int, tau: float, n: int = 8, spread: float = 40.0) -> list[dict]:
     return [trial(tau + o, c) for o in np.linspace(-1.75, 1.75, n) * spread]
 
 
-def results(overrides: dict | None = None, worlds=stats.WORLDS) -> dict:
+def results(overrides: dict | None = None, worlds=protocol.WORLDS) -> dict:
     out = {}
     for w in worlds:
         spec = CLEAR | (overrides or {}).get(w, {})
-        out[w] = {s: system(*spec[s]) for s in stats.systems_for_world(w)}
+        out[w] = {s: system(*spec[s]) for s in protocol.systems_for_world(w)}
     return out
 
 

@@ -48,7 +48,9 @@ def test_importing_jaxais_leaves_the_device_count_open():
     # backends at import time (a module-level jit, an array constant, ...).
     code = (
         "import jaxais\n"
-        "from jaxais import envs, ga, trials, experiment, checkpointing, seed, systems, report\n"
+        "from jaxais import envs, ga, trials, checkpointing, seed, systems\n"
+        "from jaxais.experiments import protocol, records, stats, claims, report, ablation\n"
+        "from jaxais.experiments import plotting\n"
         # evolve.py imports these in a thread while it sets XLA_FLAGS and the device count
         "import orbax.checkpoint, matplotlib.figure, matplotlib.backends.backend_agg\n"
         "from jax._src import xla_bridge\n"

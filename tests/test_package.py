@@ -35,7 +35,7 @@ def test_reading_worlds_constants_and_the_seed_compiles_only_named_programs():
     code = (
         "import jax\n"
         "from jaxais import envs\n"
-        "from jaxais.experiment import build_systems\n"
+        "from jaxais.experiments.records import build_systems\n"
         "names = []\n"
         "jax.config.update('jax_log_compiles', True)\n"
         "import logging\n"

@@ -1,4 +1,4 @@
-"""Tests of jaxais.report: the packaged paper tables and the written report."""
+"""Tests of jaxais.experiments.report: the packaged paper tables and the written report."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from _records import trial
 
-from jaxais import claims, report, stats
+from jaxais.experiments import claims, protocol, report, stats
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -24,9 +24,9 @@ def synthetic_results(paper: dict, n: int = 6) -> dict:
     SRL (paper: SRL 679 < HDC 688) so the ordering of f differs there."""
     rng = np.random.default_rng(1)
     out = {}
-    for world in stats.WORLDS:
+    for world in protocol.WORLDS:
         out[world] = {}
-        for s in stats.systems_for_world(world):
+        for s in protocol.systems_for_world(world):
             mean = dict(paper["table3"][world][s])
             if (world, s) == ("world1", "HDC"):
                 mean = {"c": 1, "tau": 400}
@@ -52,9 +52,9 @@ def test_paper_tables_spot_cells(paper):
 
 
 def test_paper_tables_layout(paper):
-    for world in stats.WORLDS:
-        assert tuple(paper["table3"][world]) == stats.systems_for_world(world)
-        assert tuple(paper["table5"][world]) == stats.systems_for_world(world)
+    for world in protocol.WORLDS:
+        assert tuple(paper["table3"][world]) == protocol.systems_for_world(world)
+        assert tuple(paper["table5"][world]) == protocol.systems_for_world(world)
         pairs = [f"{a} vs {b}" for a, b in stats.comparison_pairs(world)]
         assert list(paper["table4"][world]) == pairs
     # f is (8c + tau)/2 of the rounded means up to the rounding of c.
@@ -95,7 +95,7 @@ def test_write_report_full(tmp_path, paper):
         ],
     }
     trajectories = {
-        w: {s: np.cumsum(np.ones((20, 2)), axis=0) for s in stats.systems_for_world(w)}
+        w: {s: np.cumsum(np.ones((20, 2)), axis=0) for s in protocol.systems_for_world(w)}
         for w in ("world1", "real")
     }
     drawn = []
@@ -145,13 +145,13 @@ def test_write_report_full(tmp_path, paper):
     assert "SRL 3 vs 2" in text
     assert "| 0 | 300.0 | 297.0 |" in text  # LTL best f at generation 0 and final
     assert '"seed": 3' in text and "stl.world1_s" in text
-    for world in stats.WORLDS:
+    for world in protocol.WORLDS:
         assert (tmp_path / "figures" / f"box_{world}.png").stat().st_size > 0
     assert (tmp_path / "figures" / "traj_world1.png").exists()
     assert (tmp_path / "figures" / "traj_real.png").exists()
     assert not (tmp_path / "figures" / "traj_world2.png").exists()
     assert (tmp_path / "figures" / "ltl_fitness.png").exists()
-    assert drawn.count("world1") == len(stats.SYSTEMS)
+    assert drawn.count("world1") == len(protocol.SYSTEMS)
 
 
 def test_ltl_section_reads_the_evolve_summary_format():

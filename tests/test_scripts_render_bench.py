@@ -260,7 +260,7 @@ def test_bench_script_commands_parse():
         for run in bench.SCRIPT_RUNS
     )
     assert evolve.out == trials.out == "x"
-    assert (evolve.populations, evolve.robots, evolve.generations) == (5, 10, 50)
+    assert (evolve.populations, evolve.robots, evolve.generations) == (5, 10, 200)
     assert (trials.system, trials.world, trials.trials) == ("SIE", "world1", 30)
 
 
@@ -335,7 +335,8 @@ def test_run_script_exits_with_mains_status_without_teardown(body, status, out, 
 def test_world_figure_without_state(tmp_path):
     import numpy as np
 
-    from jaxais import envs, plotting
+    from jaxais import envs
+    from jaxais.experiments import plotting
 
     world = envs.load_world("real")
     traj = np.stack([np.linspace(0.2, 1.0, 50), np.full(50, 0.5)], axis=1)
@@ -368,7 +369,8 @@ def test_figures_draw_boxes_and_goal_where_the_trial_had_them(tmp_path):
     from matplotlib.colors import to_rgb
     from matplotlib.figure import Figure
 
-    from jaxais import envs, plotting, report
+    from jaxais import envs
+    from jaxais.experiments import plotting, report
     from jaxais.trials import Placement
 
     world = envs.load_world("real")

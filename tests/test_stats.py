@@ -1,4 +1,4 @@
-"""Tests of jaxais.stats: hand-worked statistics, table assembly and the H1-H4 verdicts."""
+"""Tests of jaxais.experiments.stats: hand-worked statistics, table assembly and H1-H4 verdicts."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats as sps
 
-from jaxais import stats
+from jaxais.experiments import protocol, stats
 
 A = [1.0, 2.0, 3.0]
 B = [4.0, 5.0, 6.0, 7.0]
@@ -64,18 +64,11 @@ def trials_with_f(f_mean: float, n: int = 8, spread: float = 4.0) -> list[dict]:
 # --------------------------------------------------------------------------- systems and pairs
 
 
-def test_systems_and_worlds():
-    assert stats.SYSTEMS == ("SIE", "SRL", "UIE-R1", "URL-R1", "UIE-R2", "URL-R2", "HDC")
-    assert stats.WORLDS == ("world1", "world2", "real")
-    assert stats.systems_for_world("real") == ("SIE", "SRL", "UIE-R1", "URL-R1", "HDC")
-    assert stats.systems_for_world("world2") == stats.SYSTEMS
-
-
 def test_comparison_pairs_follow_table4_and_filter_per_world():
-    assert len(stats.COMPARISONS) == 12
-    assert stats.COMPARISONS[0] == ("SIE", "SRL")
-    assert stats.COMPARISONS[-1] == ("UIE-R2", "URL-R2")
-    assert stats.comparison_pairs("world1") == stats.COMPARISONS
+    assert len(protocol.COMPARISONS) == 12
+    assert protocol.COMPARISONS[0] == ("SIE", "SRL")
+    assert protocol.COMPARISONS[-1] == ("UIE-R2", "URL-R2")
+    assert stats.comparison_pairs("world1") == protocol.COMPARISONS
     real = stats.comparison_pairs("real")
     assert real == (
         ("SIE", "SRL"),
@@ -314,14 +307,14 @@ def test_build_tables_is_plain_json():
 # --------------------------------------------------------------------------- hypotheses
 
 
-def paper_like(overrides: dict | None = None, worlds=stats.WORLDS) -> dict:
+def paper_like(overrides: dict | None = None, worlds=protocol.WORLDS) -> dict:
     """All systems in all worlds, SIE best by far, with f means overridable per world/system."""
     base = {"SIE": 100, "SRL": 200, "HDC": 300, "UIE-R1": 400, "UIE-R2": 420}
     base |= {"URL-R1": 500, "URL-R2": 520}
     out = {}
     for w in worlds:
         means = base | (overrides or {}).get(w, {})
-        out[w] = {s: trials_with_f(means[s]) for s in stats.systems_for_world(w)}
+        out[w] = {s: trials_with_f(means[s]) for s in protocol.systems_for_world(w)}
     return out
 
 

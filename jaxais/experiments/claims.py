@@ -9,15 +9,16 @@ Per world (Simulated World 1, Simulated World 2, the real world), from the paper
 6. SRL has a lower mean f than URL-R1; 7. UIE-R1 has a lower mean f than URL-R1.
 
 That is 10 + 10 + 8 = 28 claims, plus H1-H4 "supported" as decided by
-:func:`jaxais.stats.hypotheses`: 32 in all.
+:func:`jaxais.experiments.stats.hypotheses`: 32 in all.
 
 Rules. "Lowest" compares SIE with the other systems of the world that have results and allows
 ties (SIE's mean <= every other mean): the paper calls SIE's c lowest in Simulated World 2 where
 HDC ties it at 2. "Lower" between two systems is strict. "Significantly lower" is a lower mean
 and a two-tailed Student's t p-value below ``alpha`` (the paper's 99 % level for 0.01). Means use
 the capped c (Table 3's). A claim whose world or systems have no results is not evaluated
-(``held`` is ``None``); so is a hypothesis that :func:`~jaxais.stats.hypotheses` finds not
-testable.
+(``held`` is ``None``); so is a hypothesis that :func:`~jaxais.experiments.stats.hypotheses` finds
+not testable. The worlds, their systems and the significance level are
+:mod:`jaxais.experiments.protocol`'s.
 """
 
 from __future__ import annotations
@@ -25,16 +26,10 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from . import stats
+from . import protocol, stats
 
-__all__ = ["HYPOTHESES", "WORLD_NAMES", "claims", "document", "headline", "summary"]
+__all__ = ["HYPOTHESES", "claims", "document", "headline", "summary"]
 
-WORLD_NAMES = {
-    "world1": "Simulated World 1",
-    "world2": "Simulated World 2",
-    "real": "the real world",
-}
-"""How the paper names its worlds."""
 HYPOTHESES = {
     "H1": "Seeded STL systems outperform unseeded STL systems.",
     "H2": "Seeded STL systems that employ idiotypic effects outperform seeded systems that do not.",
@@ -78,7 +73,8 @@ def _mean(results: stats.Results, system: str, metric: str) -> float:
 def _lowest(world: str, results: stats.Results, have: list[str], metric: str) -> dict:
     cid = f"{world}/SIE-lowest-{metric}"
     text = (
-        f"In {WORLD_NAMES[world]}, the seeded idiotypic system (SIE) has {_METRIC_WORDS[metric]}."
+        f"In {protocol.WORLD_NAMES[world]}, the seeded idiotypic system (SIE) has "
+        f"{_METRIC_WORDS[metric]}."
     )
     others = [s for s in have if s != "SIE"]
     why = _missing(["SIE"], have, world) or (None if others else f"No other system in {world}.")
@@ -90,7 +86,7 @@ def _lowest(world: str, results: stats.Results, have: list[str], metric: str) ->
     held = all(sie <= v for v in means.values())
     tie = " (a tie)" if sie == means[best] else ""
     evidence = f"SIE {_fmt(sie)}; lowest other: {best} {_fmt(means[best])}{tie}"
-    absent = [s for s in stats.systems_for_world(world) if s not in have]
+    absent = [s for s in protocol.systems_for_world(world) if s not in have]
     if absent:
         evidence += f"; no results for {', '.join(absent)}"
     return _claim(cid, world, text, held, evidence + ".")
@@ -98,7 +94,7 @@ def _lowest(world: str, results: stats.Results, have: list[str], metric: str) ->
 
 def _no_failures(world: str, results: stats.Results, have: list[str]) -> dict:
     cid = f"{world}/SIE-no-failures"
-    text = f"In {WORLD_NAMES[world]}, SIE has a 0 % failure rate."
+    text = f"In {protocol.WORLD_NAMES[world]}, SIE has a 0 % failure rate."
     why = _missing(["SIE"], have, world)
     if why:
         return _claim(cid, world, text, None, why)
@@ -119,7 +115,7 @@ def _sig_below(
 ) -> dict:
     cid = f"{world}/SIE-f-sig-below/{other}"
     text = (
-        f"In {WORLD_NAMES[world]}, SIE's f is significantly lower than {other}'s "
+        f"In {protocol.WORLD_NAMES[world]}, SIE's f is significantly lower than {other}'s "
         f"(two-tailed Student's t, {100 * (1 - alpha):g} % level)."
     )
     why = _missing(["SIE", other], have, world)
@@ -138,7 +134,7 @@ def _sig_below(
 
 def _lower(world: str, results: stats.Results, have: list[str], a: str, b: str, text: str) -> dict:
     cid = f"{world}/{a}-f-below/{b}"
-    text = f"In {WORLD_NAMES[world]}, {text}"
+    text = f"In {protocol.WORLD_NAMES[world]}, {text}"
     why = _missing([a, b], have, world)
     if why:
         return _claim(cid, world, text, None, why)
@@ -147,11 +143,11 @@ def _lower(world: str, results: stats.Results, have: list[str], a: str, b: str, 
 
 
 def _world_claims(world: str, results: stats.Results, alpha: float) -> list[dict]:
-    systems = stats.systems_for_world(world)
+    systems = protocol.systems_for_world(world)
     have = [s for s in systems if len(results.get(s, ())) > 0]
     out = [_lowest(world, results, have, m) for m in stats.METRICS]
     out.append(_no_failures(world, results, have))
-    out += [_sig_below(world, results, have, u, alpha) for u in stats.UNSEEDED if u in systems]
+    out += [_sig_below(world, results, have, u, alpha) for u in protocol.UNSEEDED if u in systems]
     out += [_lower(world, results, have, a, b, text) for a, b, text in _PAIR_CLAIMS]
     return out
 
@@ -159,7 +155,7 @@ def _world_claims(world: str, results: stats.Results, alpha: float) -> list[dict
 # --------------------------------------------------------------------------- public
 
 
-def claims(results_by_world: stats.ResultsByWorld, alpha: float = stats.ALPHA) -> list[dict]:
+def claims(results_by_world: stats.ResultsByWorld, alpha: float = protocol.ALPHA) -> list[dict]:
     """The paper's 32 claims, each judged on our results (see the module docstring for rules).
 
     Args:
@@ -173,7 +169,7 @@ def claims(results_by_world: stats.ResultsByWorld, alpha: float = stats.ALPHA) -
         H1-H4. ``held`` is ``None`` when the claim's data are missing.
     """
     out = []
-    for world in stats.WORLDS:
+    for world in protocol.WORLDS:
         out += _world_claims(world, results_by_world.get(world, {}), alpha)
     for h, verdict in stats.hypotheses(results_by_world, alpha).items():
         testable = not verdict["summary"].startswith("Not testable")

@@ -3,7 +3,8 @@ tests and figures.
 
 Figures are drawn with matplotlib's object-oriented API on the Agg canvas (no pyplot, no
 display, no global backend change). The paper's tables ship as package data and are loaded with
-:func:`load_paper_tables`.
+:func:`load_paper_tables`. Worlds, systems and Table 4's comparisons appear in the order of
+:mod:`jaxais.experiments.protocol`.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from . import claims, stats
+from . import claims, protocol, stats
 
 __all__ = ["load_paper_tables", "ordering_differences", "write_report"]
 
@@ -33,7 +34,8 @@ _T5_COLS = (("c", "c cap", 0), ("tau", "τ cap", 0), ("total", "total", 0))
 _METRIC_NAME = {"c": "c", "tau": "τ", "f": "f", "total": "total"}
 _RANK_MARK = "†"
 _SIG_MARK = "‡"
-_SIG_LEVEL = 99
+_SIG_LEVEL = stats.significance_level(protocol.ALPHA)
+"""Table 4's level at the paper's significance threshold (99)."""
 
 
 def load_paper_tables() -> dict:
@@ -59,11 +61,11 @@ def _canonical(names: Sequence[str], order: Sequence[str]) -> list[str]:
 
 
 def _worlds(*tables: Mapping[str, Any]) -> list[str]:
-    return _canonical([w for t in tables for w in t], stats.WORLDS)
+    return _canonical([w for t in tables for w in t], protocol.WORLDS)
 
 
 def _rows(*rows: Mapping[str, Any]) -> list[str]:
-    return _canonical([s for r in rows for s in r], stats.SYSTEMS)
+    return _canonical([s for r in rows for s in r], protocol.SYSTEMS)
 
 
 def _num(x: Any, decimals: int = 0) -> str:
@@ -212,7 +214,7 @@ def _table4_section(ours: Mapping[str, Any], paper: Mapping[str, Any]) -> list[s
     ]
     for world in _worlds(ours, paper):
         mine, theirs = ours.get(world, {}), paper.get(world, {})
-        pairs = [f"{a} vs {b}" for a, b in stats.COMPARISONS]
+        pairs = [f"{a} vs {b}" for a, b in protocol.COMPARISONS]
         pairs = [p for p in pairs if p in mine or p in theirs]
         body = []
         for pair in pairs:
@@ -542,7 +544,7 @@ def write_report(
 
     Args:
         out_dir: output folder (created if needed).
-        tables: :func:`jaxais.stats.build_tables` of ``results_by_world``.
+        tables: :func:`jaxais.experiments.stats.build_tables` of ``results_by_world``.
         results_by_world: ``{world: {system: [trial record]}}`` (for the robustness tests, trial
             counts and box plots).
         paper: :func:`load_paper_tables`.
@@ -557,8 +559,8 @@ def write_report(
         example_trajectories: ``{world: {system: xy [T, 2]}}`` drawn to ``figures/traj_{world}``.
         world_drawer: ``world_drawer(ax, world_name)`` draws the world under each trajectory
             (``world_drawer(ax, world_name, placement)`` where ``example_placements`` has one).
-        claims_ledger: :func:`jaxais.claims.claims` of ``results_by_world`` (computed here at
-            the 99 % level when ``None``).
+        claims_ledger: :func:`jaxais.experiments.claims.claims` of ``results_by_world``
+            (computed here at the 99 % level when ``None``).
         example_placements: ``{world: {system: placement}}``: where each example trajectory's
             trial had its boxes and goal (``jaxais.trials.Placement``), passed to the drawer.
 
@@ -568,8 +570,9 @@ def write_report(
     out = Path(out_dir)
     fig_dir = out / "figures"
     fig_dir.mkdir(parents=True, exist_ok=True)
-    caps = paper.get("protocol", {}).get("caps", {"c": 100, "tau": 4000})
-    alpha = 1.0 - _SIG_LEVEL / 100.0
+    default_caps = {"c": protocol.COLLISION_CAP, "tau": protocol.TAU_CAP}
+    caps = paper.get("protocol", {}).get("caps", default_caps)
+    alpha = protocol.ALPHA
 
     figures: list[tuple[str, str]] = []
     for world in _worlds(results_by_world):

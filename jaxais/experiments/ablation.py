@@ -4,8 +4,9 @@ The engine's readings of what the paper leaves open (SPEC 5-9) are named paramet
 literal readings are kept as options. A :class:`Variant` switches some of them; :data:`VARIANTS`
 holds ours, one variant per reading and ``literal`` (every old reading together). For each
 variant, :func:`run_ablation` runs every system of the paper's protocol in every world and
-:func:`variant_summary` scores it: the paper's claims reproduced (:mod:`jaxais.claims`) and the
-mean f and failure rate of SIE, HDC and URL-R1.
+:func:`variant_summary` scores it: the paper's claims reproduced
+(:mod:`jaxais.experiments.claims`) and the mean f and failure rate of SIE, HDC and URL-R1. The
+systems of each world and the trial counts are :mod:`jaxais.experiments.protocol`'s.
 
 Batching. The readings (:class:`jaxais.readings.Readings`) and the HDC's antibodies are traced
 data of a :class:`~jaxais.controllers.System`, so the variants that differ only there run as one
@@ -30,13 +31,13 @@ from typing import Any
 import jax
 import numpy as np
 
-from jaxais import claims, envs, stats
+from jaxais import envs
 from jaxais import trials as trials_module
 from jaxais.antibodies import Antibodies
 from jaxais.controllers import System
 from jaxais.envs.struct import device_array
 from jaxais.episode import EpisodeConfig
-from jaxais.experiment import paper_trials, protocol
+from jaxais.experiments import claims, protocol, stats
 from jaxais.network import NetworkParams
 from jaxais.readings import HOLD, SIGMA0_FLOOR, Readings
 from jaxais.readings import readings as make_readings
@@ -323,7 +324,8 @@ class Ablation:
     calls: list[dict[str, Any]]
 
     def records(self, variant: str) -> dict[str, dict[str, list[dict[str, Any]]]]:
-        """``{world: {label: [trial record]}}`` of a variant (what :mod:`jaxais.claims` reads)."""
+        """``{world: {label: [trial record]}}`` of a variant (what
+        :mod:`jaxais.experiments.claims` reads)."""
         return {
             world: {label: ts.records for label, ts in by_label.items()}
             for world, by_label in self.trials[variant].items()
@@ -372,9 +374,9 @@ def run_ablation(
     log: list[dict[str, Any]] = []
     for world_name in worlds:
         world = envs.load_world(world_name)
-        world_labels = list(protocol(world_name) if labels is None else labels)
+        world_labels = list(protocol.systems_for_world(world_name) if labels is None else labels)
         if n_trials is None:
-            n = paper_trials(world_name)
+            n = protocol.trials_for_world(world_name)
         else:
             n = n_trials if isinstance(n_trials, int) else n_trials[world_name]
         systems = {
@@ -521,7 +523,8 @@ def markdown(doc: Mapping[str, Any]) -> str:
     notes = [
         "",
         f"Trials per system: {trials}. f = (8c + τ)/2 (s, lower is better), c capped at 100. "
-        f"Claims: of the paper's claims that our results can evaluate (`jaxais.claims`).",
+        "Claims: of the paper's claims that our results can evaluate "
+        "(`jaxais.experiments.claims`).",
         "",
     ]
     notes += [f"- `{v['name']}`: {v['description']}." for v in doc["variants"]]

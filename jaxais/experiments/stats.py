@@ -1,7 +1,9 @@
 """Statistics of STL trials: the paper's Tables 3, 4 and 5, robustness tests and H1-H4 (SPEC 11).
 
 Plain NumPy/SciPy, run outside jit on finished trial records. Lower is better for every metric
-(c collisions, tau seconds, f = (rho c + tau) / 2), as in the paper.
+(c collisions, tau seconds, f = (rho c + tau) / 2), as in the paper. The worlds and systems (and
+their order), Table 4's comparisons, the significance level and the collision cap are
+:mod:`jaxais.experiments.protocol`'s.
 
 A trial record is a dict (see :class:`TrialRecord`); the results of one world are
 ``dict[system_name, list[TrialRecord]]`` and ``results_by_world`` maps world names to those.
@@ -32,16 +34,11 @@ from typing import Any, Literal, TypedDict
 import numpy as np
 from scipy import stats as sps
 
+from jaxais.experiments import protocol
+
 __all__ = [
-    "ALPHA",
-    "COLLISION_CAP",
-    "COMPARISONS",
     "FAILURE_COLUMNS",
     "METRICS",
-    "SEEDED",
-    "SYSTEMS",
-    "UNSEEDED",
-    "WORLDS",
     "Results",
     "ResultsByWorld",
     "TrialRecord",
@@ -57,7 +54,6 @@ __all__ = [
     "metric_values",
     "significance_level",
     "student_t",
-    "systems_for_world",
     "table3",
     "table4",
     "table5",
@@ -65,36 +61,10 @@ __all__ = [
     "welch_t",
 ]
 
-SYSTEMS: tuple[str, ...] = ("SIE", "SRL", "UIE-R1", "URL-R1", "UIE-R2", "URL-R2", "HDC")
-"""The paper's systems, in its table order."""
-WORLDS: tuple[str, ...] = ("world1", "world2", "real")
-"""The paper's test worlds, in its table order."""
-SEEDED: tuple[str, ...] = ("SIE", "SRL")
-UNSEEDED: tuple[str, ...] = ("UIE-R1", "URL-R1", "UIE-R2", "URL-R2")
 METRICS: tuple[str, ...] = ("c", "tau", "f")
 """Table 3 / Table 4 metric keys."""
 FAILURE_COLUMNS: tuple[str, ...] = ("c", "tau", "total")
 """Table 5 keys: failures by collision cap, by time cap, overall."""
-ALPHA = 0.01
-"""The paper accepts differences at the 99 % level only."""
-COLLISION_CAP = 100
-"""c is capped at this count [paper, section 5: "τ and c are capped at 4000 s and 100"]."""
-
-COMPARISONS: tuple[tuple[str, str], ...] = (
-    ("SIE", "SRL"),
-    ("SIE", "HDC"),
-    ("SIE", "UIE-R1"),
-    ("SIE", "URL-R1"),
-    ("SIE", "UIE-R2"),
-    ("SIE", "URL-R2"),
-    ("SRL", "UIE-R1"),
-    ("SRL", "URL-R1"),
-    ("SRL", "UIE-R2"),
-    ("SRL", "URL-R2"),
-    ("UIE-R1", "URL-R1"),
-    ("UIE-R2", "URL-R2"),
-)
-"""The 12 comparisons of the paper's Table 4, in its row order."""
 
 _RECORD_KEY = {"tau": "tau", "f": "fitness"}
 
@@ -131,44 +101,35 @@ ResultsByWorld = Mapping[str, Results]
 # --------------------------------------------------------------------------- systems and pairs
 
 
-def systems_for_world(world: str) -> tuple[str, ...]:
-    """The systems the paper runs in ``world``.
-
-    The real world has no R2 systems; every other world (simulated, including user-defined
-    worlds) has all seven.
-    """
-    if world == "real":
-        return tuple(s for s in SYSTEMS if not s.endswith("-R2"))
-    return SYSTEMS
-
-
 def comparison_pairs(
     world: str, present: Iterable[str] | None = None
 ) -> tuple[tuple[str, str], ...]:
     """Table 4's comparisons for ``world``, in the paper's order.
 
     Args:
-        world: world name; filters by :func:`systems_for_world`.
+        world: world name; filters by :func:`~jaxais.experiments.protocol.systems_for_world`.
         present: if given, keep only pairs whose two systems are both in it (e.g. the systems
             with results).
     """
-    allowed = set(systems_for_world(world))
+    allowed = set(protocol.systems_for_world(world))
     if present is not None:
         allowed &= set(present)
-    return tuple((a, b) for a, b in COMPARISONS if a in allowed and b in allowed)
+    return tuple((a, b) for a, b in protocol.COMPARISONS if a in allowed and b in allowed)
 
 
 def _ordered_systems(results: Results) -> list[str]:
     """Systems with at least one trial: the paper's order first, then any others as given."""
     have = [s for s, trials in results.items() if len(trials) > 0]
-    return [s for s in SYSTEMS if s in have] + [s for s in have if s not in SYSTEMS]
+    return [s for s in protocol.SYSTEMS if s in have] + [
+        s for s in have if s not in protocol.SYSTEMS
+    ]
 
 
 def _capped_c(trial: Mapping[str, Any]) -> float:
     """``collisions_capped``, or ``min(collisions, 100)`` for records without it."""
     if "collisions_capped" in trial:
         return float(trial["collisions_capped"])
-    return float(min(trial["collisions"], COLLISION_CAP))
+    return float(min(trial["collisions"], protocol.COLLISION_CAP))
 
 
 def metric_values(trials: Sequence[Mapping[str, Any]], metric: str) -> np.ndarray:
@@ -449,8 +410,8 @@ def _p(p: float) -> str:
 
 def _worlds(results_by_world: ResultsByWorld, needed: Iterable[str]) -> list[str]:
     """Worlds (paper order first) whose results have trials for every system in ``needed``."""
-    names = [w for w in WORLDS if w in results_by_world]
-    names += [w for w in results_by_world if w not in WORLDS]
+    names = [w for w in protocol.WORLDS if w in results_by_world]
+    names += [w for w in results_by_world if w not in protocol.WORLDS]
     return [w for w in names if set(needed) <= set(_ordered_systems(results_by_world[w]))]
 
 
@@ -467,7 +428,7 @@ def _h1(results_by_world: ResultsByWorld, alpha: float) -> dict[str, Any]:
     worlds = [
         w
         for w in _worlds(results_by_world, ["SIE"])
-        if any(s in _ordered_systems(results_by_world[w]) for s in UNSEEDED)
+        if any(s in _ordered_systems(results_by_world[w]) for s in protocol.UNSEEDED)
     ]
     if not worlds:
         return _untestable("no world has SIE and unseeded")
@@ -475,7 +436,7 @@ def _h1(results_by_world: ResultsByWorld, alpha: float) -> dict[str, Any]:
     for w in worlds:
         res = results_by_world[w]
         have = _ordered_systems(res)
-        unseeded = [s for s in UNSEEDED if s in have]
+        unseeded = [s for s in protocol.UNSEEDED if s in have]
         mean = {s: float(_f(res, s).mean()) for s in have}
         worst_p = 0.0
         for u in unseeded:
@@ -552,7 +513,7 @@ def _verdict(ok: bool, rule: str, parts: list[str], fails: list[str]) -> dict[st
     return {"supported": ok, "evidence": f"{head} {rule} {summary}", "summary": summary}
 
 
-def hypotheses(results_by_world: ResultsByWorld, alpha: float = ALPHA) -> dict[str, dict]:
+def hypotheses(results_by_world: ResultsByWorld, alpha: float = protocol.ALPHA) -> dict[str, dict]:
     """Verdicts on the paper's hypotheses H1-H4 (section 2), judged on fitness f.
 
     Worlds missing from the results (or lacking the systems a rule needs) are skipped; a
@@ -602,7 +563,7 @@ def jsonable(obj: Any) -> Any:
     return obj
 
 
-def build_tables(results_by_world: ResultsByWorld, alpha: float = ALPHA) -> dict[str, Any]:
+def build_tables(results_by_world: ResultsByWorld, alpha: float = protocol.ALPHA) -> dict[str, Any]:
     """All of the report's tables, JSON-serialisable.
 
     Returns:

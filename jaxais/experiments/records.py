@@ -1,7 +1,9 @@
-"""Experiment plumbing shared by ``scripts/trials.py`` and ``scripts/reproduce.py``.
+"""What a run records: plumbing shared by ``scripts/trials.py``, ``scripts/reproduce.py`` and
+``scripts/ablate.py``.
 
 Turns (world, systems, trials, seed) into the results document of one system in one world, with
-every parameter it used recorded, so a run can be regenerated from its JSON.
+every parameter it used recorded, so a run can be regenerated from its JSON. Which systems run
+where, and how many times, is :mod:`jaxais.experiments.protocol`'s.
 """
 
 from __future__ import annotations
@@ -20,21 +22,8 @@ from jaxais.episode import EpisodeConfig
 from jaxais.network import NetworkParams
 from jaxais.readings import DEFAULT, Readings
 from jaxais.seed import Seed, default_seed_dir, load_seed
-from jaxais.systems import LABELS, make_system, parse_label
+from jaxais.systems import make_system, parse_label
 from jaxais.trials import TrialSet, summarise
-
-
-def protocol(world: str) -> tuple[str, ...]:
-    """The paper's systems for a world: R1 and R2 in the simulated worlds, R1 only in `real`."""
-    if world == "real":
-        return ("SIE", "SRL", "UIE-R1", "URL-R1", "HDC")
-    return LABELS
-
-
-def paper_trials(world: str) -> int:
-    """The paper's trial count: 30 per simulated world, 20 in `real`."""
-    return 20 if world == "real" else 30
-
 
 SHIPPED_SEED = "shipped (checkpoints/default)"
 """How records name the shipped LTL seed (not by where this machine installed it)."""

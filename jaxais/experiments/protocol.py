@@ -1,0 +1,97 @@
+"""The paper's experimental protocol, stated once (Whitbrook, Aickelin & Garibaldi, sections 5-6).
+
+Its worlds and systems in table order, which systems run in which world, how many trials each,
+Table 4's comparisons, the significance level and the caps. Everything that runs or judges the
+paper's experiments reads them from here: ``scripts/reproduce.py``, ``scripts/ablate.py`` and
+``scripts/trials.py`` (their worlds, trial counts and caps), :mod:`~jaxais.experiments.ablation`
+(what runs where), :mod:`~jaxais.experiments.stats` (the tables' order, Table 4's rows, H1-H4),
+:mod:`~jaxais.experiments.claims` (what the 32 claims range over) and
+:mod:`~jaxais.experiments.report` (row order, the 99 % verdicts).
+
+The system labels themselves are :data:`jaxais.labels.LABELS`. Like that module, this one is free
+of JAX: the scripts check their flags against it before JAX starts.
+"""
+
+from __future__ import annotations
+
+from jaxais.labels import LABELS, parse_label
+
+__all__ = [
+    "ALPHA",
+    "COLLISION_CAP",
+    "COMPARISONS",
+    "REAL_TRIALS",
+    "REAL_WORLD",
+    "SEEDED",
+    "SIMULATED_TRIALS",
+    "SYSTEMS",
+    "TAU_CAP",
+    "UNSEEDED",
+    "WORLDS",
+    "WORLD_NAMES",
+    "systems_for_world",
+    "trials_for_world",
+]
+
+REAL_WORLD = "real"
+"""The paper's real-world arena (here a simulated world with the real robot's noise)."""
+WORLDS: tuple[str, ...] = ("world1", "world2", REAL_WORLD)
+"""The paper's test worlds, in its table order: two simulated worlds and the real one."""
+WORLD_NAMES: dict[str, str] = {
+    "world1": "Simulated World 1",
+    "world2": "Simulated World 2",
+    REAL_WORLD: "the real world",
+}
+"""How the paper names its worlds."""
+
+SYSTEMS: tuple[str, ...] = LABELS
+"""The paper's systems, in its table order."""
+SEEDED: tuple[str, ...] = ("SIE", "SRL")
+"""The systems that start from the LTL seed."""
+UNSEEDED: tuple[str, ...] = tuple(s for s in SYSTEMS if parse_label(s)[1] is not None)
+"""The systems that start from a fixed random set (R1 or R2), in table order."""
+
+SIMULATED_TRIALS = 30
+"""Trials of each system in a simulated world [paper]."""
+REAL_TRIALS = 20
+"""Trials of each system in the real world [paper]."""
+
+COMPARISONS: tuple[tuple[str, str], ...] = (
+    ("SIE", "SRL"),
+    ("SIE", "HDC"),
+    ("SIE", "UIE-R1"),
+    ("SIE", "URL-R1"),
+    ("SIE", "UIE-R2"),
+    ("SIE", "URL-R2"),
+    ("SRL", "UIE-R1"),
+    ("SRL", "URL-R1"),
+    ("SRL", "UIE-R2"),
+    ("SRL", "URL-R2"),
+    ("UIE-R1", "URL-R1"),
+    ("UIE-R2", "URL-R2"),
+)
+"""The 12 comparisons of the paper's Table 4, in its row order."""
+ALPHA = 0.01
+"""The paper accepts differences at the 99 % level only (two-tailed Student's t, p < ALPHA)."""
+COLLISION_CAP = 100
+"""c is capped at this count [paper, section 5: "τ and c are capped at 4000 s and 100"]; Table 3
+averages the capped count."""
+TAU_CAP = 4000.0
+"""τ is capped at this many seconds [paper, section 5]."""
+
+
+def systems_for_world(world: str) -> tuple[str, ...]:
+    """The systems the paper runs in ``world``, in table order.
+
+    The real world has the unseeded systems with R1 only; every other world (simulated,
+    including a world file of ours) has all seven.
+    """
+    if world == REAL_WORLD:
+        return tuple(s for s in SYSTEMS if parse_label(s)[1] in (None, "R1"))
+    return SYSTEMS
+
+
+def trials_for_world(world: str) -> int:
+    """The paper's trials of each system in ``world``: 30 in a simulated world (including a
+    world file of ours), 20 in the real world."""
+    return REAL_TRIALS if world == REAL_WORLD else SIMULATED_TRIALS

@@ -1,0 +1,32 @@
+"""The systems' names: the five system codes, the random sets and the labels of the paper's tables.
+
+JAX-free, unlike :mod:`jaxais.systems` (which builds the systems and re-exports these names), so
+that the scripts can check their flags against them before JAX starts.
+"""
+
+from __future__ import annotations
+
+__all__ = ["LABELS", "RANDOM_SETS", "SYSTEMS", "label", "parse_label"]
+
+SYSTEMS = ("SIE", "SRL", "UIE", "URL", "HDC")
+"""The five system codes (SPEC 8)."""
+RANDOM_SETS = {"R1": 1, "R2": 2}
+"""The fixed random initial sets R1 and R2: PRNG seeds of their draws [ours]."""
+LABELS = ("SIE", "SRL", "UIE-R1", "URL-R1", "UIE-R2", "URL-R2", "HDC")
+"""System labels as in the paper's tables, in its table order (a label's random stream comes
+from its name, :func:`jaxais.trials.stream_id`, not from its place here)."""
+
+
+def label(system: str, random_set: str | None = None) -> str:
+    """Table label of a system: ``UIE`` with R1 is ``UIE-R1``; seeded systems and HDC as is."""
+    return f"{system}-{random_set}" if system in ("UIE", "URL") else system
+
+
+def parse_label(name: str) -> tuple[str, str | None]:
+    """Inverse of :func:`label`: ``"URL-R2"`` -> ``("URL", "R2")``."""
+    system, _, random_set = name.partition("-")
+    if system not in SYSTEMS or (system in ("UIE", "URL")) != bool(random_set):
+        raise ValueError(f"unknown system {name!r} (one of {', '.join(LABELS)})")
+    if random_set and random_set not in RANDOM_SETS:
+        raise ValueError(f"unknown random set {random_set!r} (one of {', '.join(RANDOM_SETS)})")
+    return system, random_set or None

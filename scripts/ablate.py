@@ -60,18 +60,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="LTL seed directory (default: the shipped checkpoints/default)",
     )
     p.add_argument("--seed", type=int, default=0, help="PRNG seed of the trials")
-    p.add_argument(
-        "--tau-cap",
-        type=float,
-        default=protocol.TAU_CAP,
-        help=f"time cap, s [paper: {protocol.TAU_CAP:g}]",
-    )
-    p.add_argument(
-        "--collision-cap",
-        type=int,
-        default=protocol.COLLISION_CAP,
-        help=f"collision cap [paper: {protocol.COLLISION_CAP}]",
-    )
+    protocol.add_cap_arguments(p)
     p.add_argument(
         "--no-share",
         action="store_true",

@@ -58,18 +58,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--worlds", default=",".join(protocol.WORLDS), help="comma-separated subset of worlds"
     )
-    p.add_argument(
-        "--tau-cap",
-        type=float,
-        default=protocol.TAU_CAP,
-        help=f"time cap, s [paper: {protocol.TAU_CAP:g}]",
-    )
-    p.add_argument(
-        "--collision-cap",
-        type=int,
-        default=protocol.COLLISION_CAP,
-        help=f"collision cap [paper: {protocol.COLLISION_CAP}]",
-    )
+    protocol.add_cap_arguments(p)
     p.add_argument(
         "--generations",
         type=int,

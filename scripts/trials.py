@@ -50,18 +50,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         default=None,
         help="LTL seed directory (default: the shipped checkpoints/default)",
     )
-    p.add_argument(
-        "--tau-cap",
-        type=float,
-        default=protocol.TAU_CAP,
-        help=f"time cap, s [paper: {protocol.TAU_CAP:g}]",
-    )
-    p.add_argument(
-        "--collision-cap",
-        type=int,
-        default=protocol.COLLISION_CAP,
-        help=f"collision cap [paper: {protocol.COLLISION_CAP}]",
-    )
+    protocol.add_cap_arguments(p)
     p.add_argument("--out", required=True, help="results JSON file")
     p.add_argument("--plot", default=None, help="also draw the trajectories to this PNG")
     return p.parse_args(argv)  # fmt: skip

@@ -14,9 +14,12 @@ of JAX: the scripts check their flags against it before JAX starts.
 
 from __future__ import annotations
 
+import argparse
+
 from jaxais.labels import LABELS, parse_label
 
 __all__ = [
+    "add_cap_arguments",
     "ALPHA",
     "COLLISION_CAP",
     "COMPARISONS",
@@ -95,3 +98,19 @@ def trials_for_world(world: str) -> int:
     """The paper's trials of each system in ``world``: 30 in a simulated world (including a
     world file of ours), 20 in the real world."""
     return REAL_TRIALS if world == REAL_WORLD else SIMULATED_TRIALS
+
+
+def add_cap_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``--tau-cap`` and ``--collision-cap`` to a script's flags, defaulting to the caps."""
+    parser.add_argument(
+        "--tau-cap",
+        type=float,
+        default=TAU_CAP,
+        help=f"time cap, s [paper: {TAU_CAP:g}]",
+    )
+    parser.add_argument(
+        "--collision-cap",
+        type=int,
+        default=COLLISION_CAP,
+        help=f"collision cap [paper: {COLLISION_CAP}]",
+    )

@@ -890,8 +890,7 @@ def verify(
     config: GAConfig,
 ) -> GAState:
     """The success check: each population's best robot of the last generation (lowest f, the
-    first on ties: the elite carried into the next generation) runs the maze from
-    ``config.success_starts`` fresh random starts.
+    first on ties) runs the maze from ``config.success_starts`` fresh random starts.
 
     If it is the set that is already the population's best so far, the check is pooled into
     that best's record (means weighted by starts, crossings and starts added), so a set that

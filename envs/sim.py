@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .geometry import (
     Scene,
@@ -333,16 +334,19 @@ def sense(state: State, noise: StepNoise, world: World, params: SimParams) -> Ob
 def sample_step_noise(key: jax.Array, world: World) -> StepNoise:
     """Every random number one step uses; noise a world turns off is not drawn (zeros).
 
-    One flat uniform draw and one normal draw (IR noise is on in every world) are sliced into the
-    fields: far cheaper to compile and run than a draw per field.
+    One uniform draw is sliced into the fields, its last values made standard normals (IR noise
+    is on in every world): every draw or split is a threefry hash, which runs as a loop of its
+    own on CPU, so a step draws once.
     """
     n_w = world.n_wanderers
     noisy_camera = world.camera_miss > 0 or world.camera_shift > 0
     n_u = 3 * n_w + (2 if noisy_camera else 0)
     n_z = (2 if world.wheel_noise > 0 else 0) + N_IR
-    k_u, k_z = jax.random.split(key)
-    u = jax.random.uniform(k_u, (n_u,)) if n_u else jnp.zeros(0)
-    z = jax.random.normal(k_z, (n_z,))
+    u = jax.random.uniform(key, (n_u + n_z,))
+    # Normals as jax.random.normal makes them, sqrt(2) erfinv(v) of v uniform in (-1, 1); v = -1
+    # (u = 0) moves to the next float, where erfinv is finite.
+    v = jnp.maximum(2.0 * u[n_u:] - 1.0, np.nextafter(np.float32(-1.0), np.float32(0.0)))
+    u, z = u[:n_u], np.sqrt(np.float32(2.0)) * jax.lax.erf_inv(v)
     wander, u = u[: 3 * n_w].reshape(n_w, 3), u[3 * n_w :]
     # A blob is never missed or shifted below a probability of 0: a clean camera gets ones.
     camera = u if noisy_camera else jnp.ones(2)

@@ -241,7 +241,12 @@ def sample_antibodies(key: jax.Array, shape: int | tuple[int, ...] = (N_ANTIGENS
             the STL's five sets.
     """
     shape = (shape,) if isinstance(shape, int) else tuple(shape)
-    u = _uniform(key, shape + (1 + N_ATTRIBUTES,))  # the type, then the six attributes
+    return _antibodies(_uniform(key, shape + (1 + N_ATTRIBUTES,)))
+
+
+def _antibodies(u: jnp.ndarray) -> Antibodies:
+    """:func:`sample_antibodies` given its draw ``u`` [..., 7] (the type, then the six
+    attributes), for a controller that slices it from a larger draw."""
     type_ = _to_type(u[..., 0])
     return from_matrix(type_, _to_attributes(type_, u[..., 1:]))
 

@@ -64,7 +64,7 @@ def wheel_speeds(
 
     Args:
         key: typed PRNG key; one ``uniform(key, (2,))`` draw (used by the wander types only), so
-            the same key gives the same turn decision (a bout keeps its key for that).
+            the same key gives the same turn decision.
         ab: one antibody (scalar fields).
         blue_pixels: [] int number of blue pixels.
         blue_centroid: [] float mean column of the blue pixels (0 = leftmost, 14 = rightmost).
@@ -72,7 +72,13 @@ def wheel_speeds(
     Returns:
         [2] float32 (left, right) speeds, clipped to +-``MAX_WHEEL_SPEED``.
     """
-    u = jax.random.uniform(key, (2,))
+    return _wheel_speeds(jax.random.uniform(key, (2,)), ab, blue_pixels, blue_centroid)
+
+
+def _wheel_speeds(
+    u: jnp.ndarray, ab: Antibodies, blue_pixels: jnp.ndarray, blue_centroid: jnp.ndarray
+) -> jnp.ndarray:
+    """:func:`wheel_speeds` given its draw ``u`` [2] (the controllers draw it once a bout)."""
     t = ab.type
     speed = jnp.asarray(ab.speed, jnp.float32)
     angle = jnp.asarray(ab.angle, jnp.float32)

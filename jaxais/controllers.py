@@ -6,6 +6,13 @@
   :class:`System` (its params) says whether it learns, whether selection is idiotypic and whether
   weak antibodies are replaced, so SIE, SRL, UIE, URL and HDC are one program with different data
   and can share one compiled batch; :func:`stl_for` leaves out the parts a batch does not use.
+
+Every draw or split of a key is a threefry hash, which runs as a loop of its own on CPU, so the
+task loop's time goes with the number of draws per iteration, not their size. Learn and act
+therefore draw at most once per iteration each and slice the draw, relying on JAX's threefry
+numbering a draw's values by their index (a draw's first k values are the k-value draw from the
+same key). An act draws a new bout's two uniforms first, which are what
+:func:`~jaxais.behaviours.wheel_speeds` draws from that key, then the selection's tie-breaks.
 """
 
 from __future__ import annotations
@@ -16,17 +23,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxais.antibodies import Antibodies, sample_antibodies, take
+from jaxais.antibodies import N_ATTRIBUTES, Antibodies, _antibodies, take
 from jaxais.antigens import is_collision, is_obstacle_or_collision
-from jaxais.behaviours import wheel_speeds
+from jaxais.behaviours import _wheel_speeds
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.episode import Controller, Percept
 from jaxais.network import (
     NetworkParams,
+    _idiotypic_select,
+    _select_alpha,
     idiotopes,
-    idiotypic_select,
     rescale_paratopes,
-    select_alpha,
 )
 from jaxais.readings import DEFAULT, Readings
 from jaxais.reinforcement import (
@@ -80,19 +87,20 @@ class Bout:
     Attributes:
         antigen: [] int32 the antigen it was selected for (its antibody column).
         left: [] int32 iterations of the bout still to act after this one.
-        key: the behaviour's PRNG key, from its selection: every iteration of the bout draws
-            the same numbers from it, so a wander's turn decision holds for the bout and F % is
-            the share of bouts, i.e. of time, spent turning.
+        u: [2] the behaviour's uniforms, what :func:`~jaxais.behaviours.wheel_speeds` draws from
+            the act key of the bout's selection: the behaviour acts on the same numbers all bout,
+            so a wander's turn decision holds for the bout and F % is the share of bouts, i.e.
+            of time, spent turning.
     """
 
     antigen: jnp.ndarray
     left: jnp.ndarray
-    key: jax.Array
+    u: jnp.ndarray
 
 
-def _init_bout(key: jax.Array) -> Bout:
-    """A bout that has ended (the first act selects; ``key`` is never drawn from)."""
-    return Bout(antigen=jnp.int32(0), left=jnp.int32(0), key=key)
+def _init_bout() -> Bout:
+    """A bout that has ended (the first act selects)."""
+    return Bout(antigen=jnp.int32(0), left=jnp.int32(0), u=jnp.zeros(2))
 
 
 def _end_if(bout: Bout, penalised: jnp.ndarray) -> Bout:
@@ -103,13 +111,13 @@ def _end_if(bout: Bout, penalised: jnp.ndarray) -> Bout:
     return bout.replace(left=jnp.where(penalised, 0, bout.left).astype(jnp.int32))
 
 
-def _next_bout(bout: Bout, pc: Percept, key: jax.Array, hold: jnp.ndarray):
-    """(select now?, the bout after this iteration's choice: a new one keeps ``key``)."""
+def _next_bout(bout: Bout, pc: Percept, u: jnp.ndarray, hold: jnp.ndarray):
+    """(select now?, the bout after this iteration's choice: a new one keeps ``u`` [2])."""
     select = (bout.left <= 0) | interrupts(pc.m, bout.antigen)
     new = Bout(
         antigen=jnp.where(select, pc.m, bout.antigen).astype(jnp.int32),
         left=jnp.where(select, hold - 1, bout.left - 1).astype(jnp.int32),
-        key=jnp.where(select, key, bout.key),
+        u=jnp.where(select, u, bout.u),
     )
     return select, new
 
@@ -140,9 +148,10 @@ def ltl_controller(readings: Readings = DEFAULT) -> Controller:
     """
 
     def init(key, antibodies):
+        del key  # the first act selects, from its own key
         n = antibodies.type.shape[0]
         return LTLState(
-            antibodies=antibodies, L=jnp.zeros(n), counters=init_counters(), bout=_init_bout(key)
+            antibodies=antibodies, L=jnp.zeros(n), counters=init_counters(), bout=_init_bout()
         )
 
     def learn(key, state: LTLState, pc: Percept, antibodies):
@@ -158,9 +167,9 @@ def ltl_controller(readings: Readings = DEFAULT) -> Controller:
 
     def act(key, state: LTLState, pc: Percept, antibodies):
         del antibodies
-        _, bout = _next_bout(state.bout, pc, key, readings.hold)
+        _, bout = _next_bout(state.bout, pc, jax.random.uniform(key, (2,)), readings.hold)
         ab = take(state.antibodies, bout.antigen)
-        wheels = wheel_speeds(bout.key, ab, pc.blue_pixels, pc.centroid)
+        wheels = _wheel_speeds(bout.u, ab, pc.blue_pixels, pc.centroid)
         return state.replace(bout=bout), wheels
 
     return Controller(init=init, learn=learn, act=act)
@@ -243,25 +252,22 @@ def stl_controller(
 
     def init(key, system: System):
         P = jnp.asarray(system.paratopes, jnp.float32)
-        k_idiotope, k_bout = jax.random.split(key)
         return STLState(
             antibodies=system.antibodies,
             P=P,
             # Eq (4)'s targets, floored so that no column is pinned at 0 (jaxais.readings).
             sigma0=jnp.maximum(jnp.mean(P, axis=0), system.readings.sigma0_floor),
-            I=idiotopes(k_idiotope, P),
+            I=idiotopes(key, P),
             N=jnp.full(P.shape, system.network.initial_clones, jnp.float32),
             counters=init_counters(),
             acting=jnp.int32(0),
-            bout=_init_bout(k_bout),
+            bout=_init_bout(),
             differences=jnp.int32(0),
             selections=jnp.int32(0),
             replaced=jnp.int32(0),
         )
 
     def learn(key, s: STLState, pc: Percept, system: System):
-        # Split whether or not replacement is built in, so the idiotope's draws are the same.
-        k_idiotope, k_antibody, k_paratope = jax.random.split(key, 3)
         P, antibodies, replaced = s.P, s.antibodies, s.replaced
         rd = system.readings
         counters, fire = update_penalty(s.counters, pc.m, rd.count_encounters, rd.encounter_gap)
@@ -279,18 +285,21 @@ def stl_controller(
                 weak = (P < REPLACE_BELOW) & system.replacement & on
                 first = _scored(P.shape, jnp.unravel_index(jnp.argmax(weak), P.shape))
                 first = first & jnp.any(weak)
-                fresh = sample_antibodies(k_antibody, ())
+                # One draw: past the x * y values that the idiotope's redraw below draws from
+                # this key, the new antibody's seven values, then its paratope's.
+                u = jax.random.uniform(key, (P.size + 1 + N_ATTRIBUTES + 1,))[P.size :]
+                fresh = _antibodies(u[:-1])
                 antibodies = jax.tree.map(
                     lambda old, new: jnp.where(first, new, old), antibodies, fresh
                 )
                 lo, hi = REPLACEMENT_P
-                P = jnp.where(first, jax.random.uniform(k_paratope, minval=lo, maxval=hi), P)
+                P = jnp.where(first, lo + (hi - lo) * u[-1], P)
                 replaced = replaced + jnp.any(weak).astype(jnp.int32)
 
         # The idiotope is redrawn every idiotope_period iterations. The test is on the batch's
         # tick (unbatched), so under vmap this stays a branch taken once per period.
         due = (pc.tick % system.network.idiotope_period == 0) & (pc.tick > 0)
-        I = jax.lax.cond(due, lambda: idiotopes(k_idiotope, P), lambda: s.I)
+        I = jax.lax.cond(due, lambda: idiotopes(key, P), lambda: s.I)
         return s.replace(
             antibodies=antibodies,
             P=P,
@@ -301,10 +310,11 @@ def stl_controller(
         )
 
     def act(key, s: STLState, pc: Percept, system: System):
-        k_select, k_bout = jax.random.split(key)
-        select, bout = _next_bout(s.bout, pc, k_bout, system.readings.hold)
+        x = s.P.shape[0]
+        u = jax.random.uniform(key, (2 + 2 * x,))  # a new bout's, then the tie-breaks
+        select, bout = _next_bout(s.bout, pc, u[:2], system.readings.hold)
         if idiotypic:
-            alpha, beta, N = idiotypic_select(k_select, s.P, s.I, s.N, pc.m, system.network)
+            alpha, beta, N = _idiotypic_select(u[2:], s.P, s.I, s.N, pc.m, system.network)
             idio = system.idiotypic
             chosen = jnp.where(idio, beta, alpha)
             differ = idio & (alpha != beta) & select
@@ -313,11 +323,11 @@ def stl_controller(
                 differences=s.differences + differ.astype(jnp.int32),
             )
         else:  # no run in the batch is idiotypic: stage 1 alone, the clones never change
-            chosen = select_alpha(k_select, s.P, pc.m)  # idiotypic_select's alpha for this key
+            chosen = _select_alpha(u[2 : 2 + x], s.P, pc.m)  # the alpha of the stages above
         acting = jnp.where(select, chosen, s.acting).astype(jnp.int32)
         s = s.replace(acting=acting, bout=bout, selections=s.selections + select.astype(jnp.int32))
         ab = take(s.antibodies, (acting, bout.antigen))
-        return s, wheel_speeds(bout.key, ab, pc.blue_pixels, pc.centroid)
+        return s, _wheel_speeds(bout.u, ab, pc.blue_pixels, pc.centroid)
 
     return Controller(init=init, learn=learn, act=act)
 

@@ -216,7 +216,28 @@ def iterate(
         key: this iteration's PRNG key, split between learn, act and the simulator step.
         tick: iterations since the batch started (unbatched; see :class:`Percept`).
     """
+    draws = _draws(key, world)
+    return _iterate(draws, run, tick, world, sim_params, controller, ctrl_params, config)
+
+
+def _draws(key: jax.Array, world: envs.World) -> tuple[jax.Array, jax.Array, envs.StepNoise]:
+    """An iteration's randomness from its key: (learn's key, act's key, the step's noise)."""
     k_learn, k_act, k_sim = jax.random.split(key, 3)
+    return k_learn, k_act, envs.sample_step_noise(k_sim, world)
+
+
+def _iterate(
+    draws: tuple[jax.Array, jax.Array, envs.StepNoise],
+    run: Run,
+    tick: jnp.ndarray,
+    world: envs.World,
+    sim_params: envs.SimParams,
+    controller: Controller,
+    ctrl_params: Any,
+    config: EpisodeConfig,
+) -> Run:
+    """:func:`iterate` given its randomness, ``_draws(key, world)``."""
+    k_learn, k_act, sim_noise = draws
     obs = run.obs
     m = antigen(obs.ir, obs.blue_pixels)
     if config.collision_rule == "episode":  # one per contact episode (EpisodeConfig)
@@ -249,7 +270,7 @@ def iterate(
     )
     ctrl = controller.learn(k_learn, run.ctrl, percept, ctrl_params)
     ctrl, wheels = controller.act(k_act, ctrl, percept, ctrl_params)
-    sim, new_obs = envs.step(k_sim, run.sim, wheels, world, sim_params)
+    sim, new_obs = envs.step_with_noise(run.sim, wheels, sim_noise, world, sim_params)
     new_obs = _carried(new_obs)
     # Trapped time: a stay within trap_radius of the anchor counts, whole, once it lasts the
     # window (at the window all of it is added, then one iteration at a time).
@@ -329,13 +350,27 @@ def advance(
 ) -> Batch:
     """Advance every run by up to ``config.segment`` iterations, stopping early once all ended.
 
-    Iteration t of a run draws from ``fold_in(run.key, t)``: its numbers do not depend on the
-    chunk and segment sizes, nor on the other runs of the batch.
+    Iteration t of a run is ``iterate`` with the key ``fold_in(run.key, t)``: its numbers do
+    not depend on the chunk and segment sizes, nor on the other runs of the batch.
     """
-    step_all = jax.vmap(iterate, in_axes=(0, 0, None, None, None, None, 0, None))
+    step_all = jax.vmap(_iterate, in_axes=(0, 0, None, None, None, None, 0, None))
     n_chunks = max(1, config.segment // config.chunk)
 
+    def chunk_draws(runs: Run):
+        """Every iteration's draws of the chunk, [chunk, n, ...]: each derivation and draw is a
+        threefry hash, a loop of its own on CPU whatever its size, so they are made once for
+        the chunk, over flat [chunk * n] keys (a hash of higher rank compiles more slowly). A
+        run that ends within the chunk stops counting t, but then its iterations change
+        nothing, so those draws are unused."""
+        n = runs.t.shape[0]
+        t = (runs.t[None, :] + jnp.arange(config.chunk)[:, None]).reshape(-1)
+        keys = jax.vmap(jax.random.fold_in)(jnp.tile(runs.key, config.chunk), t)
+        draws = jax.vmap(_draws, in_axes=(0, None))(keys, world)
+        return jax.tree.map(lambda a: a.reshape(config.chunk, n, *a.shape[1:]), draws)
+
     def chunk(batch: Batch) -> Batch:
+        draws = chunk_draws(batch.runs)
+
         def body(i, r):
             # jax.numpy's helpers are jit-wrapped: traced under vmap, each call is traced and
             # batched as a nested program (half of this loop's tracing time). Under disable_jit
@@ -345,7 +380,7 @@ def advance(
             # unroll.
             with jax.disable_jit():
                 return step_all(
-                    jax.vmap(jax.random.fold_in)(r.key, r.t),
+                    jax.tree.map(lambda a: a[i], draws),
                     r,
                     batch.chunks * config.chunk + i,
                     world,

@@ -261,7 +261,12 @@ def select_alpha(key: jax.Array, P: jax.Array, antigen: jax.Array | int) -> jax.
     Returns:
         n: int32 set index of alpha = A_nm.
     """
-    return random_tiebreak_argmax(key, jnp.asarray(P, jnp.float32)[:, antigen])
+    return _select_alpha(jax.random.uniform(key, (jnp.shape(P)[0],)), P, antigen)
+
+
+def _select_alpha(u: jax.Array, P: jax.Array, antigen: jax.Array | int) -> jax.Array:
+    """:func:`select_alpha` given its draw ``u`` [x]."""
+    return _argmax_ties(jnp.asarray(P, jnp.float32)[:, antigen], u)
 
 
 def stimulation_suppression(
@@ -317,11 +322,24 @@ def idiotypic_select(
         beta: int32 set index of the stage-3 winner, the antibody that acts.
         N_new: [x, y] float32 clone counts; only column ``antigen`` differs from ``N``.
     """
+    x = jnp.shape(P)[0]
+    return _idiotypic_select(jax.random.uniform(key, (2 * x,)), P, I, N, antigen, params)
+
+
+def _idiotypic_select(
+    u: jax.Array,
+    P: jax.Array,
+    I: jax.Array,
+    N: jax.Array,
+    antigen: jax.Array | int,
+    params: NetworkParams,
+) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """:func:`idiotypic_select` given its draw ``u`` [2 * x] (stage 1's tie-breaks, then stage
+    3's), for a controller that slices it from a larger draw."""
     P = jnp.asarray(P, jnp.float32)
     N = jnp.asarray(N, jnp.float32)
     x = P.shape[0]
-    u = jax.random.uniform(key, (2 * x,))
-    alpha = _argmax_ties(P[:, antigen], u[:x])
+    alpha = _select_alpha(u[:x], P, antigen)
     eps, delta = stimulation_suppression(
         P, I, concentrations(N, params.Phi), alpha, params.k1, params.k2
     )

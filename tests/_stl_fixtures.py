@@ -196,8 +196,8 @@ def state(
     bout_key: int = 0,
 ) -> STLState:
     """A hand-made network state (sigma0 defaults to the column means of P); the antibody
-    acting is A[acting, held], with ``left`` iterations of its bout (whose key is
-    ``jax.random.key(bout_key)``) to go."""
+    acting is A[acting, held], with ``left`` iterations of its bout (whose behaviour numbers are
+    those ``wheel_speeds`` draws from ``jax.random.key(bout_key)``) to go."""
     P = jnp.asarray(P, jnp.float32)
     return STLState(
         antibodies=sys_.antibodies if antibodies is None else antibodies,
@@ -211,7 +211,11 @@ def state(
             clear_run=jnp.int32(clear_run),
         ),
         acting=jnp.int32(acting),
-        bout=Bout(antigen=jnp.int32(held), left=jnp.int32(left), key=jax.random.key(bout_key)),
+        bout=Bout(
+            antigen=jnp.int32(held),
+            left=jnp.int32(left),
+            u=jax.random.uniform(jax.random.key(bout_key), (2,)),
+        ),
         differences=jnp.int32(0),
         selections=jnp.int32(0),
         replaced=jnp.int32(0),

@@ -19,7 +19,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxais.antibodies import sample_antibodies, take, within_limits
+from jaxais.antibodies import _antibodies, take, within_limits
 from jaxais.behaviours import wheel_speeds
 from jaxais.controllers import interrupts
 from jaxais.network import idiotopes
@@ -270,8 +270,9 @@ def test_replacement_one_weak_antibody_per_iteration():
     pc = F.percept(m=0, m_prev=0, t=7)  # scores A[0, 0]; columns 3 and 6 untouched
     seen = []
     for step, key_seed in enumerate((11, 12, 13)):
-        # learn's key splits into the idiotope's, the new antibody's and its P's keys.
-        _, k_antibody, k_paratope = jax.random.split(jax.random.key(key_seed), 3)
+        # learn's one draw from its key: the idiotope's x * y values, then the new antibody's
+        # type and six attributes, then its P's uniform.
+        u = jax.random.uniform(jax.random.key(key_seed), (F.X * F.Y + 8,))[F.X * F.Y :]
         out = learn(s, pc, sys_, key_seed)
         changed = _changed(out.antibodies, s.antibodies)
         seen.append(np.argwhere(changed).tolist())
@@ -280,11 +281,9 @@ def test_replacement_one_weak_antibody_per_iteration():
             assert changed.sum() == 1 and changed[i, j]
             new = take(out.antibodies, (i, j))
             assert bool(within_limits(new))
-            assert tree_close(new, sample_antibodies(k_antibody, ()))
+            assert tree_close(new, _antibodies(u[:7]))
             assert 0.25 <= P_of(out)[i, j] <= 0.75
-            np.testing.assert_allclose(
-                P_of(out)[i, j], 0.25 + 0.5 * float(jax.random.uniform(k_paratope)), rtol=1e-6
-            )
+            np.testing.assert_allclose(P_of(out)[i, j], 0.25 + 0.5 * float(u[7]), rtol=1e-6)
         assert int(out.replaced) == min(step + 1, 2)
         s = out
     assert seen == [[[1, 3]], [[4, 6]], []]
@@ -346,17 +345,18 @@ def test_hdc_never_learns_and_always_acts_with_set_0():
 def test_non_idiotypic_selection_acts_with_alpha(seed, m, blue, centroid):
     sys_ = F.system(idiotypic=False)
     rng = np.random.default_rng(seed)
-    s = F.state(sys_, rng.random((F.X, F.Y)), I=np.eye(F.X, F.Y))
+    s = F.state(sys_, rng.random((F.X, F.Y)), I=np.eye(F.X, F.Y), bout_key=101)
     pc = F.percept(m=m, blue_pixels=blue, centroid=centroid)
     out, wheels = act(s, pc, sys_, seed % 101)
     alpha = int(np.argmax(np.asarray(s.P)[:, m]))
     assert int(out.acting) == alpha
     np.testing.assert_array_equal(out.N, s.N)
     assert int(out.differences) == 0 and int(out.selections) == 1
-    # The winner's behaviour drives the wheels, with the new bout's (fresh) key.
-    assert not tree_equal(out.bout.key, s.bout.key)
+    # The winner's behaviour drives the wheels with fresh numbers: what wheel_speeds draws from
+    # the act's key.
+    assert not tree_equal(out.bout.u, s.bout.u)
     ab = take(sys_.antibodies, (alpha, m))
-    expected = wheel_speeds(out.bout.key, ab, blue, centroid)
+    expected = wheel_speeds(jax.random.key(seed % 101), ab, blue, centroid)
     np.testing.assert_allclose(np.asarray(wheels), np.asarray(expected), rtol=1e-6)
 
 
@@ -365,6 +365,22 @@ def test_ties_in_stage_1_are_broken_at_random():
     s = F.state(sys_, np.full((F.X, F.Y), 0.5))
     chosen = {int(act(s, F.percept(m=2), sys_, k)[0].acting) for k in range(40)}
     assert chosen == set(range(F.X))
+
+
+@pytest.mark.parametrize("idiotypic", [False, True])
+def test_the_selections_tie_breaks_are_not_the_new_bouts_numbers(idiotypic):
+    """One draw per act serves the new bout's behaviour and the selection's tie-breaks, from
+    separate values: with every set tied, the set chosen says nothing about the bout's numbers.
+    (Were they shared, set n would win only when its value is the largest of X: a mean of
+    X / (X + 1), not 1/2.)"""
+    sys_ = F.system(idiotypic=idiotypic)
+    s = F.state(sys_, np.full((F.X, F.Y), 0.5))
+    outs = [act(s, F.percept(m=2), sys_, k)[0] for k in range(200)]
+    chosen = np.array([int(o.acting) for o in outs])
+    u = np.array([np.asarray(o.bout.u) for o in outs])
+    for n in range(2):
+        assert np.sum(chosen == n) > 20
+        assert abs(u[chosen == n, n].mean() - 0.5) < 0.15
 
 
 def reference_select(P, I, N, m, k1=0.85, k2=1.10, b=100.0, k3=0.0, Phi=25.0):
@@ -444,9 +460,8 @@ def test_clone_counts_are_floored_at_zero_under_sustained_suppression():
 
 
 def test_idiotope_is_recomputed_only_every_period():
-    """Eq (3) is redrawn when the batch tick is a positive multiple of the period, from the
-    first of the three keys learn splits its key into, on the paratopes after this iteration's
-    learning."""
+    """Eq (3) is redrawn when the batch tick is a positive multiple of the period, from
+    learn's key, on the paratopes after this iteration's learning."""
     sys_ = F.system()
     period = sys_.network.idiotope_period
     assert period == 120
@@ -461,8 +476,7 @@ def test_idiotope_is_recomputed_only_every_period():
         out = learn(F.state(sys_, P, I=stale), F.percept(m=0, m_prev=0, t=t), sys_, t)
         I = np.asarray(out.I)
         assert np.all(I.sum(axis=1) <= 1), t
-        k_idiotope = jax.random.split(jax.random.key(t), 3)[0]
-        np.testing.assert_array_equal(I, idiotopes(k_idiotope, out.P))
+        np.testing.assert_array_equal(I, idiotopes(jax.random.key(t), out.P))
         draws.add(I.tobytes())
     assert len(draws) > 1  # a fresh draw each period
 
@@ -499,8 +513,9 @@ def _bout_system(hold: int = 4):
 
 
 def test_a_selected_behaviour_acts_for_its_bout_then_is_selected_again():
-    """With hold h the antibody selected for an antigen keeps acting, with the behaviour key
-    of its selection, for h iterations (SPEC 5 [ours]); calmer antigens do not cut it short."""
+    """With hold h the antibody selected for an antigen keeps acting, with the behaviour
+    numbers of its selection (what wheel_speeds draws from that act's key), for h iterations
+    (SPEC 5 [ours]); calmer antigens do not cut it short."""
     sys_ = _bout_system(hold=4)
     P = np.full((F.X, F.Y), 0.5)
     P[3, 5] = 0.9  # set 3 wins antigen 5 (collision right), set 1 antigen 0
@@ -514,11 +529,11 @@ def test_a_selected_behaviour_acts_for_its_bout_then_is_selected_again():
         assert int(s.acting) == (3 if k <= 4 else 1)
         assert int(s.bout.antigen) == (5 if k <= 4 else 0)
         if k == 1:
-            bout_key = s.bout.key
-        assert tree_equal(s.bout.key, bout_key) == (k <= 4)
+            bout_u = s.bout.u
+        assert tree_equal(s.bout.u, bout_u) == (k <= 4)
     assert int(s.selections) == 2
-    expected = wheel_speeds(bout_key, take(sys_.antibodies, (3, 5)), 0, 7.0)
-    for w in wheels[:4]:  # the behaviour draws from the key of its selection
+    expected = wheel_speeds(jax.random.key(1), take(sys_.antibodies, (3, 5)), 0, 7.0)
+    for w in wheels[:4]:  # the behaviour acts on the numbers of its selection's key
         np.testing.assert_allclose(w, expected, rtol=1e-6)
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import zlib
+from collections import Counter
 from types import SimpleNamespace
 
 import _stl_fixtures as F
@@ -23,7 +24,8 @@ import pytest
 
 from jaxais import episode
 from jaxais import trials as trials_module
-from jaxais.controllers import STL, stl_for
+from jaxais.antibodies import sample_antibodies
+from jaxais.controllers import LTL, STL, stl_for
 from jaxais.episode import FAILED_COLLISIONS, FAILED_TIME, FINISHED, RUNNING, outcome
 from jaxais.trials import TrialSet, run_trials, summarise, trial_keys
 
@@ -255,6 +257,40 @@ def test_task_loop_equals_iterate_with_folded_keys():
     assert np.all(np.asarray(expected.t) == chunk)  # every run went on (keys of t = 0..3)
     assert tree_equal(advanced.runs, expected)
     assert int(advanced.chunks) == 1
+
+
+def _hashes(jaxpr, loops: int = 0, counts: Counter | None = None) -> Counter:
+    """Threefry hashes (draws, splits, fold-ins) of a jaxpr, counted by how many loops enclose
+    them; those inside a branch (the idiotope's, once a period) count under "branch"."""
+    counts = Counter() if counts is None else counts
+    for eqn in jaxpr.eqns:
+        name = eqn.primitive.name
+        if name in ("random_bits", "random_split", "random_fold_in"):
+            counts["branch" if loops < 0 else loops] += 1
+        inner = -1 if name == "cond" else loops + (name in ("while", "scan"))
+        for value in eqn.params.values():
+            for sub in value if isinstance(value, tuple | list) else [value]:
+                if hasattr(sub, "eqns") or hasattr(sub, "jaxpr"):
+                    _hashes(getattr(sub, "jaxpr", sub), inner, counts)
+    return counts
+
+
+@pytest.mark.parametrize("ltl", [False, True])
+def test_the_task_loop_hashes_once_or_twice_per_iteration(ltl):
+    """On CPU every threefry hash is a loop of its own, so the count per iteration is what the
+    task loop's speed depends on: the keys and the simulator's noise of a chunk are drawn
+    together (three hashes a chunk), and in each iteration the act draws once (and an STL
+    learn that replaces antibodies once); the idiotope's draw sits in its periodic branch."""
+    controller, params = STL, F.batch_params()
+    if ltl:
+        controller, params = LTL, sample_antibodies(jax.random.key(0), (F.BATCH, 8))
+    w, sp = F.world(), F.sim_params()
+    keys = trial_keys(0, "SIE", F.BATCH)
+    start = lambda p: episode.start_batch(*keys, w, sp, controller, p, F.CONFIG)
+    advance = lambda b, p: episode.advance(b, w, sp, controller, p, F.CONFIG)
+    jaxpr = jax.make_jaxpr(advance)(jax.eval_shape(start, params), params)
+    expected = Counter({1: 3, 2: 1}) if ltl else Counter({1: 3, 2: 2, "branch": 1})
+    assert _hashes(jaxpr.jaxpr) == expected
 
 
 # ---------------------------------------------------------------------------------- trials

@@ -7,33 +7,27 @@ stays free of JAX and a script can still set ``XLA_FLAGS`` before JAX starts)::
     world = envs.load_world("world1")
     results = run_trials(world, {"SIE": make_system("SIE", load_seed()[0])}, 30, seed=0)
 
-Submodules: ``envs`` (the simulator), ``antigens``, ``antibodies``, ``behaviours``,
-``reinforcement``, ``network`` (eqs 1-10), ``readings`` (our readings of the paper's open points),
-``controllers``, ``episode`` (the task loop), ``ga`` (LTL), ``checkpointing``, ``seed``,
-``labels`` (the systems' names), ``systems``, ``trials``; and ``experiments``, the paper's
-experiments on top of them: ``experiments.protocol`` (its worlds, systems, trial counts and
-comparisons), ``experiments.records``, ``experiments.stats``, ``experiments.claims`` (the paper's
-32 claims), ``experiments.report``, ``experiments.ablation``, ``experiments.plotting``.
-"""
+Submodules: ``envs`` (the simulator); ``immune``, the paper's immune network: ``immune.antigens``,
+``immune.antibodies``, ``immune.behaviours``, ``immune.reinforcement``, ``immune.network`` (eqs
+1-10), ``immune.readings`` (our readings of the paper's open points); ``controllers`` (the
+controller protocol and the controllers), ``episode`` (the task loop), ``ga`` (LTL),
+``checkpointing``, ``seed``, ``labels`` (the systems' names), ``systems``, ``trials``; and
+``experiments``, the paper's experiments on top of them: ``experiments.protocol`` (its worlds,
+systems, trial counts and comparisons), ``experiments.records``, ``experiments.stats``,
+``experiments.claims`` (the paper's 32 claims), ``experiments.report``, ``experiments.ablation``,
+``experiments.plotting``."""
 
 from __future__ import annotations
 
 import importlib
-from pathlib import Path
 from typing import Any
 
 __version__ = "0.1.0"
 
-# In a source checkout the simulator lives in ../envs (installed as jaxais.envs by pip); make
-# ``import jaxais.envs`` work there too, e.g. for ``python -c`` run from the repository root.
-_checkout_envs = Path(__file__).resolve().parent.parent / "envs"
-if (_checkout_envs / "worlds").is_dir() and not (Path(__file__).parent / "envs").is_dir():
-    __path__.append(str(_checkout_envs.parent))  # noqa: F821 (module __path__)
-
 _EXPORTS = {
     "GAConfig": "ga",
-    "NetworkParams": "network",
-    "Readings": "readings",
+    "NetworkParams": "immune.network",
+    "Readings": "immune.readings",
     "EpisodeConfig": "episode",
     "System": "controllers",
     "LTL": "controllers",

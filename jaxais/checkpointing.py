@@ -31,8 +31,8 @@ from typing import Any
 import jax
 import numpy as np
 
-from jaxais.antibodies import within_limits
 from jaxais.ga import GAConfig, GAState, abstract_state
+from jaxais.immune.antibodies import within_limits
 from jaxais.orbax_reads import forget_abandoned_reads
 
 __all__ = [

@@ -12,7 +12,7 @@ task loop's time goes with the number of draws per iteration, not their size. Le
 therefore draw at most once per iteration each and slice the draw, relying on JAX's threefry
 numbering a draw's values by their index (a draw's first k values are the k-value draw from the
 same key). An act draws a new bout's two uniforms first, which are what
-:func:`~jaxais.behaviours.wheel_speeds` draws from that key, then the selection's tie-breaks.
+:func:`~jaxais.immune.behaviours.wheel_speeds` draws from that key, then the selection's tie-breaks.
 """
 
 from __future__ import annotations
@@ -23,20 +23,20 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxais.antibodies import N_ATTRIBUTES, Antibodies, _antibodies, take
-from jaxais.antigens import is_collision, is_obstacle_or_collision
-from jaxais.behaviours import _wheel_speeds
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.episode import Controller, Percept
-from jaxais.network import (
+from jaxais.immune.antibodies import N_ATTRIBUTES, Antibodies, _antibodies, take
+from jaxais.immune.antigens import is_collision, is_obstacle_or_collision
+from jaxais.immune.behaviours import _wheel_speeds
+from jaxais.immune.network import (
     NetworkParams,
     _idiotypic_select,
     _select_alpha,
     idiotopes,
     rescale_paratopes,
 )
-from jaxais.readings import DEFAULT, Readings
-from jaxais.reinforcement import (
+from jaxais.immune.readings import DEFAULT, Readings
+from jaxais.immune.reinforcement import (
     PENALTY_NON_IDIOTYPIC,
     PenaltyCounters,
     init_counters,
@@ -87,11 +87,10 @@ class Bout:
     Attributes:
         antigen: [] int32 the antigen it was selected for (its antibody column).
         left: [] int32 iterations of the bout still to act after this one.
-        u: [2] the behaviour's uniforms, what :func:`~jaxais.behaviours.wheel_speeds` draws from
-            the act key of the bout's selection: the behaviour acts on the same numbers all bout,
-            so a wander's turn decision holds for the bout and F % is the share of bouts, i.e.
-            of time, spent turning.
-    """
+        u: [2] the behaviour's uniforms, what :func:`~jaxais.immune.behaviours.wheel_speeds` draws
+            from the act key of the bout's selection: the behaviour acts on the same numbers all
+            bout, so a wander's turn decision holds for the bout and F % is the share of bouts, i.e.
+            of time, spent turning."""
 
     antigen: jnp.ndarray
     left: jnp.ndarray
@@ -189,7 +188,7 @@ class System:
         idiotypic: three-stage idiotypic selection (eqs 5-10) rather than stage 1 alone.
         replacement: replace antibodies with P < 0.1 (unseeded systems).
         network: the network constants.
-        readings: our readings of the paper's open points (:mod:`jaxais.readings`).
+        readings: our readings of the paper's open points (:mod:`jaxais.immune.readings`).
     """
 
     antibodies: Antibodies
@@ -255,7 +254,7 @@ def stl_controller(
         return STLState(
             antibodies=system.antibodies,
             P=P,
-            # Eq (4)'s targets, floored so that no column is pinned at 0 (jaxais.readings).
+            # Eq (4)'s targets, floored so that no column is pinned at 0 (jaxais.immune.readings).
             sigma0=jnp.maximum(jnp.mean(P, axis=0), system.readings.sigma0_floor),
             I=idiotopes(key, P),
             N=jnp.full(P.shape, system.network.initial_clones, jnp.float32),

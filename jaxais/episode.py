@@ -24,8 +24,8 @@ import numpy as np
 from jax.extend.core import jaxpr_as_fun
 
 from jaxais import envs
-from jaxais.antigens import OBSTACLE_THRESHOLD, antigen, is_collision
 from jaxais.envs.struct import pytree_dataclass
+from jaxais.immune.antigens import OBSTACLE_THRESHOLD, antigen, is_collision
 
 # Why a run ended (failed_by codes).
 RUNNING, FINISHED, FAILED_COLLISIONS, FAILED_TIME = 0, 1, 2, 3

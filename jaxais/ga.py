@@ -16,7 +16,7 @@ One generation (:func:`step`):
    generation inside each population: the ``elitism`` best robots survive unchanged; every
    other child has two parents drawn by roulette on 1/(τ + ρc), takes for each antigen the
    antibody of either parent (``crossover="uniform"``) or of the one with the higher L
-   (``"rl"``, ties at random), and is mutated with :func:`jaxais.antibodies.mutate`.
+   (``"rl"``, ties at random), and is mutated with :func:`jaxais.immune.antibodies.mutate`.
 3. :func:`verify` (when ``success_starts`` > 0), the success check: each population's best robot
    of the generation runs the maze again from ``success_starts`` fresh random starts. If it is
    already the population's best so far, the check is pooled into that best's record; else it
@@ -83,11 +83,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxais import envs
-from jaxais.antibodies import Antibodies, antibody_distance, mutate, sample_antibodies
-from jaxais.antigens import N_ANTIGENS
 from jaxais.controllers import LTL
 from jaxais.envs.struct import pytree_dataclass, static_field
 from jaxais.episode import FINISHED, RHO, EpisodeConfig, fitness, outcome, rollout
+from jaxais.immune.antibodies import Antibodies, antibody_distance, mutate, sample_antibodies
+from jaxais.immune.antigens import N_ANTIGENS
 from jaxais.seed import Seed
 
 __all__ = [
@@ -1092,9 +1092,10 @@ def best_sets(state: GAState) -> Seed:
 def diversity(sets: Antibodies) -> float:
     """Mean pairwise distance between sets (SPEC 10 [ours]).
 
-    For every pair of sets (i < k) and every antigen j, :func:`jaxais.antibodies.antibody_distance`
-    between A_ij and A_kj (1 for different types, else the mean normalised attribute
-    difference); the result is the mean over all pairs and antigens, in [0, 1].
+    For every pair of sets (i < k) and every antigen j,
+    :func:`jaxais.immune.antibodies.antibody_distance` between A_ij and A_kj (1 for different types,
+    else the mean normalised attribute difference); the result is the mean over all pairs and
+    antigens, in [0, 1].
 
     Args:
         sets: [K, 8] antibody sets, K >= 2.

@@ -21,13 +21,13 @@ from typing import Any
 
 import numpy as np
 
-from jaxais.antibodies import (
+from jaxais.envs.struct import pytree_dataclass
+from jaxais.immune.antibodies import (
     Antibodies,
     from_dicts,
     to_dicts,
     within_limits,
 )
-from jaxais.envs.struct import pytree_dataclass
 from jaxais.orbax_reads import forget_abandoned_reads
 
 SEED_JSON = "seed.json"

@@ -20,12 +20,12 @@ import jax
 import numpy as np
 
 from jaxais import envs
-from jaxais.antibodies import Antibodies, from_dicts, sample_antibodies
 from jaxais.controllers import System
 from jaxais.envs.struct import device_array
+from jaxais.immune.antibodies import Antibodies, from_dicts, sample_antibodies
+from jaxais.immune.network import NetworkParams, relative_fitness, seed_paratopes
+from jaxais.immune.readings import DEFAULT, Readings
 from jaxais.labels import LABELS, RANDOM_SETS, SYSTEMS, label, parse_label  # noqa: F401 (re-export)
-from jaxais.network import NetworkParams, relative_fitness, seed_paratopes
-from jaxais.readings import DEFAULT, Readings
 from jaxais.seed import Seed
 
 UNSEEDED_P = (0.25, 0.75)
@@ -94,7 +94,7 @@ def make_system(
         random_set: R1 or R2 (needed by UIE and URL).
         network: network constants (default: the paper's).
         readings: our readings of the paper's open points (default: ours,
-            :data:`jaxais.readings.DEFAULT`).
+            :data:`jaxais.immune.readings.DEFAULT`).
     """
     if "-" in name:
         name, random_set = parse_label(name)

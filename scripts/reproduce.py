@@ -138,7 +138,7 @@ def main(argv: list[str] | None = None) -> None:
         run_config,
         versions,
     )
-    from jaxais.network import NetworkParams
+    from jaxais.immune.network import NetworkParams
     from jaxais.seed import default_seed_dir
     from jaxais.trials import run_trials
 

@@ -77,7 +77,7 @@ def main(argv: list[str] | None = None) -> None:
     from jaxais import compilation_cache, envs, host_devices
     from jaxais.episode import EpisodeConfig
     from jaxais.experiments.records import build_systems, results_document, run_config
-    from jaxais.network import NetworkParams
+    from jaxais.immune.network import NetworkParams
     from jaxais.trials import run_trials
 
     compilation_cache.enable()

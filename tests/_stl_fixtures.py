@@ -15,12 +15,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxais import envs
-from jaxais.antibodies import sample_antibodies
 from jaxais.controllers import STL, Bout, STLState, System
 from jaxais.episode import EpisodeConfig, Percept, iterate, start
-from jaxais.network import NetworkParams
-from jaxais.readings import LITERAL, Readings
-from jaxais.reinforcement import PenaltyCounters
+from jaxais.immune.antibodies import sample_antibodies
+from jaxais.immune.network import NetworkParams
+from jaxais.immune.readings import LITERAL, Readings
+from jaxais.immune.reinforcement import PenaltyCounters
 from jaxais.seed import Seed, save_seed
 from jaxais.systems import make_system
 

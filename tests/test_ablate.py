@@ -24,9 +24,9 @@ import numpy as np
 import pytest
 
 from jaxais import envs
-from jaxais.antibodies import TYPE_NAMES, from_dicts
 from jaxais.experiments import ablation, protocol
-from jaxais.readings import DEFAULT, LITERAL, readings
+from jaxais.immune.antibodies import TYPE_NAMES, from_dicts
+from jaxais.immune.readings import DEFAULT, LITERAL, readings
 from jaxais.systems import HAND_DESIGNED, LABELS, make_system
 from jaxais.trials import STL_CONFIG, TrialSet, run_trials
 

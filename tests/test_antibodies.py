@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxais.antibodies import (
+from jaxais.immune.antibodies import (
     ATTRIBUTE_NAMES,
     LIMITS_MAX,
     LIMITS_MIN,

@@ -9,7 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxais.antigens import (
+from jaxais.envs import Observation
+from jaxais.immune.antigens import (
     ANTIGEN_NAMES,
     COLLISION_THRESHOLD,
     N_ANTIGENS,
@@ -20,7 +21,6 @@ from jaxais.antigens import (
     is_obstacle_or_collision,
     severity,
 )
-from jaxais.envs import Observation
 
 _antigen = jax.jit(antigen)
 _batched = jax.jit(jax.vmap(antigen))

@@ -1,4 +1,5 @@
-"""Behaviour-level tests of our readings of SPEC 5 and 6 (:mod:`jaxais.readings`), from motion.
+"""Behaviour-level tests of our readings of SPEC 5 and 6 (:mod:`jaxais.immune.readings`), from
+motion.
 
 Robots whose set maps every antigen to one behaviour type of Table 1 (or antigens 0-1 to it and
 the obstacle and collision antigens 2-7 to a given escape) run in an empty and a cluttered arena
@@ -30,12 +31,12 @@ import numpy as np
 import pytest
 
 from jaxais import envs, episode
-from jaxais.antibodies import Antibodies, from_dicts
-from jaxais.antigens import COLLISION_THRESHOLD, OBSTACLE_THRESHOLD, antigen
 from jaxais.controllers import ltl_controller
 from jaxais.episode import Controller, EpisodeConfig, outcome
-from jaxais.readings import DEFAULT, HOLD, LITERAL, Readings, readings
-from jaxais.reinforcement import init_counters, update_penalty
+from jaxais.immune.antibodies import Antibodies, from_dicts
+from jaxais.immune.antigens import COLLISION_THRESHOLD, OBSTACLE_THRESHOLD, antigen
+from jaxais.immune.readings import DEFAULT, HOLD, LITERAL, Readings, readings
+from jaxais.immune.reinforcement import init_counters, update_penalty
 from jaxais.systems import HAND_DESIGNED
 
 WORLDS = Path(__file__).parent / "worlds"

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxais.antibodies import (
+from jaxais.immune.antibodies import (
     LIMITS_MAX,
     LIMITS_MIN,
     N_TYPES,
@@ -16,7 +16,7 @@ from jaxais.antibodies import (
     from_matrix,
     take,
 )
-from jaxais.behaviours import MAX_WHEEL_SPEED, wheel_speeds
+from jaxais.immune.behaviours import MAX_WHEEL_SPEED, wheel_speeds
 
 N = 20000
 _speeds = jax.jit(wheel_speeds)

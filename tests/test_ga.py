@@ -22,16 +22,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxais import envs, ga
-from jaxais.antibodies import (
+from jaxais.checkpointing import state_to_tree
+from jaxais.controllers import LTL
+from jaxais.episode import EpisodeConfig, rollout
+from jaxais.immune.antibodies import (
     LIMITS_MIN,
     Antibodies,
     antibody_distance,
     sample_antibodies,
     within_limits,
 )
-from jaxais.checkpointing import state_to_tree
-from jaxais.controllers import LTL
-from jaxais.episode import EpisodeConfig, rollout
 
 TINY = ga.GAConfig(populations=2, robots=4, generations=2, tau_cap=2.0, starts=1, success_starts=4)
 """The tests' GA: every test that evaluates robots uses this config (batches of 8 runs)."""

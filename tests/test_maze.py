@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 
 from jaxais import envs, ga
-from jaxais.antibodies import from_dicts
+from jaxais.immune.antibodies import from_dicts
 from jaxais.systems import HAND_DESIGNED
 
 # Obstacle and collision avoidance: the hand-designed controller's (steer away from a detected

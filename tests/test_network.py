@@ -1,4 +1,4 @@
-"""Tests of the idiotypic network equations (1)-(10) in jaxais.network.
+"""Tests of the idiotypic network equations (1)-(10) in jaxais.immune.network.
 
 Every equation is checked against hand-worked numbers and against a plain NumPy reference
 written independently here (loops, float64). Jitted functions are built once at module level and
@@ -21,7 +21,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from jaxais import network as nw
+from jaxais.immune import network as nw
 
 X, Y = 5, 8
 PARAMS = nw.network_params()

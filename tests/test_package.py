@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import ast
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from _python import run_python
@@ -123,3 +125,44 @@ def test_jit_compiles_with_the_options_of_its_mode(monkeypatch) -> None:
     assert [o["mode"] for o in seen] == ["default", "quick", "small"]
     with pytest.raises(ValueError, match="one of"):
         ec.jit(fun, quick_compile=True, small_kernels=True)
+
+
+def _jaxais_imports(folder: str) -> dict[str, set[str]]:
+    """file -> the jaxais modules it imports (absolute names), for every .py under ``folder``."""
+    root = Path(__file__).resolve().parent.parent
+    found = {}
+    for path in sorted((root / folder).rglob("*.py")):
+        names = set()
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                names |= {a.name for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names |= {node.module, *(f"{node.module}.{a.name}" for a in node.names)}
+        found[str(path.relative_to(root))] = {n for n in names if n.startswith("jaxais")}
+    return found
+
+
+@pytest.mark.parametrize(
+    ("folder", "allowed"),
+    [
+        ("envs", ("jaxais.envs",)),  # the physics never imports the rest
+        ("jaxais/immune", ("jaxais.immune", "jaxais.envs")),  # the model, not the task loop
+    ],
+)
+def test_lower_layers_import_only_themselves(folder, allowed):
+    offenders = {
+        f: sorted(n for n in names if not any(n == a or n.startswith(a + ".") for a in allowed))
+        for f, names in _jaxais_imports(folder).items()
+    }
+    assert not {f: n for f, n in offenders.items() if n}
+
+
+def test_envs_and_immune_are_the_installed_packages_not_a_path_hack():
+    # pip maps envs/ to jaxais.envs (pyproject's package-dir); jaxais/__init__.py adds nothing to
+    # its __path__, so tools that follow imports find the physics where the packaging puts it.
+    import jaxais.envs
+    import jaxais.immune
+
+    assert list(jaxais.__path__) == [str(Path(jaxais.__file__).parent)]
+    assert Path(jaxais.immune.__file__).parent.parent == Path(jaxais.__file__).parent
+    assert (Path(jaxais.envs.__file__).parent / "worlds" / "world1.toml").is_file()

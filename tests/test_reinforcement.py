@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxais.reinforcement import (
+from jaxais.immune.reinforcement import (
     OBSTACLE_LIMIT,
     PENALTY_IDIOTYPIC,
     PENALTY_NON_IDIOTYPIC,
@@ -234,7 +234,7 @@ def test_penalty_vmap() -> None:
     assert [(np.flatnonzero(np.asarray(f)) + 1).tolist() for f in fire] == [[251], [16], []]
 
 
-# --- encounters [ours: jaxais.readings] ---------------------------------------------------------
+# --- encounters [ours: jaxais.immune.readings] ----------------------------------------------------
 
 _run_encounters = jax.jit(
     lambda ms, gap: jax.lax.scan(lambda c, m: update_penalty(c, m, True, gap), init_counters(), ms)

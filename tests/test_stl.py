@@ -19,12 +19,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxais.antibodies import _antibodies, take, within_limits
-from jaxais.behaviours import wheel_speeds
 from jaxais.controllers import interrupts
-from jaxais.network import idiotopes
-from jaxais.readings import LITERAL, readings
-from jaxais.reinforcement import rl_score
+from jaxais.immune.antibodies import _antibodies, take, within_limits
+from jaxais.immune.behaviours import wheel_speeds
+from jaxais.immune.network import idiotopes
+from jaxais.immune.readings import LITERAL, readings
+from jaxais.immune.reinforcement import rl_score
 
 hyp = settings(max_examples=25, deadline=None)
 seeds = st.integers(0, 2**31 - 1)

@@ -24,9 +24,9 @@ import pytest
 
 from jaxais import episode
 from jaxais import trials as trials_module
-from jaxais.antibodies import sample_antibodies
 from jaxais.controllers import LTL, STL, stl_for
 from jaxais.episode import FAILED_COLLISIONS, FAILED_TIME, FINISHED, RUNNING, outcome
+from jaxais.immune.antibodies import sample_antibodies
 from jaxais.trials import TrialSet, run_trials, summarise, trial_keys
 
 DT = 0.032

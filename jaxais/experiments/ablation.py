@@ -8,14 +8,14 @@ variant, :func:`run_ablation` runs every system of the paper's protocol in every
 (:mod:`jaxais.experiments.claims`) and the mean f and failure rate of SIE, HDC and URL-R1. The
 systems of each world and the trial counts are :mod:`jaxais.experiments.protocol`'s.
 
-Batching. The readings (:class:`jaxais.readings.Readings`) and the HDC's antibodies are traced
-data of a :class:`~jaxais.controllers.System`, so the variants that differ only there run as one
-batch, in one compiled program per world: the systems of all of them side by side, labelled
-``"SIE@hold=1"`` and so on (:func:`jaxais.trials.run_trials` gives a tagged label the random
-streams of its plain label, so every variant meets the same worlds and draws: common random
-numbers). A variant with another :class:`~jaxais.episode.EpisodeConfig` (collision rule, stopping
-at the collision cap: static, compile-time) is its own call, and so is one with other simulator
-parameters (noise-free IR; traced but shared by a whole batch). :func:`plan_calls` groups them.
+Batching. The readings (:class:`jaxais.immune.readings.Readings`) and the HDC's antibodies are
+traced data of a :class:`~jaxais.controllers.System`, so the variants that differ only there run as
+one batch, in one compiled program per world: the systems of all of them side by side, labelled
+``"SIE@hold=1"`` and so on (:func:`jaxais.trials.run_trials` gives a tagged label the random streams
+of its plain label, so every variant meets the same worlds and draws: common random numbers). A
+variant with another :class:`~jaxais.episode.EpisodeConfig` (collision rule, stopping at the
+collision cap: static, compile-time) is its own call, and so is one with other simulator parameters
+(noise-free IR; traced but shared by a whole batch). :func:`plan_calls` groups them.
 
 Within a call, a variant's system that is the same data as another variant's (the HDC-tracking
 variant changes HDC alone) is run once and its trials shared: a run's numbers do not depend on
@@ -33,14 +33,14 @@ import numpy as np
 
 from jaxais import envs
 from jaxais import trials as trials_module
-from jaxais.antibodies import Antibodies
 from jaxais.controllers import System
 from jaxais.envs.struct import device_array
 from jaxais.episode import EpisodeConfig
 from jaxais.experiments import claims, protocol, stats
-from jaxais.network import NetworkParams
-from jaxais.readings import HOLD, SIGMA0_FLOOR, Readings
-from jaxais.readings import readings as make_readings
+from jaxais.immune.antibodies import Antibodies
+from jaxais.immune.network import NetworkParams
+from jaxais.immune.readings import HOLD, SIGMA0_FLOOR, Readings
+from jaxais.immune.readings import readings as make_readings
 from jaxais.seed import Seed
 from jaxais.systems import HAND_DESIGNED, N_SETS, hand_designed_sets, make_system, parse_label
 from jaxais.trials import STL_CONFIG, TrialSet

@@ -27,8 +27,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from jaxais.antigens import TARGET_SEEN, TARGET_UNSEEN, is_obstacle_or_collision, severity
 from jaxais.envs.struct import pytree_dataclass
+from jaxais.immune.antigens import TARGET_SEEN, TARGET_UNSEEN, is_obstacle_or_collision, severity
 
 __all__ = [
     "CENTRE_COLUMN",
@@ -100,7 +100,7 @@ UNSEEN_LIMIT = 250
 """Penalise after more than this many consecutive iterations of antigen 0."""
 OBSTACLE_LIMIT = 15
 """Penalise after more than this many consecutive obstacle encounters (what an encounter is:
-:class:`jaxais.readings.Readings`)."""
+:class:`jaxais.immune.readings.Readings`)."""
 PENALTY_IDIOTYPIC = 0.5
 """Score removed from the acting antibody by a penalty in idiotypic systems."""
 PENALTY_NON_IDIOTYPIC = 1.0

@@ -25,8 +25,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxais.antigens import ANTIGEN_NAMES, N_ANTIGENS
 from jaxais.envs.struct import device_array, pytree_dataclass
+from jaxais.immune.antigens import ANTIGEN_NAMES, N_ANTIGENS
 
 __all__ = [
     "ATTRIBUTE_NAMES",

@@ -15,7 +15,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from jaxais.antibodies import (
+from jaxais.immune.antibodies import (
     FORWARD_TURN,
     LEFT,
     REVERSE_TURN,

@@ -1,4 +1,12 @@
-"""Controllers built on the shared task loop (:mod:`jaxais.episode`).
+"""Controllers: the protocol the task loop (:mod:`jaxais.episode`) runs, and the controllers.
+
+A controller is a :class:`Controller`, a tuple of pure functions of one robot, key first, like
+optax's ``(init, update)`` pairs: ``init`` makes its state, ``learn`` scores what acted last,
+``act`` picks wheel speeds, ``stats`` (optional) reads what a run records from the final state.
+Its ``params`` are a pytree of its own (antibodies, flags, constants), so a batch of robots can
+differ in data under one compiled program. The loop hands it a :class:`Percept` and never looks
+inside its state: a new controller plugs in without touching the loop
+(``jaxais.trials.make_trials``, ``run_trials(..., controller=...)``).
 
 - :func:`ltl_controller`: one antibody set acting alone with RL accumulating each antibody's
   score L (the GA's evaluation, SPEC 10).
@@ -6,28 +14,33 @@
   :class:`System` (its params) says whether it learns, whether selection is idiotypic and whether
   weak antibodies are replaced, so SIE, SRL, UIE, URL and HDC are one program with different data
   and can share one compiled batch; :func:`stl_for` leaves out the parts a batch does not use.
+- :func:`braitenberg_controller`: a Braitenberg vehicle [ours, not in the paper], a reactive
+  baseline of a dozen lines: the IR readings push the wheels away from obstacles, the blue
+  centroid steers toward the target.
 
 Every draw or split of a key is a threefry hash, which runs as a loop of its own on CPU, so the
 task loop's time goes with the number of draws per iteration, not their size. Learn and act
 therefore draw at most once per iteration each and slice the draw, relying on JAX's threefry
 numbering a draw's values by their index (a draw's first k values are the k-value draw from the
 same key). An act draws a new bout's two uniforms first, which are what
-:func:`~jaxais.immune.behaviours.wheel_speeds` draws from that key, then the selection's tie-breaks.
+:func:`~jaxais.immune.behaviours.wheel_speeds` draws from that key, then the selection's
+tie-breaks.
 """
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from jaxais.envs.struct import pytree_dataclass
-from jaxais.episode import Controller, Percept
 from jaxais.immune.antibodies import N_ATTRIBUTES, Antibodies, _antibodies, take
 from jaxais.immune.antigens import is_collision, is_obstacle_or_collision
-from jaxais.immune.behaviours import _wheel_speeds
+from jaxais.immune.behaviours import MAX_WHEEL_SPEED, _wheel_speeds
 from jaxais.immune.network import (
     NetworkParams,
     _idiotypic_select,
@@ -44,6 +57,59 @@ from jaxais.immune.reinforcement import (
     rl_score,
     update_penalty,
 )
+
+# ----------------------------------------------------------------------------- the protocol
+
+
+@pytree_dataclass
+class Percept:
+    """What a controller sees at one iteration (scalars but ``ir``).
+
+    Attributes:
+        m, m_prev: antigen now and at the previous iteration (m_prev = 0 at t = 0).
+        v, v_prev: Vm (maximum IR reading) now and before.
+        ir: [8] the IR readings ps0..ps7 (0..4095, ``envs.params.IR_BEARINGS_DEG``).
+        blue_pixels: number of blue pixels; centroid: their mean column (7 when none).
+        t: iterations since the start of the run.
+        tick: iterations since the batch started, the same for every run of a batch (it equals
+            t while a run is going), so a periodic step can be a ``lax.cond`` that stays a
+            branch under ``vmap`` instead of being computed every iteration and masked.
+    """
+
+    m: jnp.ndarray
+    m_prev: jnp.ndarray
+    v: jnp.ndarray
+    v_prev: jnp.ndarray
+    ir: jnp.ndarray
+    blue_pixels: jnp.ndarray
+    centroid: jnp.ndarray
+    t: jnp.ndarray
+    tick: jnp.ndarray
+
+
+class Controller(NamedTuple):
+    """A controller as pure functions of one robot, key first.
+
+    - ``init(key, params) -> state``
+    - ``learn(key, state, percept, params) -> state``: learning from the last action's outcome
+      (a controller that does not learn returns ``state``);
+    - ``act(key, state, percept, params) -> (state, wheels [2])``: left and right wheel speeds;
+    - ``stats(state, params) -> dict[str, scalar]`` (optional): what a finished run records
+      beyond the loop's own counts, e.g. the STL's idiotypic difference rate (NaN where it
+      does not apply).
+
+    ``params`` is the controller's own pytree; every key is a typed PRNG key of its own (the
+    loop gives learn and act one each per iteration). Controllers are compared by identity when
+    compiled programs are cached, so build each once (a module constant or a cached factory).
+    """
+
+    init: Callable[..., Any]
+    learn: Callable[..., Any]
+    act: Callable[..., Any]
+    stats: Callable[..., dict[str, Any]] | None = None
+
+
+# --------------------------------------------------------------- the immune controllers' bouts
 
 L_MAX = 100.0
 """Upper clip of an antibody's cumulative RL score L in the LTL [ours, consistent with φ = 20]."""
@@ -328,7 +394,14 @@ def stl_controller(
         ab = take(s.antibodies, (acting, bout.antigen))
         return s, _wheel_speeds(bout.u, ab, pc.blue_pixels, pc.centroid)
 
-    return Controller(init=init, learn=learn, act=act)
+    def stats(s: STLState, system: System):
+        rate = s.differences / jnp.maximum(s.selections, 1)
+        return {
+            "idiotypic_difference_rate": jnp.where(system.idiotypic, rate, jnp.nan),
+            "replaced": s.replaced,
+        }
+
+    return Controller(init=init, learn=learn, act=act, stats=stats)
 
 
 LTL = ltl_controller()
@@ -350,3 +423,73 @@ def stl_for(systems: System) -> Controller:
 
 STL = _stl(True, True, True)
 """The STL network controller, every part built in (one shared instance)."""
+
+
+# ---------------------------------------------------------------------------- a baseline
+
+
+@pytree_dataclass
+class BraitenbergParams:
+    """A Braitenberg vehicle's gains [ours; a baseline, not in the paper].
+
+    Attributes:
+        speed: cruising wheel speed, speed units (Table 1's behaviours run at 100-1000).
+        avoid: turn per unit of proximity (the nearer side's, 0 far to 1 touching).
+        steer: turn per unit of the blue centroid's offset from the image centre (-1..1).
+    """
+
+    speed: jnp.ndarray
+    avoid: jnp.ndarray
+    steer: jnp.ndarray
+
+
+def braitenberg_params(speed: float = 500.0, avoid: float = 1.0, steer: float = 0.5):
+    """:class:`BraitenbergParams` as float32 scalars (the defaults are ours, set by
+    ``tests/test_controllers.py``'s behaviour tests: it turns away from the nearer wall and
+    toward the blue, not by any STL result)."""
+    f = lambda x: jnp.float32(x)
+    return BraitenbergParams(speed=f(speed), avoid=f(avoid), steer=f(steer))
+
+
+def _proximity(ir: jnp.ndarray) -> jnp.ndarray:
+    """IR readings as proximity in [0, 1]: 0 beyond about 6 cm (reading 100), 1 from about
+    1.5 cm (reading 600; ``envs.params.IR_TABLE_VALUE``)."""
+    return jnp.clip((ir - 100.0) / 500.0, 0.0, 1.0)
+
+
+def braitenberg_controller() -> Controller:
+    """A reactive vehicle: no state, no learning, no randomness.
+
+    The front sensors' proximity on each side (ps0-ps2 right, ps5-ps7 left, weighted toward
+    the front) slows the robot and turns it away from the nearer side; with nothing near, a
+    blue centroid left or right of the image centre turns it toward the blue.
+    """
+    weights = np.array([1.0, 0.7, 0.3, 0.0, 0.0, 0.3, 0.7, 1.0], np.float32)  # ps0..ps7
+    right_side = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0], np.float32)
+
+    def init(key, params):
+        del key, params
+        return jnp.int32(0)  # no state; a scalar keeps the loop's pytrees non-empty
+
+    def learn(key, state, pc: Percept, params):
+        del key, pc, params
+        return state
+
+    def act(key, state, pc: Percept, params: BraitenbergParams):
+        del key
+        p = _proximity(pc.ir) * weights
+        right, left = jnp.max(p * right_side), jnp.max(p * (1.0 - right_side))
+        near = jnp.maximum(left, right)
+        away = jnp.where(left >= right, 1.0, -1.0)  # + turns right (left wheel faster)
+        seen = pc.blue_pixels > 0
+        toward = jnp.where(seen, (pc.centroid - 7.0) / 7.0, 0.0)  # + the blue is to the right
+        turn = params.avoid * near * away + (1.0 - near) * params.steer * toward
+        forward = params.speed * (1.0 - near)
+        wheels = jnp.stack([forward + params.speed * turn, forward - params.speed * turn])
+        return state, jnp.clip(wheels, -MAX_WHEEL_SPEED, MAX_WHEEL_SPEED)
+
+    return Controller(init=init, learn=learn, act=act)
+
+
+BRAITENBERG = braitenberg_controller()
+"""The Braitenberg vehicle (one shared instance, so compiled programs are reused)."""

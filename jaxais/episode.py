@@ -5,7 +5,8 @@ rule and the caps, let the controller learn and act, step the simulator. Written
 :func:`rollout` advances a batch of runs in lockstep with ``vmap`` inside a ``while_loop``, in
 segments so that a Python driver can show progress and stop as soon as every run has ended.
 
-Controllers are (init, learn, act) triples of pure functions, like optax's transformations.
+The loop runs any :class:`~jaxais.controllers.Controller` (the protocol is in
+:mod:`jaxais.controllers`): it knows nothing of antibodies or networks.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import numpy as np
 from jax.extend.core import jaxpr_as_fun
 
 from jaxais import envs
+from jaxais.controllers import Controller, Percept
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.immune.antigens import OBSTACLE_THRESHOLD, antigen, is_collision
 
@@ -91,44 +93,6 @@ class EpisodeConfig:
     def trap_iterations(self, dt: float) -> int:
         """Iterations within the trap disc after which a robot counts as trapped."""
         return max(1, round(self.trap_window / dt))
-
-
-@pytree_dataclass
-class Percept:
-    """What a controller sees at one iteration (all scalars).
-
-    Attributes:
-        m, m_prev: antigen now and at the previous iteration (m_prev = 0 at t = 0).
-        v, v_prev: Vm (maximum IR reading) now and before.
-        blue_pixels: number of blue pixels; centroid: their mean column (7 when none).
-        t: iterations since the start of the run.
-        tick: iterations since the batch started, the same for every run of a batch (it equals
-            t while a run is going), so a periodic step can be a ``lax.cond`` that stays a
-            branch under ``vmap`` instead of being computed every iteration and masked.
-    """
-
-    m: jnp.ndarray
-    m_prev: jnp.ndarray
-    v: jnp.ndarray
-    v_prev: jnp.ndarray
-    blue_pixels: jnp.ndarray
-    centroid: jnp.ndarray
-    t: jnp.ndarray
-    tick: jnp.ndarray
-
-
-class Controller(NamedTuple):
-    """A controller as pure functions of one robot, key first.
-
-    init(key, params) -> cstate; learn(key, cstate, percept, params) -> cstate (scores the
-    antibody that acted last); act(key, cstate, percept, params) -> (cstate, wheels [2]).
-    ``params`` is the controller's own pytree (antibodies, flags, constants); every key is a
-    typed PRNG key of its own (the loop gives learn and act one each per iteration).
-    """
-
-    init: Callable[..., Any]
-    learn: Callable[..., Any]
-    act: Callable[..., Any]
 
 
 @pytree_dataclass
@@ -263,6 +227,7 @@ def _iterate(
         m_prev=run.m_prev,
         v=obs.vm,
         v_prev=run.v_prev,
+        ir=obs.ir,
         blue_pixels=obs.blue_pixels,
         centroid=obs.blue_centroid,
         t=run.t,
@@ -663,19 +628,23 @@ def rollout(
     return batch
 
 
-def outcome(runs: Run, config: EpisodeConfig, dt: float) -> dict[str, np.ndarray]:
+def outcome(runs: Run, config: EpisodeConfig, dt: float, xp: Any = np) -> dict[str, Any]:
     """Per-run τ (s, capped), collisions (raw and capped), f = (ρc + τ)/2 with ρ = 8 and the
     capped c (SPEC 9), the failures, trapped time and the status.
 
+    Args:
+        xp: ``numpy`` (default: on the host, τ in float64) or ``jax.numpy`` (inside a traced
+            function, :func:`jaxais.trials.make_trials`).
+
     Returns:
-        NumPy arrays [n]: tau, collisions (raw), collisions_capped, fitness, failed_collisions
+        Arrays [n]: tau, collisions (raw), collisions_capped, fitness, failed_collisions
         (c > cap), failed_time (the time cap reached), trapped_s, status, iterations.
     """
-    status = np.asarray(runs.status)
-    t = np.asarray(runs.t)
-    tau = np.minimum(t * dt, config.tau_cap)
-    raw = np.asarray(runs.collisions)
-    capped = np.minimum(raw, config.collision_cap)
+    status = xp.asarray(runs.status)
+    t = xp.asarray(runs.t)
+    tau = xp.minimum(t * dt, config.tau_cap)
+    raw = xp.asarray(runs.collisions)
+    capped = xp.minimum(raw, config.collision_cap)
     return {
         "tau": tau,
         "collisions": raw,
@@ -683,7 +652,7 @@ def outcome(runs: Run, config: EpisodeConfig, dt: float) -> dict[str, np.ndarray
         "fitness": fitness(tau, capped),
         "failed_collisions": raw > config.collision_cap,
         "failed_time": status == FAILED_TIME,
-        "trapped_s": np.asarray(runs.trapped) * dt,
+        "trapped_s": xp.asarray(runs.trapped) * dt,
         "status": status,
         "iterations": t,
     }

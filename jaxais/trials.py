@@ -7,22 +7,34 @@ of its name (:func:`stream_id`), not by its place in a list: adding, removing or
 systems changes no other system's trials. A label may carry a variant tag after "@"
 (``"SIE@hold=1"``): the same system with other data (``scripts/ablate.py`` batches several
 variants of one system), which meets the same worlds and random streams as the plain label.
+
+Two ways to run them:
+
+- :func:`make_trials` builds an experiment as one pure function, ``run(key, params)`` ->
+  per-trial arrays, jitted, which ``vmap`` batches over seeds (keys) and parameter grids (a
+  params pytree with a leading axis): what sweeps are made of.
+- :func:`run_trials` runs several systems' trials as one batch from the host, with a progress
+  bar, and returns trial records (what the scripts and the paper's tables use). Its trials are
+  those of ``make_trials``: the same keys, the same numbers.
+
+Both run any :class:`~jaxais.controllers.Controller` (default: the STL network).
 """
 
 from __future__ import annotations
 
-import functools
+import dataclasses
 import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from jaxais import envs
-from jaxais.controllers import System, stl_for
-from jaxais.episode import EpisodeConfig, outcome, rollout
+from jaxais.controllers import STL, Controller, stl_for
+from jaxais.episode import EpisodeConfig, advance, outcome, rollout, start_batch
 from jaxais.systems import LABELS
 
 STL_CONFIG = EpisodeConfig(tau_cap=4000.0, collision_cap=100, stop_at_collision_cap=False)
@@ -96,44 +108,132 @@ def batch_keys(seed: int, plan: tuple[tuple[str, int], ...]) -> tuple[jax.Array,
     return _derive_keys(np.uint32(seed), streams, trials)
 
 
-@functools.partial(envs.jit, quick_compile=True)
+@jax.jit
 def _derive_keys(seed: jax.Array, streams: jax.Array, trials: jax.Array):
     """:func:`batch_keys` given the seed and, per trial, its stream id and index ([n] uint32):
     one small program per batch size, whatever the seed and the systems."""
-    k_worlds, k_systems = jax.random.split(jax.random.key(seed))
+    return _keys(jax.random.key(seed), streams, trials)
+
+
+def _keys(key: jax.Array, streams: jax.Array, trials: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """(reset keys, run keys) [n] of the trials with these stream ids and indices, from ``key``
+    (:func:`batch_keys`)."""
+    k_worlds, k_systems = jax.random.split(key)
     fold_each = jax.vmap(jax.random.fold_in, in_axes=(None, 0))
     run_streams = fold_each(k_systems, streams)
     return fold_each(k_worlds, trials), jax.vmap(jax.random.fold_in)(run_streams, trials)
 
 
+@dataclasses.dataclass(frozen=True)
+class TrialsConfig:
+    """What :func:`make_trials` compiles in (static: it fixes shapes and the program).
+
+    Attributes:
+        world: a built-in world's name or a world TOML file (``envs.load_world``).
+        n_trials: trials per call.
+        label: the system's label, whose name chooses the random stream (:func:`batch_keys`):
+            ``make_trials(TrialsConfig(label="SIE"))(key(seed), system)`` gives the trials of
+            ``run_trials(world, {"SIE": system}, n, seed)``.
+        controller: the controller (default: the STL network, for a :class:`System`).
+        episode: caps and recording (default: the paper's STL protocol).
+    """
+
+    world: str = "world1"
+    n_trials: int = 30
+    label: str = "SIE"
+    controller: Controller = STL
+    episode: EpisodeConfig = dataclasses.field(default_factory=lambda: STL_CONFIG)
+
+    def __post_init__(self):
+        if isinstance(self.n_trials, bool) or not isinstance(self.n_trials, int):
+            raise ValueError(f"n_trials must be an integer, got {self.n_trials!r}")
+        if self.n_trials < 1:
+            raise ValueError(f"n_trials must be >= 1, got {self.n_trials}")
+
+
+def make_trials(config: TrialsConfig):
+    """An experiment as a pure function: ``run(key, params, sim_params=None)``.
+
+    ``run`` plays ``config.n_trials`` trials of ``config.controller`` with ``params`` (one
+    controller's params, e.g. a :class:`System`; every trial gets them) in ``config.world``,
+    each to its end, and returns a dict of arrays [n_trials]: :func:`jaxais.episode.outcome`'s
+    (tau, collisions, collisions_capped, fitness, failed_collisions, failed_time, trapped_s,
+    status, iterations) and the controller's ``stats`` (for the STL:
+    idiotypic_difference_rate, NaN where not idiotypic, and replaced). It is jitted, and
+    ``jax.vmap`` batches it over keys (seeds) and over a params pytree with a leading axis (a
+    grid: several values of k1, of b, of the penalties ...); ``sim_params`` (default
+    ``envs.default_params()``) is traced too, so the simulator's noise levels can be swept.
+
+    Example::
+
+        run = make_trials(TrialsConfig(world="world1", n_trials=30))
+        out = run(jax.random.key(0), make_system("SIE", load_seed()[0]))
+        out["tau"].mean()
+    """
+    world = envs.load_world(config.world)
+    episode = config.episode
+    n = config.n_trials
+    stream = np.full(n, stream_id(config.label), np.uint32)
+    trials = np.arange(n, dtype=np.uint32)
+
+    @jax.jit
+    def run_in(world, key, params, sim_params):
+        dt = float(sim_params.dt)  # static: it fixes the loop's length
+        # One call of the task loop runs every trial to its end: a segment past the time cap.
+        to_end = dataclasses.replace(episode, segment=episode.max_iterations(dt) + 1)
+        reset_keys, run_keys = _keys(key, stream, trials)
+        batched = jax.tree.map(lambda a: jnp.broadcast_to(a, (n, *jnp.shape(a))), params)
+        batch = start_batch(
+            reset_keys, run_keys, world, sim_params, config.controller, batched, to_end
+        )
+        batch = advance(batch, world, sim_params, config.controller, batched, to_end)
+        out = outcome(batch.runs, episode, dt, xp=jnp)
+        if config.controller.stats is not None:
+            out |= jax.vmap(config.controller.stats)(batch.runs.ctrl, batched)
+        return out
+
+    def run(key: jax.Array, params: Any, sim_params: envs.SimParams | None = None):
+        sim_params = envs.default_params() if sim_params is None else sim_params
+        # The world is an argument of the program, not constants folded into it: folded, XLA
+        # rounds some products differently, and a run's path (chaotic over thousands of
+        # steps) would then differ from run_trials'.
+        return run_in(world, key, params, sim_params)
+
+    return run
+
+
 def run_trials(
     world: envs.World,
-    systems: Mapping[str, System],
+    systems: Mapping[str, Any],
     n_trials: int | Mapping[str, int],
     seed: int,
     config: EpisodeConfig = STL_CONFIG,
     sim_params: envs.SimParams | None = None,
     progress: Any = None,
     timings: dict[str, float] | None = None,
+    controller: Controller | None = None,
 ) -> dict[str, TrialSet]:
     """Run every system's trials in one batch.
 
     Args:
         world: the world.
-        systems: label (from :data:`jaxais.systems.LABELS`, optionally with a variant tag
-            after "@", e.g. ``"SIE@hold=1"``: then the random streams of the plain label) ->
-            System.
+        systems: label -> the controller's params (a :class:`System` for the STL network).
+            A label names the system's random stream (:func:`batch_keys`); the STL's labels
+            come from :data:`jaxais.systems.LABELS`, optionally with a variant tag after "@"
+            (``"SIE@hold=1"``: then the random streams of the plain label).
         n_trials: trials per system (or per label).
         seed: the run's seed, in [0, 2**32).
         config: caps and recording (``config.record`` keeps trajectories).
         progress: optional tqdm-like object with ``update(n)``, advanced in simulated iterations.
         timings: optional dict collecting ``compile_s`` and ``run_s``.
+        controller: the controller every system runs (default: the STL network, the smallest
+            variant that runs these systems, :func:`~jaxais.controllers.stl_for`).
 
     Returns:
         label -> :class:`TrialSet`.
 
     Raises:
-        ValueError: an unknown label, fewer than one trial, or a seed outside [0, 2**32).
+        ValueError: an unknown STL label, fewer than one trial, or a seed outside [0, 2**32).
     """
     sim_params = envs.default_params() if sim_params is None else sim_params
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
@@ -142,7 +242,7 @@ def run_trials(
         raise ValueError(f"seed must be in [0, 2**32), got {seed}")
     counts = {k: n_trials if isinstance(n_trials, int) else n_trials[k] for k in systems}
     for name, n in counts.items():
-        if base_label(name) not in LABELS:
+        if controller is None and base_label(name) not in LABELS:
             raise ValueError(f"unknown system label {name!r} (one of {', '.join(LABELS)})")
         if n < 1:
             raise ValueError(f"trials must be >= 1, got {n} for {name}")
@@ -156,9 +256,10 @@ def run_trials(
         ],
     )
     update = None if progress is None else progress.update
-    # Parts of the network no system in the batch uses (replacement, idiotypic selection,
-    # learning) are left out of the program: same trials, a smaller and faster loop.
-    controller = stl_for(params)
+    if controller is None:
+        # Parts of the network no system in the batch uses (replacement, idiotypic selection,
+        # learning) are left out of the program: same trials, a smaller and faster loop.
+        controller = stl_for(params)
     batch = rollout(
         reset_keys,
         run_keys,
@@ -172,11 +273,9 @@ def run_trials(
         timings,
     )
     res = outcome(batch.runs, config, float(sim_params.dt))
-    ctrl = batch.runs.ctrl
-    differences = np.asarray(ctrl.differences)
-    selections = np.maximum(np.asarray(ctrl.selections), 1)
-    idiotypic = np.asarray(params.idiotypic)
-    replaced = np.asarray(ctrl.replaced)
+    if controller.stats is not None:
+        res |= jax.device_get(jax.vmap(controller.stats)(batch.runs.ctrl, params))
+    extra = sorted(set(res) - set(_OUTCOME_KEYS))
     chunks = np.asarray(batch.runs.t) // config.chunk
     poses = np.asarray(batch.poses)
     # Boxes and the goal stay where reset put them: the final state holds the start placement.
@@ -187,32 +286,41 @@ def run_trials(
         records, trajectories, placements = [], [], []
         for i in range(start, start + counts[name]):
             by_c, by_t = bool(res["failed_collisions"][i]), bool(res["failed_time"][i])
-            records.append(
-                {
-                    "tau": float(res["tau"][i]),
-                    "collisions": int(res["collisions"][i]),
-                    "collisions_capped": int(res["collisions_capped"][i]),
-                    "fitness": float(res["fitness"][i]),
-                    "failed": by_c or by_t,
-                    "failed_collisions": by_c,
-                    "failed_time": by_t,
-                    "failed_by": [
-                        name for name, on in (("collisions", by_c), ("time", by_t)) if on
-                    ],
-                    "trapped_s": float(res["trapped_s"][i]),
-                    "idiotypic_difference_rate": (
-                        float(differences[i] / selections[i]) if idiotypic[i] else None
-                    ),
-                    "iterations": int(res["iterations"][i]),
-                    "replaced": int(replaced[i]),
-                }
-            )
+            record = {
+                "tau": float(res["tau"][i]),
+                "collisions": int(res["collisions"][i]),
+                "collisions_capped": int(res["collisions_capped"][i]),
+                "fitness": float(res["fitness"][i]),
+                "failed": by_c or by_t,
+                "failed_collisions": by_c,
+                "failed_time": by_t,
+                "failed_by": [cap for cap, on in (("collisions", by_c), ("time", by_t)) if on],
+                "trapped_s": float(res["trapped_s"][i]),
+                "iterations": int(res["iterations"][i]),
+            }
+            for key in extra:  # the controller's stats; NaN (does not apply) is None
+                value = res[key][i].item()
+                record[key] = None if isinstance(value, float) and np.isnan(value) else value
+            records.append(record)
             if config.record:
                 trajectories.append(poses[i, : chunks[i] + 2])
             placements.append(Placement(boxes=placed_boxes[i], goal=placed_goal[i]))
         out[name] = TrialSet(records, trajectories if config.record else None, placements)
         start += counts[name]
     return out
+
+
+_OUTCOME_KEYS = (
+    "tau",
+    "collisions",
+    "collisions_capped",
+    "fitness",
+    "failed_collisions",
+    "failed_time",
+    "trapped_s",
+    "status",
+    "iterations",
+)
 
 
 def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:

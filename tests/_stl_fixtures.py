@@ -15,8 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxais import envs
-from jaxais.controllers import STL, Bout, STLState, System
-from jaxais.episode import EpisodeConfig, Percept, iterate, start
+from jaxais.controllers import STL, Bout, Percept, STLState, System
+from jaxais.episode import EpisodeConfig, iterate, start
 from jaxais.immune.antibodies import sample_antibodies
 from jaxais.immune.network import NetworkParams
 from jaxais.immune.readings import LITERAL, Readings
@@ -144,14 +144,18 @@ def act_fn():
     return jit(STL.act)
 
 
-def percept(m, m_prev=0, v=0.0, v_prev=0.0, blue_pixels=0, centroid=7.0, t=1, tick=None) -> Percept:
+def percept(
+    m, m_prev=0, v=0.0, v_prev=0.0, blue_pixels=0, centroid=7.0, t=1, tick=None, ir=None
+) -> Percept:
     """A hand-made percept with fixed dtypes (so the jitted functions never retrace); the batch
-    tick defaults to t (as in a running run)."""
+    tick defaults to t (as in a running run), the IR readings to Vm ahead (ps0)."""
+    ir = [v, 0, 0, 0, 0, 0, 0, 0] if ir is None else ir
     return Percept(
         m=jnp.int32(m),
         m_prev=jnp.int32(m_prev),
         v=jnp.float32(v),
         v_prev=jnp.float32(v_prev),
+        ir=jnp.asarray(ir, jnp.float32),
         blue_pixels=jnp.int32(blue_pixels),
         centroid=jnp.float32(centroid),
         t=jnp.int32(t),

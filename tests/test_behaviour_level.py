@@ -31,8 +31,8 @@ import numpy as np
 import pytest
 
 from jaxais import envs, episode
-from jaxais.controllers import ltl_controller
-from jaxais.episode import Controller, EpisodeConfig, outcome
+from jaxais.controllers import Controller, ltl_controller
+from jaxais.episode import EpisodeConfig, outcome
 from jaxais.immune.antibodies import Antibodies, from_dicts
 from jaxais.immune.antigens import COLLISION_THRESHOLD, OBSTACLE_THRESHOLD, antigen
 from jaxais.immune.readings import DEFAULT, HOLD, LITERAL, Readings, readings

@@ -345,7 +345,9 @@ def stl_controller(
             # (the rescale alone can lift an entry above 1; column means then fall a little short
             # of sigma0, and only while the bound binds).
             P = jnp.where(on, jnp.clip(rescale_paratopes(P, s.sigma0), 0.0, 1.0), P)
-            P = jnp.where(scored & fire, jnp.clip(P - penalty_size(system.idiotypic), 0.0, 1.0), P)
+            net = system.network
+            size = penalty_size(system.idiotypic, net.penalty_idiotypic, net.penalty_non_idiotypic)
+            P = jnp.where(scored & fire, jnp.clip(P - size, 0.0, 1.0), P)
             if replacement:  # only a learning run replaces
                 weak = (P < REPLACE_BELOW) & system.replacement & on
                 first = _scored(P.shape, jnp.unravel_index(jnp.argmax(weak), P.shape))
@@ -361,10 +363,12 @@ def stl_controller(
                 P = jnp.where(first, lo + (hi - lo) * u[-1], P)
                 replaced = replaced + jnp.any(weak).astype(jnp.int32)
 
-        # The idiotope is redrawn every idiotope_period iterations. The test is on the batch's
-        # tick (unbatched), so under vmap this stays a branch taken once per period.
-        due = (pc.tick % system.network.idiotope_period == 0) & (pc.tick > 0)
-        I = jax.lax.cond(due, lambda: idiotopes(key, P), lambda: s.I)
+        # The idiotope is redrawn every idiotope_period iterations of a run (not at t = 0). The
+        # test is on the batch's tick (unbatched), so under vmap this stays a branch taken once
+        # per period; a run that joins a batch at a tick that is a multiple of the period
+        # (jaxais.pool's refills) keeps the same schedule.
+        due = pc.tick % system.network.idiotope_period == 0
+        I = jax.lax.cond(due, lambda: jnp.where(pc.t > 0, idiotopes(key, P), s.I), lambda: s.I)
         return s.replace(
             antibodies=antibodies,
             P=P,

@@ -179,8 +179,10 @@ def make_trials(config: TrialsConfig):
     @jax.jit
     def run_in(world, key, params, sim_params):
         dt = float(sim_params.dt)  # static: it fixes the loop's length
-        # One call of the task loop runs every trial to its end: a segment past the time cap.
-        to_end = dataclasses.replace(episode, segment=episode.max_iterations(dt) + 1)
+        # One call of the task loop runs every trial to its end: a segment of whole chunks past
+        # the time cap (the iteration after the cap records the run's end).
+        chunks = episode.max_iterations(dt) // episode.chunk + 2
+        to_end = dataclasses.replace(episode, segment=chunks * episode.chunk)
         reset_keys, run_keys = _keys(key, stream, trials)
         batched = jax.tree.map(lambda a: jnp.broadcast_to(a, (n, *jnp.shape(a))), params)
         batch = start_batch(

@@ -268,3 +268,11 @@ def step_one(run, key: jax.Array, params: System, tick=None, config=CONFIG):
     """One unbatched iteration from ``key`` (the tick defaults to run.t)."""
     tick = run.t if tick is None else jnp.int32(tick)
     return iterate_fn()(key, run, tick, world(), sim_params(), STL, params, config)
+
+
+@functools.cache
+def sie_trials(n: int = 2):
+    """``make_trials``' run of SIE in :data:`WORLD` with :data:`CONFIG`, ``n`` trials."""
+    from jaxais.trials import TrialsConfig, make_trials
+
+    return make_trials(TrialsConfig(world=WORLD, n_trials=n, label="SIE", episode=CONFIG))

@@ -23,9 +23,8 @@ N = 2
 KEYS = ("tau", "collisions", "fitness", "trapped_s", "iterations")
 
 
-@functools.cache
 def stl_run():
-    return make_trials(TrialsConfig(world=F.WORLD, n_trials=N, label="SIE", episode=F.CONFIG))
+    return F.sie_trials(N)
 
 
 @functools.cache

@@ -134,8 +134,10 @@ def test_defaults_match_spec():
     p = nw.network_params()
     assert (p.b, p.k1, p.k2, p.k3, p.Phi) == (100.0, 0.85, 1.10, 0.0, 25.0)
     assert (p.rho, p.phi, p.initial_clones, p.idiotope_period) == (8.0, 20.0, 1000.0, 120)
-    # idiotope_period is static: eight float leaves, the period lives in the treedef.
-    assert len(jax.tree_util.tree_leaves(p)) == 8
+    # The penalties of SPEC 6 (Table 2's text): 0.5 with idiotypic selection, 1.0 without.
+    assert (p.penalty_idiotypic, p.penalty_non_idiotypic) == (0.5, 1.0)
+    # idiotope_period is static: ten float leaves, the period lives in the treedef.
+    assert len(jax.tree_util.tree_leaves(p)) == 10
     assert p.replace(k1=0.5).k1 == 0.5
 
 
@@ -151,6 +153,7 @@ def test_defaults_match_spec():
         {"Phi": -2.0},
         {"phi": 0.0},
         {"rho": -8.0},
+        {"penalty_idiotypic": -0.5},
         {"initial_clones": 0.0},
         {"k1": float("nan")},
         {"idiotope_period": 0},

@@ -235,6 +235,21 @@ def test_penalty_size(idiotypic, counters, m_prev, m):
     assert int(fire.counters.unseen_run) == 0 and int(fire.counters.obstacle_run) == 0
 
 
+@pytest.mark.parametrize("idiotypic", [True, False])
+def test_penalty_sizes_are_the_networks_traced_constants(idiotypic):
+    # A sweep sets them per run: the same compiled learn, other numbers.
+    sys_ = F.system(idiotypic=idiotypic)
+    sys_ = sys_.replace(
+        network=sys_.network.replace(penalty_idiotypic=0.25, penalty_non_idiotypic=0.75)
+    )
+    P = column_P(0, [0.5, 0.9, 0.5, 0.5, 0.5])
+    pc = F.percept(m=0, m_prev=0, v=900, v_prev=1000, t=10)
+    fire = learn(F.state(sys_, P, acting=1, unseen_run=250), pc, sys_)
+    calm = learn(F.state(sys_, P, acting=1), pc, sys_)
+    drop = P_of(calm)[1, 0] - P_of(fire)[1, 0]
+    assert drop == pytest.approx(0.25 if idiotypic else 0.75, abs=1e-6)
+
+
 def test_no_penalty_one_iteration_before_the_limit():
     sys_ = F.system()
     P = np.full((F.X, F.Y), 0.5)

@@ -63,6 +63,8 @@ class NetworkParams:
         rho: weight of collisions against completion time in eq (1).
         phi: paratope scale of eq (2), > 0.
         initial_clones: clones per antibody at the start of the STL phase.
+        penalty_idiotypic, penalty_non_idiotypic: paratope removed from the acting antibody by
+            a penalty with and without idiotypic selection (SPEC 6).
         idiotope_period: iterations between idiotope recomputations (eq 3), >= 1.
     """
 
@@ -74,6 +76,8 @@ class NetworkParams:
     rho: float = 8.0
     phi: float = 20.0
     initial_clones: float = 1000.0
+    penalty_idiotypic: float = 0.5
+    penalty_non_idiotypic: float = 1.0
     idiotope_period: int = static_field(default=120)
 
     def validate(self) -> NetworkParams:
@@ -105,6 +109,8 @@ _FLOAT_RULES = {
     "rho": (lambda v: v >= 0, ">= 0"),
     "phi": (lambda v: v > 0, "> 0"),
     "initial_clones": (lambda v: v > 0, "> 0"),
+    "penalty_idiotypic": (lambda v: v >= 0, ">= 0"),
+    "penalty_non_idiotypic": (lambda v: v >= 0, ">= 0"),
 }
 
 

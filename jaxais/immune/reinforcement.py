@@ -237,6 +237,11 @@ def update_penalty(
     return new, fire_unseen | fire_obstacle
 
 
-def penalty_size(idiotypic: bool | jnp.ndarray) -> jnp.ndarray:
-    """Score removed by one penalty: 0.5 with idiotypic selection, 1.0 without [paper]."""
-    return jnp.where(idiotypic, PENALTY_IDIOTYPIC, PENALTY_NON_IDIOTYPIC).astype(jnp.float32)
+def penalty_size(
+    idiotypic: bool | jnp.ndarray,
+    with_idiotypic: float | jnp.ndarray = PENALTY_IDIOTYPIC,
+    without: float | jnp.ndarray = PENALTY_NON_IDIOTYPIC,
+) -> jnp.ndarray:
+    """Score removed by one penalty: 0.5 with idiotypic selection, 1.0 without [paper] (the STL
+    takes both from its ``NetworkParams``, so they can be swept)."""
+    return jnp.where(idiotypic, with_idiotypic, without).astype(jnp.float32)

@@ -1,0 +1,275 @@
+"""Parameter landscapes: a grid over the STL's traced parameters, all points' trials as one pool.
+
+The network's constants (:class:`~jaxais.immune.network.NetworkParams`: k1, k2, b, Phi, ...,
+the penalties) and our readings (:class:`~jaxais.immune.readings.Readings`: hold, ...) are
+traced data of a :class:`~jaxais.controllers.System`, so every grid point is the same compiled
+program with other numbers. :func:`run_sweep` stacks one system per point, repeats it for its
+trials and runs all points x trials through :func:`jaxais.pool.run_pool` (one compiled loop,
+finished runs' slots refilled).
+
+Trial i of every point meets the same world placement and the same random streams as trial i of
+``run_trials(world, {label: system}, n, seed)`` (common random numbers across the grid): the
+point that equals the paper's constants reproduces the plain trials, and the differences between
+points are the parameters', not the draws'.
+
+Per point the sweep reports the mean and a 95 % confidence interval of tau, c (capped at 100, as
+in Table 3), f and trapped time (Student's t interval of the mean), the failure rate (Wilson
+score interval) and the mean idiotypic difference rate (t interval; idiotypic systems only).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import jax
+import numpy as np
+from scipy import stats as sps
+
+from jaxais import envs
+from jaxais.controllers import System, stl_for
+from jaxais.episode import EpisodeConfig
+from jaxais.pool import run_pool
+from jaxais.trials import _keys, stream_id
+
+PARAMETERS: dict[str, tuple[str, type]] = {
+    "k1": ("network", float),
+    "k2": ("network", float),
+    "k3": ("network", float),
+    "b": ("network", float),
+    "Phi": ("network", float),
+    "initial_clones": ("network", float),
+    "penalty_idiotypic": ("network", float),
+    "penalty_non_idiotypic": ("network", float),
+    "hold": ("readings", int),
+    "encounter_gap": ("readings", int),
+    "sigma0_floor": ("readings", float),
+}
+"""Sweepable parameters: name -> (the System field that holds it, its type)."""
+
+STATIC: dict[str, str] = {
+    "idiotope_period": "NetworkParams.idiotope_period is a loop schedule, fixed when the "
+    "program is compiled; run one sweep per value",
+    "rho": "rho and phi set the seeded paratopes (eqs 1-2) before the trials start; build the "
+    "system with other NetworkParams instead",
+    "phi": "rho and phi set the seeded paratopes (eqs 1-2) before the trials start; build the "
+    "system with other NetworkParams instead",
+}
+"""Parameters that look sweepable but are not traced, and why."""
+
+METRICS = ("tau", "c", "f", "trapped_s")
+"""Continuous metrics summarised per point (c is capped at 100)."""
+PAPER_POINT = {"k1": 0.85, "k2": 1.10}
+"""The paper's operating point (section 5: tuned for a mean idiotypic difference rate of about
+20 %)."""
+
+
+def parse_axis(spec: str) -> tuple[str, np.ndarray]:
+    """``"k1=0:2:11"`` (11 points from 0 to 2) or ``"k1=0.5,0.85,1.1"`` -> (name, values).
+
+    Raises:
+        ValueError: one line naming the bad part and the accepted forms.
+    """
+    name, sep, values = spec.partition("=")
+    name = name.strip()
+    if not sep or not values.strip():
+        raise ValueError(f"--grid {spec!r}: write NAME=START:STOP:COUNT or NAME=V1,V2,...")
+    if name in STATIC:
+        raise ValueError(f"--grid {name}: not traced ({STATIC[name]})")
+    if name not in PARAMETERS:
+        raise ValueError(f"--grid {name}: unknown parameter (one of {', '.join(PARAMETERS)})")
+    kind = PARAMETERS[name][1]
+    try:
+        if ":" in values:
+            start, stop, count = values.split(":")
+            n = int(count)
+            if n < 1:
+                raise ValueError
+            grid = np.linspace(float(start), float(stop), n)
+        else:
+            grid = np.array([float(v) for v in values.split(",")])
+    except ValueError:
+        raise ValueError(
+            f"--grid {spec!r}: write NAME=START:STOP:COUNT (COUNT >= 1) or NAME=V1,V2,..."
+        ) from None
+    if not np.all(np.isfinite(grid)):
+        raise ValueError(f"--grid {spec!r}: values must be finite")
+    if kind is int:
+        if not np.all(grid == np.round(grid)):
+            raise ValueError(f"--grid {name}: an integer parameter, got {values}")
+        grid = grid.astype(np.int32)
+    return name, grid
+
+
+def grid_points(axes: Sequence[tuple[str, np.ndarray]]) -> list[dict[str, Any]]:
+    """Every combination of the axes' values, the last axis fastest."""
+    names = [name for name, _ in axes]
+    return [
+        dict(zip(names, (v.item() for v in combo), strict=True))
+        for combo in itertools.product(*(values for _, values in axes))
+    ]
+
+
+def point_systems(base: System, points: Sequence[dict[str, Any]]) -> System:
+    """``base`` once per point with the point's values, stacked along a leading axis [P].
+
+    Raises:
+        ValueError: a value out of its parameter's range (the network's own checks).
+    """
+    systems = []
+    for point in points:
+        network = {k: v for k, v in point.items() if PARAMETERS[k][0] == "network"}
+        readings = {k: v for k, v in point.items() if PARAMETERS[k][0] == "readings"}
+        system = base.replace(
+            network=base.network.replace(**network).validate(),
+            readings=base.readings.replace(**readings),
+        )
+        systems.append(system)
+    # Each value in its base leaf's dtype (an int32 hold stays int32: the same program).
+    return jax.tree.map(
+        lambda b, *xs: np.stack([np.asarray(x, np.asarray(b).dtype) for x in xs]), base, *systems
+    )
+
+
+def _value_of(system: System, name: str) -> float | int:
+    """A parameter's value in ``system`` (the operating point a sweep is drawn around)."""
+    return np.asarray(getattr(getattr(system, PARAMETERS[name][0]), name)).item()
+
+
+def _t_interval(x: np.ndarray, level: float) -> tuple[float, float, float]:
+    """(mean, low, high) of a Student's t interval of the mean of ``x`` (finite values)."""
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return (math.nan,) * 3
+    mean = float(np.mean(x))
+    if x.size < 2:
+        return mean, mean, mean
+    half = sps.t.ppf(0.5 + level / 2, x.size - 1) * np.std(x, ddof=1) / math.sqrt(x.size)
+    return mean, mean - float(half), mean + float(half)
+
+
+def _wilson(k: int, n: int, level: float) -> tuple[float, float, float]:
+    """(rate, low, high) of the Wilson score interval of k successes in n."""
+    z = sps.norm.ppf(0.5 + level / 2)
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return p, max(0.0, centre - half), min(1.0, centre + half)
+
+
+def summarise_point(result: dict[str, np.ndarray], level: float = 0.95) -> dict[str, Any]:
+    """One point's means and intervals from its trials' outcome arrays [n]."""
+    values = {
+        "tau": result["tau"],
+        "c": result["collisions_capped"],
+        "f": result["fitness"],
+        "trapped_s": result["trapped_s"],
+    }
+    out: dict[str, Any] = {"n": int(result["tau"].size)}
+    for name in METRICS:
+        mean, lo, hi = _t_interval(np.asarray(values[name], np.float64), level)
+        out[name] = {"mean": mean, "ci": [lo, hi]}
+    failed = np.asarray(result["failed_collisions"]) | np.asarray(result["failed_time"])
+    rate, lo, hi = _wilson(int(failed.sum()), failed.size, level)
+    out["failure_rate"] = {"mean": rate, "ci": [lo, hi]}
+    if "idiotypic_difference_rate" in result:
+        idio = np.asarray(result["idiotypic_difference_rate"], np.float64)
+        if np.all(np.isnan(idio)):
+            out["idiotypic_difference_rate"] = None
+        else:
+            mean, lo, hi = _t_interval(idio, level)
+            out["idiotypic_difference_rate"] = {"mean": mean, "ci": [lo, hi]}
+    return out
+
+
+def run_sweep(
+    world: envs.World,
+    base: System,
+    label: str,
+    axes: Sequence[tuple[str, np.ndarray]],
+    n_trials: int,
+    seed: int,
+    config: EpisodeConfig,
+    sim_params: envs.SimParams | None = None,
+    slots: int = 1024,
+    progress: Callable[[int], None] | None = None,
+) -> dict[str, Any]:
+    """Every grid point's ``n_trials`` trials of ``base`` with the point's values.
+
+    Args:
+        world: the world. base: the system at the paper's constants. label: its label (it
+            names the random streams, as in :func:`jaxais.trials.run_trials`).
+        axes: (parameter name, values) per axis (:func:`parse_axis`).
+        slots: runs live at once (:func:`jaxais.pool.run_pool`).
+        progress: called with the number of runs that ended, after every segment.
+
+    Returns:
+        ``{"axes": {name: values}, "points": [{"values": {...}, <summarise_point>}, ...],
+        "runs", "robot_iterations", "wall_s"}``; points in :func:`grid_points` order.
+    """
+    sim_params = envs.default_params() if sim_params is None else sim_params
+    points = grid_points(axes)
+    grid = point_systems(base, points)
+    n_points = len(points)
+    trials = np.tile(np.arange(n_trials, dtype=np.uint32), n_points)
+    streams = np.full(trials.size, stream_id(label), np.uint32)
+    reset_keys, run_keys = _keys(jax.random.key(seed), streams, trials)
+    params = jax.tree.map(lambda a: np.repeat(a, n_trials, axis=0), grid)
+    align = math.lcm(config.chunk, int(base.network.idiotope_period))
+    align *= max(1, 600 // align)  # segments of about 600 iterations (one host check each)
+    start = time.perf_counter()
+    res = run_pool(
+        reset_keys,
+        run_keys,
+        params,
+        world,
+        sim_params,
+        stl_for(grid),
+        config,
+        slots=slots,
+        align=align,
+        progress=progress,
+    )
+    wall = time.perf_counter() - start
+    out_points = []
+    for p, point in enumerate(points):
+        part = {k: v[p * n_trials : (p + 1) * n_trials] for k, v in res.items()}
+        out_points.append({"values": point, **summarise_point(part)})
+    iterations = int(np.sum(res["iterations"], dtype=np.int64))
+    base_values = {name: _value_of(base, name) for name, _ in axes}
+    return {
+        "axes": {name: values.tolist() for name, values in axes},
+        "base_values": base_values,
+        "points": out_points,
+        "runs": int(trials.size),
+        "robot_iterations": iterations,
+        "wall_s": wall,
+        "runs_per_s": trials.size / wall,
+        "robot_iterations_per_s": iterations / wall,
+    }
+
+
+def surface(doc: dict[str, Any], metric: str) -> np.ndarray:
+    """A metric's point means on the grid, shape [len(axis) for each axis] (NaN where none)."""
+    shape = [len(v) for v in doc["axes"].values()]
+    values = [math.nan if p.get(metric) is None else p[metric]["mean"] for p in doc["points"]]
+    return np.asarray(values, np.float64).reshape(shape)
+
+
+def interpolate(doc: dict[str, Any], metric: str, at: dict[str, float]) -> float | None:
+    """A metric's mean at a point between grid points of a 2-D sweep (bilinear), or None when
+    the point lies outside the grid or the sweep is not over those two axes."""
+    names = list(doc["axes"])
+    if len(names) != 2 or set(names) != set(at):
+        return None
+    from scipy.interpolate import RegularGridInterpolator
+
+    axes = [np.asarray(doc["axes"][n], np.float64) for n in names]
+    if any(a.size < 2 for a in axes):
+        return None
+    f = RegularGridInterpolator(axes, surface(doc, metric), bounds_error=False)
+    value = float(f([[at[n] for n in names]])[0])
+    return None if math.isnan(value) else value

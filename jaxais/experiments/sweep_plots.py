@@ -1,0 +1,104 @@
+"""Figures of a parameter sweep (:mod:`jaxais.experiments.sweep`): lines for one axis, heatmaps
+for two, the operating point of the swept system marked."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from jaxais.experiments.plotting import save_figure
+from jaxais.experiments.sweep import surface
+
+PANELS = (
+    ("f", "mean f = (8c + τ)/2"),
+    ("failure_rate", "failure rate"),
+    ("idiotypic_difference_rate", "idiotypic difference rate"),
+    ("tau", "mean τ (s)"),
+    ("c", "mean c (capped at 100)"),
+    ("trapped_s", "mean trapped time (s)"),
+)
+CONTOUR = 0.20
+"""The idiotypic difference rate the paper tuned k1 and k2 for (section 5)."""
+
+
+def _new_figure(size: tuple[float, float]) -> Figure:
+    fig = Figure(figsize=size, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _panels(doc: dict[str, Any]) -> list[tuple[str, str]]:
+    present = lambda m: any(p.get(m) is not None for p in doc["points"])
+    return [(m, title) for m, title in PANELS if present(m)]
+
+
+def _line_figure(doc: dict[str, Any], path: Path) -> None:
+    ((name, values),) = doc["axes"].items()
+    panels = _panels(doc)
+    fig = _new_figure((4.0 * len(panels), 3.2))
+    axes = fig.subplots(1, len(panels), squeeze=False)[0]
+    for ax, (metric, title) in zip(axes, panels, strict=True):
+        mean = surface(doc, metric)
+        ci = np.asarray(
+            [p[metric]["ci"] if p.get(metric) else [np.nan, np.nan] for p in doc["points"]],
+            np.float64,
+        )
+        ax.plot(values, mean, marker="o", color="C0")
+        ax.fill_between(values, ci[:, 0], ci[:, 1], color="C0", alpha=0.2, label="95 % CI")
+        ax.axvline(doc["base_values"][name], color="k", ls="--", lw=1, label="operating point")
+        if metric == "idiotypic_difference_rate":
+            ax.axhline(CONTOUR, color="C3", lw=1, label="20 %")
+        ax.set_xlabel(name)
+        ax.set_title(title, fontsize=9)
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"{doc['system']} in {doc['world']}, {doc['trials']} trials per point")
+    save_figure(fig, path)
+
+
+def _heatmap_figure(doc: dict[str, Any], path: Path) -> None:
+    (ny, yv), (nx, xv) = ((n, np.asarray(v)) for n, v in doc["axes"].items())
+    panels = _panels(doc)
+    cols = 3
+    rows = -(-len(panels) // cols)
+    fig = _new_figure((4.3 * cols, 3.6 * rows))
+    axes = fig.subplots(rows, cols, squeeze=False).ravel()
+    for ax in axes[len(panels) :]:
+        ax.set_visible(False)
+    for ax, (metric, title) in zip(axes, panels, strict=True):
+        z = surface(doc, metric)  # [len(y), len(x)]
+        mesh = ax.pcolormesh(xv, yv, z, shading="nearest", cmap="viridis")
+        fig.colorbar(mesh, ax=ax, shrink=0.85)
+        if metric == "idiotypic_difference_rate" and min(z.shape) > 1:
+            if np.nanmin(z) <= CONTOUR <= np.nanmax(z):
+                ax.contour(xv, yv, z, levels=[CONTOUR], colors="w", linewidths=1.5)
+                ax.set_title(f"{title} (white: 20 %)", fontsize=9)
+            else:
+                extent = f"{100 * np.nanmin(z):.1f}-{100 * np.nanmax(z):.1f} %"
+                ax.set_title(f"{title}: {extent}, no 20 % contour", fontsize=9)
+        else:
+            ax.set_title(title, fontsize=9)
+        base = doc["base_values"]
+        ax.plot(base[nx], base[ny], marker="*", ms=12, color="C3", mec="w", ls="none")
+        ax.set_xlabel(nx)
+        ax.set_ylabel(ny)
+    fig.suptitle(
+        f"{doc['system']} in {doc['world']}, {doc['trials']} trials per point "
+        "(red star: the operating point)"
+    )
+    save_figure(fig, path)
+
+
+def save_sweep_figures(doc: dict[str, Any], out: Path) -> list[Path]:
+    """Draw ``doc``'s figure into ``out`` (sweep.png); none for three or more axes."""
+    path = Path(out) / "sweep.png"
+    if len(doc["axes"]) == 1:
+        _line_figure(doc, path)
+    elif len(doc["axes"]) == 2:
+        _heatmap_figure(doc, path)
+    else:
+        return []
+    return [path]

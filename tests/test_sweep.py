@@ -1,0 +1,226 @@
+"""Parameter sweeps: the pool of runs (``jaxais.pool``) and the grid (``experiments.sweep``).
+
+The pool's runs must be those of ``make_trials`` bit for bit, whatever slot they ran in and
+whenever they started; the sweep's points those of plain trials with the point's constants. All
+programs are world1 under :data:`_stl_fixtures.CONFIG`'s short caps, one slot, so each compiles
+once per session.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import _stl_fixtures as F
+import jax
+import numpy as np
+import pytest
+from scipy import stats as sps
+
+from jaxais.controllers import stl_for
+from jaxais.experiments import sweep
+from jaxais.pool import run_pool
+from jaxais.trials import _keys, stream_id
+
+ROOT = Path(__file__).resolve().parent.parent
+N = 2
+
+
+def keys(seed: int, n: int = N):
+    trials = np.arange(n, dtype=np.uint32)
+    return _keys(jax.random.key(seed), np.full(n, stream_id("SIE"), np.uint32), trials)
+
+
+def repeated(system, n: int = N):
+    return jax.tree.map(lambda a: np.repeat(np.asarray(a)[None], n, 0), system)
+
+
+def pool(seed: int, system, n: int = N, **kw):
+    reset_keys, run_keys = keys(seed, n)
+    params = repeated(system, n)
+    controller = stl_for(params)
+    return run_pool(
+        reset_keys, run_keys, params, F.world(), F.sim_params(), controller, F.CONFIG, **kw
+    )
+
+
+def test_one_slot_refilled_gives_make_trials_runs_bit_for_bit():
+    # One slot: trial 1 starts when trial 0 has ended, at a tick aligned to the idiotope's period
+    # (120 iterations; 600 = 24 chunks). Its idiotope redraws then fall where they fall in a
+    # batch that started both trials at once.
+    sie = F.systems()["SIE"]
+    for seed in (0, 1):
+        want = jax.device_get(F.sie_trials(N)(jax.random.key(seed), sie))
+        got = pool(seed, sie, slots=1, align=600)
+        for k in ("iterations", "collisions", "status", "idiotypic_difference_rate", "replaced"):
+            np.testing.assert_array_equal(got[k], want[k], err_msg=f"seed {seed}: {k}")
+        for k in ("tau", "fitness", "trapped_s"):  # the same counts, times dt in float64 here
+            np.testing.assert_allclose(got[k], want[k], rtol=1e-6, err_msg=f"seed {seed}: {k}")
+
+
+def test_pool_rejects_bad_alignments_and_slot_counts():
+    sie = F.systems()["SIE"]
+    with pytest.raises(ValueError, match="multiple of the chunk"):
+        pool(0, sie, slots=1, align=610)
+    with pytest.raises(ValueError, match="slots must be >= 1"):
+        pool(0, sie, slots=0)
+
+
+# --------------------------------------------------------------------------------- the grid
+
+
+def test_parse_axis_forms():
+    name, values = sweep.parse_axis("k1=0:2:11")
+    assert name == "k1"
+    np.testing.assert_allclose(values, np.linspace(0, 2, 11))
+    name, values = sweep.parse_axis("hold=1,10,31")
+    assert name == "hold" and values.dtype == np.int32 and values.tolist() == [1, 10, 31]
+    assert sweep.parse_axis("k2=1.1")[1].tolist() == [1.1]
+
+
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        ("k1", "NAME=START:STOP:COUNT"),
+        ("k1=", "NAME=START:STOP:COUNT"),
+        ("k1=0:2", "NAME=START:STOP:COUNT"),
+        ("k1=0:2:0", "COUNT >= 1"),
+        ("k1=a,b", "NAME=START:STOP:COUNT"),
+        ("k1=0,inf", "finite"),
+        ("kk1=0:1:2", "unknown parameter"),
+        ("idiotope_period=60,120", "not traced"),
+        ("hold=1.5,2", "integer parameter"),
+    ],
+)
+def test_parse_axis_errors_say_what_is_wrong(spec, message):
+    with pytest.raises(ValueError, match=message):
+        sweep.parse_axis(spec)
+
+
+def test_grid_points_are_the_product_with_the_last_axis_fastest():
+    axes = [("k1", np.array([0.5, 1.0])), ("hold", np.array([1, 2, 3], np.int32))]
+    points = sweep.grid_points(axes)
+    assert [(p["k1"], p["hold"]) for p in points] == [
+        (0.5, 1), (0.5, 2), (0.5, 3), (1.0, 1), (1.0, 2), (1.0, 3)
+    ]  # fmt: skip
+
+
+def test_point_systems_set_each_value_and_keep_dtypes():
+    sie = F.systems()["SIE"]
+    points = [{"k1": 0.5, "hold": 3}, {"k1": 1.5, "hold": 7}]
+    grid = sweep.point_systems(sie, points)
+    np.testing.assert_allclose(grid.network.k1, [0.5, 1.5])
+    assert grid.readings.hold.tolist() == [3, 7]
+    assert grid.readings.hold.dtype == np.asarray(sie.readings.hold).dtype
+    np.testing.assert_array_equal(grid.paratopes[1], np.asarray(sie.paratopes))
+    with pytest.raises(ValueError, match="k1 must be >= 0"):
+        sweep.point_systems(sie, [{"k1": -1.0}])
+
+
+def test_sweep_points_are_plain_trials_with_the_points_constants():
+    sie = F.systems()["SIE"]
+    axes = [("k1", np.array([0.85, 1.6]))]
+    doc = sweep.run_sweep(F.world(), sie, "SIE", axes, N, 3, F.CONFIG, F.sim_params(), slots=1)
+    assert doc["runs"] == 2 * N and [p["values"] for p in doc["points"]] == [
+        {"k1": 0.85}, {"k1": 1.6}
+    ]  # fmt: skip
+    for point in doc["points"]:
+        system = sie.replace(network=sie.network.replace(k1=point["values"]["k1"]))
+        plain = jax.device_get(F.sie_trials(N)(jax.random.key(3), system))
+        assert point["tau"]["mean"] == pytest.approx(float(np.mean(plain["tau"])), rel=1e-6)
+        assert point["f"]["mean"] == pytest.approx(float(np.mean(plain["fitness"])), rel=1e-6)
+        rate = float(np.mean(plain["idiotypic_difference_rate"]))
+        assert point["idiotypic_difference_rate"]["mean"] == pytest.approx(rate, rel=1e-6)
+    assert doc["base_values"] == {"k1": pytest.approx(0.85)}
+    assert doc["robot_iterations"] > 0 and doc["robot_iterations_per_s"] > 0
+
+
+def test_point_summary_intervals_by_hand():
+    tau = np.array([100.0, 200.0, 300.0, 4000.0])
+    c = np.array([0, 2, 150, 1])
+    result = {
+        "tau": tau,
+        "collisions_capped": np.minimum(c, 100),
+        "fitness": (8 * np.minimum(c, 100) + tau) / 2,
+        "trapped_s": np.zeros(4),
+        "failed_collisions": c > 100,
+        "failed_time": tau >= 4000.0,
+        "idiotypic_difference_rate": np.array([0.1, 0.2, np.nan, 0.3]),
+    }
+    s = sweep.summarise_point(result)
+    lo, hi = sps.t.interval(0.95, 3, loc=tau.mean(), scale=sps.sem(tau))
+    assert s["tau"]["mean"] == pytest.approx(1150.0)
+    assert s["tau"]["ci"] == pytest.approx([lo, hi])
+    assert s["c"]["mean"] == pytest.approx((0 + 2 + 100 + 1) / 4)
+    assert s["trapped_s"]["ci"] == pytest.approx([0.0, 0.0])
+    # Wilson: 2 failures of 4, z = 1.96: centre (p + z^2/2n) / (1 + z^2/n), by hand.
+    z = 1.959963984540054
+    centre = (0.5 + z * z / 8) / (1 + z * z / 4)
+    half = z * math.sqrt(0.25 / 4 + z * z / 64) / (1 + z * z / 4)
+    assert s["failure_rate"]["mean"] == 0.5
+    assert s["failure_rate"]["ci"] == pytest.approx([centre - half, centre + half])
+    # The NaN (a run where the rate does not apply) is left out.
+    assert s["idiotypic_difference_rate"]["mean"] == pytest.approx(0.2)
+    none_failed = sweep.summarise_point(result | {"failed_collisions": np.zeros(4, bool),
+                                                  "failed_time": np.zeros(4, bool)})  # fmt: skip
+    assert none_failed["failure_rate"]["ci"][1] == pytest.approx(z * z / (4 + z * z))
+
+
+def test_interpolate_on_a_two_axis_grid():
+    doc = {
+        "axes": {"k1": [0.0, 1.0], "k2": [0.0, 2.0]},
+        "points": [{"idiotypic_difference_rate": {"mean": m}} for m in (0.0, 0.2, 0.4, 0.6)],
+    }
+    # Bilinear: at k1 = 0.5, k2 = 1.0 the mean of the four corners.
+    assert sweep.interpolate(doc, "idiotypic_difference_rate", {"k1": 0.5, "k2": 1.0}) == (
+        pytest.approx(0.3)
+    )
+    assert sweep.interpolate(doc, "idiotypic_difference_rate", {"k1": 2.0, "k2": 1.0}) is None
+
+
+# ------------------------------------------------------------------------------- the script
+
+
+def _sweep_script(*args: str, tmp: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "scripts/sweep.py", *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=480,
+        env={"PATH": "/usr/bin:/bin", "HOME": str(tmp), "JAXAIS_DEBUG": ""},
+    )
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--grid", "k9=0:1:2"], "unknown parameter"),
+        (["--grid", "idiotope_period=10,20"], "not traced"),
+        (["--grid", "k1=0:1:2", "--grid", "k1=3"], "names a parameter twice"),
+        (["--grid", "k1=0:1:2", "--trials", "0"], "--trials must be >= 1"),
+        (["--grid", "k1=-1,1"], "k1 must be >= 0"),
+    ],
+)
+def test_sweep_script_bad_input_is_one_line(args, message, tmp_path):
+    out = _sweep_script(*args, "--out", str(tmp_path / "o"), tmp=tmp_path)
+    assert out.returncode == 2, out.stderr
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("sweep.py: error:") and message in lines[0]
+
+
+def test_sweep_script_writes_its_json_and_figure(tmp_path):
+    out_dir = tmp_path / "sw"
+    out = _sweep_script(
+        "--grid", "k1=0.85,1.6", "--grid", "k2=1.1,2", "--trials", "1", "--tau-cap", "4",
+        "--out", str(out_dir), tmp=tmp_path,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr[-2000:]
+    doc = json.loads((out_dir / "sweep.json").read_text())
+    assert doc["runs"] == 4 and len(doc["points"]) == 4
+    assert doc["config"]["command"].startswith("sweep.py --grid k1=0.85,1.6")
+    assert str(tmp_path) not in json.dumps(doc)  # no machine paths in the record
+    assert (out_dir / "sweep.png").stat().st_size > 10_000

@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxais import envs
+from jaxais import distributed, envs
 from jaxais.controllers import Controller
 from jaxais.episode import RUNNING, EpisodeConfig, advance, outcome, start_batch
 
@@ -40,22 +40,32 @@ class _Programs:
     refill: Callable[..., Any]
 
 
-def _programs(controller: Controller, config: EpisodeConfig, chunks: int) -> _Programs:
+def _programs(controller: Controller, config: EpisodeConfig, chunks: int, sharding) -> _Programs:
+    def spread(batch):
+        """The runs split over the devices (jaxais.distributed); a no-op on one device."""
+        if sharding is None:
+            return batch
+        split = lambda x: jax.lax.with_sharding_constraint(x, sharding)
+        return batch.replace(runs=jax.tree.map(split, batch.runs), poses=split(batch.poses))
+
     def readout(batch, params):
         runs = batch.runs
         out = {"t": runs.t, "status": runs.status, "collisions": runs.collisions}
         out["trapped"] = runs.trapped
         if controller.stats is not None:
             out |= jax.vmap(controller.stats)(runs.ctrl, params)
+        if sharding is not None:  # every host reads every run's counts
+            out = jax.lax.with_sharding_constraint(out, distributed.replicated(sharding))
         return out
 
     def start(reset_keys, run_keys, idx, world, sim_params, params):
         keys = (reset_keys[idx], run_keys[idx])
-        return start_batch(*keys, world, sim_params, controller, _take(params, idx), config)
+        batch = start_batch(*keys, world, sim_params, controller, _take(params, idx), config)
+        return spread(batch)
 
     def step(batch, idx, world, sim_params, params):
         p = _take(params, idx)
-        batch = advance(batch, world, sim_params, controller, p, config)
+        batch = spread(advance(spread(batch), world, sim_params, controller, p, config))
         return batch, readout(batch, p)
 
     def refill(batch, mask, reset_keys, run_keys, idx, world, sim_params, params):
@@ -68,7 +78,7 @@ def _programs(controller: Controller, config: EpisodeConfig, chunks: int) -> _Pr
         # A segment that stopped early (every live run ended) leaves the tick short of a
         # multiple of the alignment: the next runs start on one.
         aligned = -(-batch.chunks // chunks) * chunks
-        return batch.replace(runs=runs, chunks=aligned)
+        return spread(batch.replace(runs=runs, chunks=aligned))
 
     return _Programs(jax.jit(start), jax.jit(step), jax.jit(refill))
 
@@ -114,16 +124,19 @@ def run_pool(
     if slots < 1:
         raise ValueError(f"slots must be >= 1, got {slots}")
     n = reset_keys.shape[0]
-    b = min(slots, n)
+    sharding = distributed.batch_sharding()
+    # Slots come in whole multiples of the devices (jaxais.distributed): each holds as many.
+    d = 1 if sharding is None else sharding.mesh.size
+    b = -(-min(slots, n) // d) * d
     config = dataclasses.replace(config, segment=align, record=False)
-    key = (controller, config)  # jax.jit compiles each batch size on first use
+    key = (controller, config, sharding)  # jax.jit compiles each batch size on first use
     if key not in _CACHE:
-        _CACHE[key] = _programs(controller, config, align // config.chunk)
+        _CACHE[key] = _programs(controller, config, align // config.chunk, sharding)
     programs = _CACHE[key]
 
-    idx = np.arange(b, dtype=np.int32)
-    queued = b  # the next run to start
-    live = np.ones(b, bool)  # the slot holds a run not yet read out
+    idx = np.arange(b, dtype=np.int32) % n  # slots past n pad the batch with ended copies
+    queued = min(b, n)  # the next run to start
+    live = np.arange(b) < n  # the slot holds a run not yet read out
     batch = programs.start(reset_keys, run_keys, idx, world, sim_params, params)
     got: dict[str, np.ndarray] = {}
     while live.any():
@@ -147,12 +160,11 @@ def run_pool(
             batch = programs.refill(
                 batch, mask, reset_keys, run_keys, idx, world, sim_params, params
             )
-        elif live.sum() <= b // SHRINK:
+        elif b > d and live.sum() <= b // SHRINK:
             # The queue is empty and most slots idle: go on with a batch an eighth the size
             # (ended runs never change, so an idle slot can pad it).
-            while b > 1 and live.sum() <= b // SHRINK:
-                b //= SHRINK
-            b = max(b, 1)
+            while b > d and live.sum() <= b // SHRINK:
+                b = max(d, -(-(b // SHRINK) // d) * d)
             keep = np.flatnonzero(live)
             keep = np.concatenate([keep, np.full(b - keep.size, np.flatnonzero(~live)[0])])
             batch = batch.replace(runs=_take(batch.runs, keep), poses=batch.poses[keep])

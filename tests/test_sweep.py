@@ -169,6 +169,24 @@ def test_point_summary_intervals_by_hand():
     assert none_failed["failure_rate"]["ci"][1] == pytest.approx(z * z / (4 + z * z))
 
 
+def test_noisy_world_scales_each_kind_and_caps_probabilities():
+    from jaxais import envs
+
+    real = envs.load_world("real")
+    assert real.ir_noise > 0 and real.camera_miss > 0 and real.wheel_noise > 0
+    double = sweep.noisy_world(real, 2.0)
+    assert double.ir_noise == pytest.approx(2 * real.ir_noise)
+    assert double.camera_shift == pytest.approx(2 * real.camera_shift)
+    assert double.wheel_noise == pytest.approx(2 * real.wheel_noise)
+    assert sweep.noisy_world(real, 1e6).camera_miss == 1.0  # a probability
+    wheel_only = sweep.noisy_world(real, 0.0, ["wheel"])
+    assert wheel_only.wheel_noise == 0.0 and wheel_only.ir_noise == real.ir_noise
+    with pytest.raises(ValueError, match="unknown noise kind"):
+        sweep.noisy_world(real, 1.0, ["sonar"])
+    with pytest.raises(ValueError, match=">= 0"):
+        sweep.noisy_world(real, -0.5)
+
+
 def test_interpolate_on_a_two_axis_grid():
     doc = {
         "axes": {"k1": [0.0, 1.0], "k2": [0.0, 2.0]},
@@ -203,6 +221,14 @@ def _sweep_script(*args: str, tmp: Path) -> subprocess.CompletedProcess:
         (["--grid", "k1=0:1:2", "--grid", "k1=3"], "names a parameter twice"),
         (["--grid", "k1=0:1:2", "--trials", "0"], "--trials must be >= 1"),
         (["--grid", "k1=-1,1"], "k1 must be >= 0"),
+        (["--grid", "k1=1", "--system", "SIE,HDC"], "one system"),
+        (["--grid", "k1=1", "--system", "XYZ"], "unknown system 'XYZ'"),
+        (["--grid", "k1=1", "--noise", "1"], "not allowed with argument"),
+        (["--noise", "0,x"], "comma-separated numbers"),
+        (["--noise=-1,1"], "finite and >= 0"),
+        (["--noise", "1,nan"], "finite and >= 0"),
+        (["--noise", "1", "--noise-kinds", "ir,sonar"], "--noise-kinds"),
+        (["--grid", "k1=1", "--coordinator", "nohost"], "HOST:PORT"),
     ],
 )
 def test_sweep_script_bad_input_is_one_line(args, message, tmp_path):

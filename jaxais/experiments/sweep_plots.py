@@ -102,3 +102,29 @@ def save_sweep_figures(doc: dict[str, Any], out: Path) -> list[Path]:
     else:
         return []
     return [path]
+
+
+def save_noise_figure(doc: dict[str, Any], out: Path) -> Path:
+    """f and the failure rate against the noise scale, one line per system (reality_gap.png)."""
+    scales = np.asarray(doc["scales"])
+    fig = _new_figure((9.0, 3.6))
+    axes = fig.subplots(1, 2)
+    labels = list(doc["points"][0]["systems"])
+    for k, label in enumerate(labels):
+        for ax, metric in zip(axes, ("f", "failure_rate"), strict=True):
+            rows = [p["systems"][label][metric] for p in doc["points"]]
+            mean = np.asarray([r["mean"] for r in rows])
+            ci = np.asarray([r["ci"] for r in rows], np.float64)
+            ax.plot(scales, mean, marker="o", color=f"C{k}", label=label)
+            ax.fill_between(scales, ci[:, 0], ci[:, 1], color=f"C{k}", alpha=0.15)
+    for ax, title in zip(
+        axes, ("mean f = (8c + τ)/2 (lower is better)", "failure rate"), strict=True
+    ):
+        ax.axvline(1.0, color="k", ls="--", lw=1)
+        ax.set_xlabel(f"noise scale ({', '.join(doc['kinds'])}; 1 = the world's own levels)")
+        ax.set_title(title, fontsize=9)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(f"The reality gap in {doc['world']}: {doc['trials']} trials per point, 95 % CIs")
+    path = Path(out) / "reality_gap.png"
+    save_figure(fig, path)
+    return path

@@ -3,7 +3,6 @@
 This package never imports the rest of jaxais: physics sits at the bottom of the stack.
 """
 
-from .compile import compiler_options, jit, small_kernel_options
 from .geometry import Scene, cast_rays, disc_gaps, min_gap
 from .gymnax import EpuckEnv, make
 from .params import (
@@ -54,17 +53,14 @@ __all__ = [
     "WorldError",
     "build_scene",
     "cast_rays",
-    "compiler_options",
     "default_params",
     "disc_gaps",
-    "jit",
     "load_world",
     "make",
     "min_gap",
     "observe",
     "reset",
     "sample_step_noise",
-    "small_kernel_options",
     "step",
     "step_with_noise",
     "world_path",

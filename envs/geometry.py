@@ -41,7 +41,7 @@ class Scene:
 
 # The intersection tables below are laid out [surfaces, rays]: the rays (23 per robot) are the
 # minor axis that XLA's CPU backend vectorises, and the nearest-surface reduction runs over the
-# major axis as elementwise minima. The transposed layout is about a third slower.
+# major axis as elementwise minima. The transposed layout runs slower (docs/performance.md).
 
 
 def _ray_segments(o: jnp.ndarray, d: jnp.ndarray, seg: jnp.ndarray) -> jnp.ndarray:
@@ -131,7 +131,7 @@ def cast_rays(
     # Which surface is nearest is found with one integer min per kind: a non-negative float's bit
     # pattern orders like the float, so the surface's index goes into the low mantissa bits (a
     # relative error below 1e-5 on t). argmin + gather, or masked reductions, make XLA's CPU
-    # backend recompute the intersection tests several times over and run 5x slower.
+    # backend recompute the intersection tests several times over (docs/performance.md).
     key = None
     for hits, offset in zip(_per_kind_hits(origins, dirs, scene), (0, n_s, n_s + n_b), strict=True):
         bits = jax.lax.bitcast_convert_type(hits, jnp.int32)
@@ -247,8 +247,8 @@ def resolve_disc(
     4.5 mm); more passes cost compile and run time in every step.
 
     Each kind's pushes along x and y are summed in one two-output reduction
-    (:func:`reduce_pair`): with two plain sums XLA's CPU backend computed every push twice,
-    and the simulator stepped about 1.3x slower at batch 10000 (world1, 2-core CPU).
+    (:func:`reduce_pair`): with two plain sums XLA's CPU backend computed every push twice
+    (docs/performance.md).
 
     Returns:
         [2] the resolved centre.

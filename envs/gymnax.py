@@ -52,9 +52,9 @@ truncated and info describe the step that ended it. ``make(..., auto_reset=False
 off and ``step_env`` never resets: stepping on after the end is the caller's business (a robot
 parked at the target keeps terminating, and earning the bonus, every step). Unbatched the reset
 runs only when an episode ends; under ``vmap`` it runs on every step (``lax.cond`` becomes a
-select), and a reset (placing boxes, goal and robots by trial and error) costs several steps:
-world1 at batch 1000 on a 2-core CPU took 16 ms a step with auto-reset, 1.8 ms without. For
-large batches of long episodes, ``auto_reset=False`` and a reset between rollouts is cheaper.
+select), and a reset (placing boxes, goal and robots by trial and error) costs several steps
+(docs/performance.md). For large batches of long episodes, ``auto_reset=False`` and a reset
+between rollouts is cheaper.
 
 Everything is jit- and vmap-able; the only randomness is the keys passed in (the reset's
 placements, the simulator's sensor and wanderer noise each step). ``reset`` and ``step`` are
@@ -71,7 +71,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .compile import jit
 from .params import CAMERA_COLUMNS, CAMERA_ROWS, N_IR, SimParams, default_params
 from .sim import Observation, State, observe
 from .sim import reset as sim_reset
@@ -156,20 +155,6 @@ class Box:
         return jnp.all(x >= self.low) & jnp.all(x <= self.high)
 
 
-def _under_trace(args: Any) -> bool:
-    """Whether we are inside a trace (a user's jit, vmap or scan): the compiled entry points
-    carry compiler options, which JAX accepts on top-level programs only, so there the plain
-    functions are called and the outer program compiles them."""
-    if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(args)):
-        return True
-    try:  # everything closed over inside a trace: no tracer among the arguments
-        from jax._src import core
-
-        return not core.trace_state_clean()
-    except (ImportError, AttributeError):
-        return False
-
-
 def features(ob: Observation) -> jnp.ndarray:
     """The simulator's observation as the environment's float32 vector [11] (:data:`OBS_NAMES`)."""
     seen = ob.blue_pixels > 0
@@ -194,8 +179,8 @@ class EpuckEnv:
     def __init__(self, params: EnvParams, auto_reset: bool = True):
         self._params = params
         self.auto_reset = auto_reset
-        self._reset = jit(self.reset_env)
-        self._step = jit(self._step_impl)
+        self._reset = jax.jit(self.reset_env)
+        self._step = jax.jit(self._step_impl)
 
     @property
     def default_params(self) -> EnvParams:
@@ -221,8 +206,7 @@ class EpuckEnv:
     def reset(self, key: jax.Array, params: EnvParams | None = None) -> tuple[jax.Array, EnvState]:
         """A fresh episode: ``(obs [11], state)``; placements and sensor noise from ``key``."""
         params = self._params if params is None else params
-        run = self.reset_env if _under_trace((key, params)) else self._reset
-        return run(key, params)
+        return self._reset(key, params)
 
     def step(
         self,
@@ -243,8 +227,7 @@ class EpuckEnv:
             ``terminated | truncated``.
         """
         params = self._params if params is None else params
-        run = self._step_impl if _under_trace((key, state, action, params)) else self._step
-        return run(key, state, action, params)
+        return self._step(key, state, action, params)
 
     def _step_impl(self, key, state, action, params):
         k_step, k_reset = jax.random.split(key)

@@ -186,10 +186,8 @@ def _move(pose, wheels, scene, params):
     v, w = wheel_to_body(wheels, params)
     # The barrier computes the candidate pose once per robot. Without it XLA's CPU backend fuses
     # the arc (four sines and cosines and a division) into every surface's collision test and
-    # recomputes it there. With it (2-core CPU, interleaved runs): world1 at batch 10000 on one
-    # device 1.49-1.72 -> 1.93-2.21 M robot-steps/s; 30 SIE trials (trials.py) 15.9-20.2 ->
-    # 15.3-17.6 s wall; a GA generation's evaluation 0.50 -> 0.46 s. Positions moved by an ulp
-    # where the fused copies had rounded differently.
+    # recomputes it there, more slowly (docs/performance.md), and with positions an ulp apart
+    # where the fused copies round differently.
     cand = jax.lax.optimization_barrier(integrate_pose(pose, v, w, params.dt))
     xy = resolve_disc(pose[:2], cand[:2], params.body_radius, scene)
     return jnp.concatenate([xy, cand[2:]])
@@ -273,7 +271,7 @@ def sense(state: State, noise: StepNoise, world: World, params: SimParams) -> Ob
     cam_offsets = 0.5 * params.camera_fov - (cols + 0.5) * pix
     # cast_rays pads the 23 rays to fill the CPU's vector lanes (to 24); padding here instead,
     # with copies of the last camera ray (dropped below) before the rays are rotated per robot,
-    # spares it a copy of every robot's rays (about 1.07x faster at batch 10000; same numbers).
+    # spares it a copy of every robot's rays (the same numbers).
     n_rays = N_IR + CAMERA_COLUMNS
     pad = ray_padding(n_rays)
     units = _unit(jnp.concatenate([params.ir_bearings, cam_offsets]))
@@ -434,44 +432,38 @@ def reset(key: jax.Array, world: World, params: SimParams) -> State:
     # Parked objects sit far outside the arena, so scenes built while placing ignore them.
     n = PLACEMENT_TRIES
 
-    # Loop-free code is traced under jax.disable_jit: jax.numpy's jit-wrapped helpers are then
-    # inlined as they are traced instead of each being traced and batched as a nested program
-    # (the same primitives and compiled program, about 0.7x the tracing time). Never around a
-    # lax loop, which disable_jit would run as a Python loop.
     def place_box(b, state):
-        with jax.disable_jit():
-            cands = _uniform_in(jax.random.fold_in(k_box, b), world.box_region[b], n)
-            # A box is tested as its circumscribed disc: conservative and cheap.
-            r = jnp.linalg.norm(world.box_half[b]) + PLACEMENT_CLEARANCE
-            scene = build_scene(state, world, params)
-            clear = jax.vmap(lambda c: min_gap(c, r, scene) >= 0)(cands)
-            return state.replace(boxes=state.boxes.at[b].set(_first_clear(cands, clear)))
+        cands = _uniform_in(jax.random.fold_in(k_box, b), world.box_region[b], n)
+        # A box is tested as its circumscribed disc: conservative and cheap.
+        r = jnp.linalg.norm(world.box_half[b]) + PLACEMENT_CLEARANCE
+        scene = build_scene(state, world, params)
+        clear = jax.vmap(lambda c: min_gap(c, r, scene) >= 0)(cands)
+        return state.replace(boxes=state.boxes.at[b].set(_first_clear(cands, clear)))
 
     # A loop rather than unrolled code: one copy of the placement test in the compiled program.
     state = jax.lax.fori_loop(0, n_b, place_box, state)
-    with jax.disable_jit():
-        scene = build_scene(state, world, params)
-        cands = _uniform_in(k_goal, world.goal_region, n)
-        r = jnp.linalg.norm(world.goal_half) if world.goal_shape == "box" else world.goal_half[0]
-        clear = jax.vmap(lambda c: min_gap(c, r + PLACEMENT_CLEARANCE, scene) >= 0)(cands)
-        state = state.replace(goal=_first_clear(cands, clear))
+    scene = build_scene(state, world, params)
+    cands = _uniform_in(k_goal, world.goal_region, n)
+    r = jnp.linalg.norm(world.goal_half) if world.goal_shape == "box" else world.goal_half[0]
+    clear = jax.vmap(lambda c: min_gap(c, r + PLACEMENT_CLEARANCE, scene) >= 0)(cands)
+    state = state.replace(goal=_first_clear(cands, clear))
 
-        def place_robot(key, region, state, exclude):
-            scene = build_scene(state, world, params, exclude=exclude)
-            cands = _uniform_in(key, region, n)
-            r = params.body_radius + PLACEMENT_CLEARANCE
-            clear = jax.vmap(lambda c: min_gap(c, r, scene) >= 0)(cands)
-            return _first_clear(cands, clear)
+    def place_robot(key, region, state, exclude):
+        scene = build_scene(state, world, params, exclude=exclude)
+        cands = _uniform_in(key, region, n)
+        r = params.body_radius + PLACEMENT_CLEARANCE
+        clear = jax.vmap(lambda c: min_gap(c, r, scene) >= 0)(cands)
+        return _first_clear(cands, clear)
 
-        heading = jax.random.uniform(
-            k_head, (), minval=world.start_heading[0], maxval=world.start_heading[1]
+    heading = jax.random.uniform(
+        k_head, (), minval=world.start_heading[0], maxval=world.start_heading[1]
+    )
+    xy = place_robot(k_pos, world.start_region, state, exclude=0)
+    state = state.replace(pose=jnp.concatenate([xy, heading[None]]))
+    wh = jax.random.uniform(k_wh, (n_w,), minval=-jnp.pi, maxval=jnp.pi)
+    for k, kw in enumerate(jax.random.split(k_wand, max(n_w, 1))[:n_w]):
+        xy = place_robot(kw, world.wanderer_region[k], state, exclude=k + 1)
+        state = state.replace(
+            wanderers=state.wanderers.at[k].set(jnp.concatenate([xy, wh[k : k + 1]]))
         )
-        xy = place_robot(k_pos, world.start_region, state, exclude=0)
-        state = state.replace(pose=jnp.concatenate([xy, heading[None]]))
-        wh = jax.random.uniform(k_wh, (n_w,), minval=-jnp.pi, maxval=jnp.pi)
-        for k, kw in enumerate(jax.random.split(k_wand, max(n_w, 1))[:n_w]):
-            xy = place_robot(kw, world.wanderer_region[k], state, exclude=k + 1)
-            state = state.replace(
-                wanderers=state.wanderers.at[k].set(jnp.concatenate([xy, wh[k : k + 1]]))
-            )
-        return state
+    return state

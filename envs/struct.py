@@ -18,8 +18,8 @@ def device_array(x: Any, dtype: Any = None) -> jax.Array:
     """``x`` converted by NumPy (to ``dtype``), then put on the default device, uncommitted.
 
     Outside a trace ``jnp.asarray(x, dtype)`` converts or copies on the device instead, with one
-    small XLA compilation per new shape and dtype (jax 0.10): 20-40 ms each on a CPU, and a
-    world, the simulator's constants and a seed took about twenty of them at a script's start.
+    small XLA compilation per new shape and dtype (jax 0.10), and a world, the simulator's
+    constants and a seed took about twenty of them at a script's start (docs/performance.md).
     """
     return jax.device_put(np.asarray(x, dtype))
 

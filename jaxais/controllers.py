@@ -308,11 +308,9 @@ def stl_controller(
         replacement, idiotypic, learning: build that part of the network in (default: all of
             them, which runs every system). A batch in which no run uses a part (its
             ``System`` flag False throughout) gives the same trials without it, from a smaller
-            and faster program; :func:`stl_for` picks the smallest controller for a batch.
-            Measured for 30 SIE trials in world1 on a 2-core CPU, without replacement:
-            11.0-11.6 s -> 9.7-10.8 s to compile, about 15 % less time per iteration. Checked:
-            30 trials of each system in world1 alone give the very means (and SIE the very
-            trials) of a run with the full controller.
+            and faster program (docs/performance.md); :func:`stl_for` picks the smallest
+            controller for a batch (tests/test_controllers.py checks that the trials are the
+            same).
     """
 
     def init(key, system: System):

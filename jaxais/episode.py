@@ -11,8 +11,6 @@ The loop runs any :class:`~jaxais.controllers.Controller` (the protocol is in
 
 from __future__ import annotations
 
-import concurrent.futures
-import functools
 import math
 import time
 from collections.abc import Callable
@@ -22,9 +20,8 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.extend.core import jaxpr_as_fun
 
-from jaxais import envs
+from jaxais import _speed, envs
 from jaxais.controllers import Controller, Percept
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.immune.antigens import OBSTACLE_THRESHOLD, antigen, is_collision
@@ -143,9 +140,8 @@ def start(
     """A run at t = 0: the world reset from ``reset_key``, everything else from ``run_key``."""
     k_obs, k_ctrl, k_run = jax.random.split(run_key, 3)
     sim = envs.reset(reset_key, world, sim_params)
-    with jax.disable_jit():  # faster tracing, the same program (see advance)
-        obs = _carried(envs.observe(k_obs, sim, world, sim_params))
-        ctrl = controller.init(k_ctrl, ctrl_params)
+    obs = _carried(envs.observe(k_obs, sim, world, sim_params))
+    ctrl = controller.init(k_ctrl, ctrl_params)
     return Run(
         sim=sim,
         obs=obs,
@@ -324,9 +320,8 @@ def advance(
     def chunk_draws(runs: Run):
         """Every iteration's draws of the chunk, [chunk, n, ...]: each derivation and draw is a
         threefry hash, a loop of its own on CPU whatever its size, so they are made once for
-        the chunk, over flat [chunk * n] keys (a hash of higher rank compiles more slowly). A
-        run that ends within the chunk stops counting t, but then its iterations change
-        nothing, so those draws are unused."""
+        the chunk, over flat [chunk * n] keys. A run that ends within the chunk stops counting
+        t, but then its iterations change nothing, so those draws are unused."""
         n = runs.t.shape[0]
         t = (runs.t[None, :] + jnp.arange(config.chunk)[:, None]).reshape(-1)
         keys = jax.vmap(jax.random.fold_in)(jnp.tile(runs.key, config.chunk), t)
@@ -337,23 +332,16 @@ def advance(
         draws = chunk_draws(batch.runs)
 
         def body(i, r):
-            # jax.numpy's helpers are jit-wrapped: traced under vmap, each call is traced and
-            # batched as a nested program (half of this loop's tracing time). Under disable_jit
-            # they are inlined as they are traced: the same primitives and compiled program,
-            # the same numbers bit for bit; 30 STL trials' loop traces in 0.6-0.8 s instead of
-            # 0.8-1.2 s (2-core CPU). The iteration has no lax loop, which disable_jit would
-            # unroll.
-            with jax.disable_jit():
-                return step_all(
-                    jax.tree.map(lambda a: a[i], draws),
-                    r,
-                    batch.chunks * config.chunk + i,
-                    world,
-                    sim_params,
-                    controller,
-                    ctrl_params,
-                    config,
-                )
+            return step_all(
+                jax.tree.map(lambda a: a[i], draws),
+                r,
+                batch.chunks * config.chunk + i,
+                world,
+                sim_params,
+                controller,
+                ctrl_params,
+                config,
+            )
 
         runs = jax.lax.fori_loop(0, config.chunk, body, batch.runs)
         poses = batch.poses
@@ -383,11 +371,10 @@ def _fingerprint(tree: Any) -> tuple:
 
 
 class Programs(NamedTuple):
-    """The compiled task loop of one world, controller and batch shape (:func:`compile_rollout`).
+    """The compiled task loop of one controller and batch shape (:func:`compile_rollout`).
 
     start(reset_keys, run_keys, world, sim_params, ctrl_params) -> Batch;
-    advance(batch, world, sim_params, ctrl_params) -> Batch. A specialised program ignores the
-    ``world`` it is given and uses the one it was compiled for.
+    advance(batch, world, sim_params, ctrl_params) -> Batch.
     """
 
     start: Callable[..., Batch]
@@ -413,65 +400,6 @@ def batch_sharding(n: int, devices: list | None = None) -> jax.sharding.NamedSha
     return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
 
 
-def _batch_shardings(sharding: jax.sharding.NamedSharding | None) -> Batch | None:
-    """Shardings of a :class:`Batch`: runs and poses split along the batch, the count replicated."""
-    if sharding is None:
-        return None
-    replicated = jax.sharding.NamedSharding(sharding.mesh, jax.sharding.PartitionSpec())
-    return Batch(runs=sharding, poses=sharding, chunks=replicated)
-
-
-def _per_device(task_advance: Callable[..., Batch], sharding: jax.sharding.NamedSharding):
-    """``task_advance`` run by every device on its own runs, each in its own loop.
-
-    Partitioned by XLA instead, the loop's test "is any run still going?" is a reduction over
-    the whole batch: an all-reduce and a rendezvous of the devices after every chunk (7 % of
-    the GA loop's time in a profile on a 2-core CPU). Runs never exchange data, so each device can
-    loop until its own runs have ended. The chunk count, which the controllers' periodic steps
-    read, may then differ between devices; a device stops early only once all its runs have
-    ended, so the largest count is the batch's count, and that is what comes back.
-
-    The loop is traced for one device's share of the batch outside ``shard_map`` and handed to
-    it as a finished jaxpr: the same program (same HLO), but traced and lowered about 0.3 s
-    faster than when traced inside, with shard_map's replication checks (30 STL trials in
-    world1, 2-core CPU: trace 0.9-1.3 -> 0.9-1.1 s, lower 0.8-0.9 -> 0.5-0.7 s).
-    """
-    axis = sharding.spec[0]
-    n_devices = sharding.mesh.shape[axis]
-    runs, same = jax.sharding.PartitionSpec(axis), jax.sharding.PartitionSpec()
-    in_specs = (Batch(runs=runs, poses=runs, chunks=same), same, same, runs)
-    is_spec = lambda x: isinstance(x, jax.sharding.PartitionSpec)
-
-    @functools.wraps(task_advance)  # the program keeps its name (compile logs, the cache)
-    def program(batch, w, sp, cp):
-        args = (batch, w, sp, cp)
-        leaves, treedef = jax.tree.flatten(args)
-        specs = jax.tree.leaves(jax.tree.broadcast(in_specs, args, is_leaf=is_spec), is_spec)
-
-        def one_device(x, spec):
-            aval = jax.typeof(x)
-            shape = (aval.shape[0] // n_devices, *aval.shape[1:]) if spec == runs else aval.shape
-            return jax.ShapeDtypeStruct(shape, aval.dtype, weak_type=aval.weak_type)
-
-        local_args = jax.tree.unflatten(treedef, map(one_device, leaves, specs))
-        closed, out_shape = jax.make_jaxpr(task_advance, return_shape=True)(*local_args)
-        out_tree = jax.tree.structure(out_shape)
-
-        def local(*xs):
-            out = jax.tree.unflatten(out_tree, jaxpr_as_fun(closed)(*xs))
-            return out.replace(chunks=jax.lax.pmax(out.chunks, axis))
-
-        return jax.shard_map(
-            local,
-            mesh=sharding.mesh,
-            in_specs=tuple(specs),
-            out_specs=in_specs[0],
-            check_vma=False,  # the jaxpr was traced without shard_map's types
-        )(*leaves)
-
-    return program
-
-
 def compile_rollout(
     reset_keys: jax.Array,
     run_keys: jax.Array,
@@ -480,64 +408,50 @@ def compile_rollout(
     controller: Controller,
     ctrl_params: Any,
     config: EpisodeConfig,
-    specialise: bool = False,
     sharding: jax.sharding.NamedSharding | None = None,
 ) -> Programs:
-    """Compile :func:`start_batch` and :func:`advance` for these shapes (and this world).
+    """Compile :func:`start_batch` and :func:`advance` for these shapes.
 
-    With ``specialise`` the world is built into the programs as constants instead of being an
-    argument, so XLA folds the walls' per-surface terms of the ray and collision tests at compile
-    time, and a world with other values compiles programs of its own. Whether that pays depends
-    on the world (measured on a 2-core CPU, same results bit for bit): the GA's loop in
-    ``ga_maze``, 16 fixed walls, runs about 2.7x faster; world1 and ``real`` run as fast as
-    without, and world2's trials about 25 % slower. The GA specialises; the trials do not.
-    The arguments may be arrays or ``jax.ShapeDtypeStruct``s, except a specialised ``world``.
-
-    With a ``sharding`` (:func:`batch_sharding`) both programs keep every run on the device that
-    holds it, and each device runs the task loop on its own runs (:func:`_per_device`); the runs
-    never exchange data, so the partitioned programs compute the same numbers.
-    The task loop is lowered first (from the start program's traced output shapes) and compiled
-    in a thread; the start program is lowered and compiled beside it (XLA compiles outside
-    Python's lock), so on two cores the start costs little wall time. Together with
-    :func:`_per_device`'s outside trace: 30 STL trials in world1 compile in 8.6-9.2 s, against
-    9.1-9.7 s with the start compiled first (three interleaved pairs, 2-core CPU). The start
-    runs once per batch, so it is compiled for compile speed
-    (``envs.jit(..., quick_compile=True)``); the task loop, many small kernels, with XLA's older
-    loop emitters (``envs.jit(..., small_kernels=True)``), which compile it faster (figures in
-    ``envs.compile.LOOP_EMITTER_OPTIONS``).
+    The arguments may be arrays or ``jax.ShapeDtypeStruct``s. With a ``sharding``
+    (:func:`batch_sharding`) the runs and their trajectories stay split along the batch over
+    its devices and XLA partitions both programs; the runs never exchange data, so every run's
+    numbers are those of one device.
     """
-    shardings = _batch_shardings(sharding)
+    return _compile(
+        reset_keys, run_keys, world, sim_params, controller, ctrl_params, config, sharding, False
+    )
+
+
+def _compile(
+    reset_keys: jax.Array,
+    run_keys: jax.Array,
+    world: envs.World,
+    sim_params: envs.SimParams,
+    controller: Controller,
+    ctrl_params: Any,
+    config: EpisodeConfig,
+    sharding: jax.sharding.NamedSharding | None,
+    fixed_world: bool,
+) -> Programs:
+    """:func:`compile_rollout`; with ``fixed_world`` the world is compiled into the programs as
+    constants (XLA folds them), which then ignore the ``world`` they are given."""
 
     def task_start(rk, uk, w, sp, cp):
-        return start_batch(rk, uk, world if specialise else w, sp, controller, cp, config)
+        return start_batch(rk, uk, world if fixed_world else w, sp, controller, cp, config)
 
     def task_advance(batch, w, sp, cp):
-        return advance(batch, world if specialise else w, sp, controller, cp, config)
+        return advance(batch, world if fixed_world else w, sp, controller, cp, config)
 
+    placement = {}
     if sharding is not None:
-        task_advance = _per_device(task_advance, sharding)
-    placement = {} if shardings is None else {"out_shardings": shardings}
-    start_traced = envs.jit(task_start, quick_compile=True, **placement).trace(
-        reset_keys, run_keys, world, sim_params, ctrl_params
-    )
-    batch_in = start_traced.out_info
-    if shardings is not None:  # each field's sharding onto every array of that field
-        batch_in = jax.tree.map(
-            lambda sh, field: jax.tree.map(
-                lambda s: jax.ShapeDtypeStruct(s.shape, s.dtype, sharding=sh), field
-            ),
-            shardings,
-            batch_in,
-        )
-    advance_lowered = envs.jit(task_advance, small_kernels=True, **placement).lower(
-        batch_in, world, sim_params, ctrl_params
-    )
-    # XLA compiles outside Python's lock: the task loop, the longest compile, starts first, and
-    # the start program is lowered and compiled beside it.
-    with concurrent.futures.ThreadPoolExecutor(2) as pool:
-        advance_compiled = pool.submit(advance_lowered.compile)
-        start_compiled = pool.submit(start_traced.lower().compile)
-        return Programs(start=start_compiled.result(), advance=advance_compiled.result())
+        replicated = jax.sharding.NamedSharding(sharding.mesh, jax.sharding.PartitionSpec())
+        placement["out_shardings"] = Batch(runs=sharding, poses=sharding, chunks=replicated)
+    # The start runs once per batch: compiled for compile speed (jaxais._speed.start_options).
+    start = jax.jit(task_start, compiler_options=_speed.start_options(), **placement)
+    start = start.lower(reset_keys, run_keys, world, sim_params, ctrl_params).compile()
+    loop = jax.jit(task_advance, **placement)
+    loop = loop.lower(start.out_info, world, sim_params, ctrl_params).compile()
+    return Programs(start=start, advance=loop)
 
 
 def _pad_batch(tree: Any, pad: int) -> Any:
@@ -556,48 +470,72 @@ def rollout(
     progress: Callable[[int], None] | None = None,
     compiled: dict | None = None,
     timings: dict[str, float] | None = None,
-    specialise: bool = False,
-    devices: list | None = None,
 ) -> Batch:
     """Run a batch to the end: every run finished or stopped by a cap.
 
-    With several devices (``devices``, default ``jax.local_devices()``; the scripts make one CPU
-    device per core, see :mod:`jaxais.host_devices`) the batch is sharded over them, padded with
-    copies of its first run to a multiple of the device count; the copies are dropped from the
-    result. Every run's numbers are the same as on one device.
+    With several devices (``jax.local_devices()``) the batch is sharded over them
+    (:func:`batch_sharding`), padded with copies of its first run to a multiple of the device
+    count; the copies are dropped from the result. Every run's numbers are those of one device.
 
     Args:
         reset_keys, run_keys: [n] PRNG keys (world placement; everything else).
         ctrl_params: controller parameters with a leading batch axis [n].
         progress: called with the iterations done after every segment (e.g. tqdm's update).
-        compiled: optional cache dict, so repeated calls with the same controller, world and
-            batch shapes reuse the compiled programs (:func:`compile_rollout`).
+        compiled: optional cache dict, so repeated calls with the same controller and batch
+            shapes reuse the compiled programs (:func:`compile_rollout`).
         timings: optional dict; ``compile_s`` and ``run_s`` are added to it.
-        specialise: compile the world's values into the programs (see :func:`compile_rollout`).
-        devices: the devices to shard the batch over (default: all local devices).
 
     Returns:
         The final :class:`Batch` of the n runs.
     """
+    return _rollout(
+        reset_keys,
+        run_keys,
+        world,
+        sim_params,
+        controller,
+        ctrl_params,
+        config,
+        progress,
+        compiled,
+        timings,
+        fixed_world=False,
+    )
+
+
+def _rollout(
+    reset_keys: jax.Array,
+    run_keys: jax.Array,
+    world: envs.World,
+    sim_params: envs.SimParams,
+    controller: Controller,
+    ctrl_params: Any,
+    config: EpisodeConfig,
+    progress: Callable[[int], None] | None,
+    compiled: dict | None,
+    timings: dict[str, float] | None,
+    fixed_world: bool,
+) -> Batch:
+    """:func:`rollout`; with ``fixed_world`` the programs are compiled for this world's values
+    (:func:`_compile`), and a world with other values compiles programs of its own."""
     cache = compiled if compiled is not None else {}
-    devices = jax.local_devices() if devices is None else list(devices)
     n = reset_keys.shape[0]
-    pad = -n % len(devices)
+    pad = -n % jax.local_device_count()
     if pad:
         reset_keys, run_keys, ctrl_params = _pad_batch((reset_keys, run_keys, ctrl_params), pad)
-    sharding = batch_sharding(n + pad, devices)
+    sharding = batch_sharding(n + pad)
     if sharding is not None:
         reset_keys, run_keys, ctrl_params = jax.device_put(
             (reset_keys, run_keys, ctrl_params), sharding
         )
     signature = (
-        (controller, config, specialise, sharding),
-        _fingerprint(world) if specialise else _signature(world),
+        (controller, config, fixed_world, sharding),
+        _fingerprint(world) if fixed_world else _signature(world),
         _signature((reset_keys, run_keys, sim_params, ctrl_params)),
     )
     t0 = time.perf_counter()
     if signature not in cache:
-        cache[signature] = compile_rollout(
+        cache[signature] = _compile(
             reset_keys,
             run_keys,
             world,
@@ -605,8 +543,8 @@ def rollout(
             controller,
             ctrl_params,
             config,
-            specialise,
             sharding,
+            fixed_world,
         )
     programs = cache[signature]
     t1 = time.perf_counter()

@@ -72,7 +72,6 @@ and crossover then takes its antibody; hence the uniform default (:class:`GAConf
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, fields
@@ -85,7 +84,7 @@ import numpy as np
 from jaxais import envs
 from jaxais.controllers import LTL
 from jaxais.envs.struct import pytree_dataclass, static_field
-from jaxais.episode import FINISHED, RHO, EpisodeConfig, fitness, outcome, rollout
+from jaxais.episode import FINISHED, RHO, EpisodeConfig, _rollout, fitness, outcome
 from jaxais.immune.antibodies import Antibodies, antibody_distance, mutate, sample_antibodies
 from jaxais.immune.antigens import N_ANTIGENS
 from jaxais.seed import Seed
@@ -391,8 +390,7 @@ def _init(key: jax.Array, P: int, R: int) -> GAState:
     )
 
 
-# Breeding and set-up do little work: compiled for compile speed (envs.jit's quick_compile).
-_init_jit = envs.jit(_init, quick_compile=True, static_argnums=(1, 2))
+_init_jit = jax.jit(_init, static_argnums=(1, 2))
 
 
 def init(key: jax.Array, config: GAConfig) -> GAState:
@@ -430,7 +428,7 @@ def start_keys(key: jax.Array, starts: int) -> jax.Array:
     return jax.random.split(key, starts)
 
 
-@functools.partial(envs.jit, quick_compile=True)
+@jax.jit
 def _rollout_inputs(keys: jax.Array, population: Antibodies):
     """(reset keys, run keys, sets) of S starts of the P × R = n robots: [S·n] each, ordered
     (start, population, robot); start s's keys are split from ``keys[s]`` alone."""
@@ -462,7 +460,11 @@ def _run_starts(
     of τ (float32, capped), c (float32, capped), finished (bool) and L (float32)."""
     S, (P, R) = keys.shape[0], population.shape[:2]
     reset_keys, run_keys, flat = _rollout_inputs(keys, population)
-    batch = rollout(
+    # The world's walls are compiled into the GA's programs as constants, which XLA folds: in
+    # ga_maze the loop runs several times faster (docs/performance.md). A world with other values
+    # compiles programs of its own, and its numbers differ in the last bits from a run with the
+    # world an argument (the STL trials' way), so the GA always runs this way.
+    batch = _rollout(
         reset_keys,
         run_keys,
         world,
@@ -470,10 +472,10 @@ def _run_starts(
         LTL,
         flat,
         episode,
-        progress=progress,
-        compiled=_COMPILED,
-        # The maze's few fixed walls fold into the program: about 2.7x faster (compile_rollout).
-        specialise=True,
+        progress,
+        _COMPILED,
+        None,
+        fixed_world=True,
     )
     out = outcome(batch.runs, episode, float(sim_params.dt))
     return {
@@ -791,9 +793,7 @@ def _tell(
 
 
 # The mutation rate is traced, so configs that differ only in it share one compiled program.
-_tell_jit = envs.jit(
-    _tell, quick_compile=True, static_argnames=("elitism", "record_best", "rl_crossover")
-)
+_tell_jit = jax.jit(_tell, static_argnames=("elitism", "record_best", "rl_crossover"))
 
 
 def tell(key: jax.Array, state: GAState, evaluation: Evaluation, config: GAConfig) -> GAState:
@@ -856,7 +856,7 @@ def _pool(best: Best, record: Evaluation) -> Best:
     )
 
 
-@functools.partial(envs.jit, quick_compile=True)
+@jax.jit
 def _verify_update(state: GAState, record: Evaluation, rate: jnp.ndarray) -> GAState:
     """Fold a success check of each population's generation best (``record``, [P]) into the
     bests: pooled where it is the best's own set, else a replacement where it ranks higher."""
@@ -918,7 +918,7 @@ def verify(
     return _verify_update(state, record, jnp.float32(rate))
 
 
-@functools.partial(envs.jit, quick_compile=True)
+@jax.jit
 def _confirm_update(state: GAState, record: Evaluation) -> GAState:
     return state.replace(best=_pool(state.best, record))
 
@@ -950,7 +950,7 @@ def confirm(
     return _confirm_update(state, record)
 
 
-@functools.partial(envs.jit, quick_compile=True)
+@jax.jit
 def _best_as_elite(state: GAState) -> GAState:
     """``state`` with each population's robot 0 (its elite) replaced by its checked best so far.
 
@@ -1110,7 +1110,7 @@ def diversity(sets: Antibodies) -> float:
     return float(d[np.triu_indices(K, k=1)].mean())
 
 
-@envs.jit
+@jax.jit
 def _set_distances(sets: Antibodies) -> jnp.ndarray:
     """[K, K, 8] antibody distances between every pair of sets, per antigen."""
     a = jax.tree.map(lambda x: jnp.asarray(x)[:, None, :], sets)

@@ -14,12 +14,9 @@ The names (``SYSTEMS``, ``RANDOM_SETS``, ``LABELS``, :func:`label`, :func:`parse
 
 from __future__ import annotations
 
-import functools
-
 import jax
 import numpy as np
 
-from jaxais import envs
 from jaxais.controllers import System
 from jaxais.envs.struct import device_array
 from jaxais.immune.antibodies import Antibodies, from_dicts, sample_antibodies
@@ -73,7 +70,7 @@ def hand_designed_sets(
     return antibodies, P
 
 
-@functools.partial(envs.jit, quick_compile=True)
+@jax.jit
 def _seeded_paratopes(tau, collisions, L, rho, phi):
     """Eqs (1)-(2) as one compiled program (rather than op by op at every script's start)."""
     return seed_paratopes(L, relative_fitness(tau, collisions, rho), phi)

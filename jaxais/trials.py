@@ -328,7 +328,7 @@ _OUTCOME_KEYS = (
 def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
     """Means and failure rates of a list of trial records."""
     arr = lambda k: np.asarray([r[k] for r in records], float)
-    rates = [r["idiotypic_difference_rate"] for r in records]
+    rates = [r.get("idiotypic_difference_rate") for r in records]  # None: does not apply
     n = len(records)
     return {
         "n": n,

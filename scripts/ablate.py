@@ -94,7 +94,7 @@ def main(argv: list[str] | None = None) -> None:
     # Imported after the cheap checks: a bad flag answers without loading JAX.
     from tqdm import tqdm
 
-    from jaxais import compilation_cache, envs, host_devices
+    from jaxais import _speed, envs
     from jaxais.experiments import ablation
     from jaxais.experiments.plotting import save_figure
     from jaxais.experiments.records import load_ltl_seed, versions
@@ -104,8 +104,7 @@ def main(argv: list[str] | None = None) -> None:
         variants = ablation.select(names)
     except ValueError as err:
         raise UserError(f"--variants: {err}") from None
-    cache_dir = compilation_cache.enable()
-    n_devices = host_devices.enable()
+    _speed.setup(cpu_device_per_core=True)
     started = time.perf_counter()
     # Read once, and early: a missing or corrupt seed fails before any trial runs.
     ltl_seed, seed_info = load_ltl_seed(args.seeds)
@@ -148,9 +147,7 @@ def main(argv: list[str] | None = None) -> None:
         "share_identical_systems": not args.no_share,
         "ltl_seed": seed_info,
         "versions": versions(),
-        "devices": n_devices,
         "cpu_cores": os.cpu_count(),
-        "compilation_cache": cache_dir is not None,
         "calls": result.calls,
         "timings_s": {
             "total_s": wall,

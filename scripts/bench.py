@@ -36,7 +36,7 @@ JSON layout (batch sizes are string keys; rates are robot-steps per second)::
     schema, config {world, steps, batches, repeats, quick, numpy_robots, numpy_steps, timing,
         policy}, machine {platform, machine, processor, cpu_count, cpus_available,
         memory_bytes, python, numpy, jax, jaxlib, backend, device_count, device_kinds,
-        xla_flags, compiler_options, load_average_start, date},
+        xla_flags, load_average_start, date},
     jax_steps_per_s {B: best}, jax_steps_per_s_median {B: ...}, compile_s {B: s},
     jax_runs {B: {compile_s, steps_per_s, steps_per_s_median, best_s, median_s, times_s,
         cpu_per_wall}},
@@ -75,7 +75,6 @@ from jaxais.cli import (
     main_wrapper,
     run_script,
 )
-from jaxais.host_devices import usable_cores
 
 PROG = "bench.py"
 SCHEMA = "jaxais-bench/1"
@@ -173,7 +172,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         type=int,
         default=0,
         help="also time evolve.py's default run and 30 SIE trials with trials.py end to end, "
-        "N runs each (default 0: skipped; about 50 s per run)",
+        "N runs each (default 0: skipped)",
     )
     args = p.parse_args(argv)
     for name, value in (QUICK if args.quick else FULL).items():
@@ -319,7 +318,7 @@ def make_rollout(n_steps: int, sharding: Any = None) -> Callable[..., Any]:
         carry, _ = jax.lax.scan(body, (state, obs), jax.random.split(key, n_steps))
         return carry  # the final observation keeps every step's sensing alive
 
-    return envs.jit(rollout)
+    return jax.jit(rollout)
 
 
 def initial(b: Bench, n: int) -> tuple[Any, Any]:
@@ -342,7 +341,7 @@ def initial(b: Bench, n: int) -> tuple[Any, Any]:
             )
             return s, o
 
-        b.cache["reset"] = jax.device_get(envs.jit(reset_observe)(jax.random.key(0)))
+        b.cache["reset"] = jax.device_get(jax.jit(reset_observe)(jax.random.key(0)))
     state, obs = b.cache["reset"]
     chunk = state.t.shape[0]
     idx = np.arange(n) % chunk
@@ -357,8 +356,6 @@ def bench_machine(b: Bench) -> None:
     import jax
     import jaxlib
     import numpy as np
-
-    from jaxais import envs
 
     def cpu_model() -> str:
         try:
@@ -391,8 +388,6 @@ def bench_machine(b: Bench) -> None:
         "device_count": jax.device_count(),
         "device_kinds": sorted({d.device_kind for d in jax.devices()}),
         "xla_flags": os.environ.get("XLA_FLAGS", ""),
-        "compiler_options": envs.compiler_options(),
-        "task_loop_compiler_options": envs.small_kernel_options(),
         "load_average_start": list(os.getloadavg()),
         "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
     }
@@ -485,7 +480,7 @@ def bench_numpy(b: Bench) -> None:
     state, obs = initial(b, n_r)
     # The same draws a JAX step makes, made up front so that only ref_step is timed.
     keys = jax.random.split(jax.random.key(2), (n_t, n_r))
-    sample = envs.jit(jax.vmap(jax.vmap(envs.sample_step_noise, in_axes=(0, None)), (0, None)))
+    sample = jax.jit(jax.vmap(jax.vmap(envs.sample_step_noise, in_axes=(0, None)), (0, None)))
     noise = ref.noise_to_numpy(sample(keys, b.world))
     world_np, params_np = ref.world_to_numpy(b.world), ref.params_to_numpy(b.params)
     states = ref.state_to_numpy(state)
@@ -516,7 +511,7 @@ def bench_flops(b: Bench) -> None:
 
     from jaxais import envs
 
-    v_step = envs.jit(jax.vmap(envs.step, in_axes=(0, 0, 0, None, None)))
+    v_step = jax.jit(jax.vmap(envs.step, in_axes=(0, 0, 0, None, None)))
     per_batch = {}
     # One batch size (each costs a compilation): the per-robot figure hardly depends on it.
     for n in [max([x for x in b.args.batches if x <= FLOPS_BATCH] or [1])]:
@@ -754,11 +749,13 @@ def main(argv: list[str] | None = None) -> None:
     environ = dict(os.environ)
     # One CPU device per core by default, so the sharded figures (every core busy) are measured
     # beside the one-device ones; --devices 1 measures one device only.
-    force_host_devices(usable_cores() if args.devices is None else args.devices)
+    force_host_devices(len(os.sched_getaffinity(0)) if args.devices is None else args.devices)
 
     from tqdm import tqdm
 
-    from jaxais import envs
+    from jaxais import _speed, envs
+
+    _speed.setup(cache=False)  # the scripts' XLA flags; no cache, since compile time is measured
 
     t0 = time.perf_counter()
     b = Bench(

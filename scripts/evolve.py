@@ -33,10 +33,8 @@ not checkpointed and cost about 2 x seeds - 1 main runs.
 from __future__ import annotations
 
 import argparse
-import importlib
 import shlex
 import sys
-import threading
 import time
 from pathlib import Path
 from typing import Any, NoReturn
@@ -141,11 +139,7 @@ def _config(args: argparse.Namespace):
 
 
 class _CompileClock:
-    """Sums JAX's tracing, lowering and XLA compile durations (jax.monitoring events).
-
-    Programs compiled at the same time (``jaxais.episode.compile_rollout``) each count in full,
-    so the sum can exceed the wall time they took.
-    """
+    """Sums JAX's tracing, lowering and XLA compile durations (jax.monitoring events)."""
 
     EVENTS = frozenset(
         {
@@ -206,15 +200,6 @@ def _generation_record(generation: int, evaluation, best, wall: float) -> dict[s
         "populations": pops,
         "wall_s": round(wall, 3),
     }
-
-
-def _import_in_background() -> None:
-    """Import orbax (the checkpoints, about 0.4 s) and matplotlib (the plot, about 0.6 s)."""
-    try:  # orbax first: the checkpoints open before the GA starts, the plot comes last
-        for name in ("orbax.checkpoint", "matplotlib.backends.backend_agg", "matplotlib.figure"):
-            importlib.import_module(name)
-    except Exception:  # noqa: BLE001 (the main thread's own imports report any problem)
-        pass
 
 
 def _plot(path: Path, history: list[dict[str, Any]], title: str, tau_cap: float) -> None:
@@ -278,23 +263,16 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
     from tqdm import tqdm
 
     import jaxais
-    from jaxais import compilation_cache, envs, ga, host_devices, loop_kernels
+    from jaxais import _speed, envs, ga
     from jaxais.checkpointing import GACheckpointer
     from jaxais.experiments.records import portable_path
-    from jaxais.orbax_reads import forget_abandoned_reads
     from jaxais.seed import save_seed
 
     # orbax reports a failed save to us as an exception, which becomes the one-line error; its
     # own logs and its background threads' reports of the same failure (hundreds of lines on a
     # full disk) are not for users.
     logging.getLogger("absl").setLevel(logging.CRITICAL)
-    forget_abandoned_reads()
-    # Orbax and matplotlib import in the background while JAX's backend starts, the world loads
-    # and the GA compiles; the main thread's own imports then find them done (or wait for them).
-    threading.Thread(target=_import_in_background, daemon=True).start()
-    cache_dir = compilation_cache.enable()
-    loop_kernel_bytes = loop_kernels.enable()  # before JAX's backend starts and reads XLA_FLAGS
-    n_devices = host_devices.enable()
+    _speed.setup(one_kernel_loops=True)
     world = envs.load_world(args.world)
     sim_params = envs.default_params()
     # Recorded without this machine's directories (jaxais.experiments.records.portable_path).
@@ -419,9 +397,6 @@ def _evolve(args: argparse.Namespace, argv: list[str], config, out: Path) -> dic
         "ga_wall_time_s": round(ga_wall, 3),
         "compile_time_s": round(compile_s, 3),
         "ga_compile_time_s": round(ga_compile, 3),
-        "compilation_cache": cache_dir is not None,
-        "devices": n_devices,
-        "loop_kernel_bytes": loop_kernel_bytes,
         "wall_time_total_s": round(earlier_wall + wall, 3),
     }
     save_seed(out / "seed", seed, provenance, crossing=crossing)
@@ -482,13 +457,11 @@ def _check_seed(args: argparse.Namespace, config) -> dict[str, Any]:
     """``--check-seed DIR``: measure an existing seed's crossing rates; write nothing."""
     import logging
 
-    from jaxais import compilation_cache, envs, host_devices, loop_kernels
+    from jaxais import _speed, envs
     from jaxais.seed import load_seed
 
     logging.getLogger("absl").setLevel(logging.ERROR)
-    compilation_cache.enable()
-    loop_kernels.enable()
-    host_devices.enable()
+    _speed.setup(one_kernel_loops=True)
     seed, meta = load_seed(args.check_seed)
     world = envs.load_world(args.world)
     start = time.perf_counter()

@@ -126,11 +126,11 @@ def make_run(world, params, n_robots: int, n_steps: int):
     from jaxais import envs
 
     v_step = jax.vmap(envs.step, in_axes=(0, 0, 0, None, None))
-    v_reset = envs.jit(jax.vmap(envs.reset, in_axes=(0, None, None)))
+    v_reset = jax.jit(jax.vmap(envs.reset, in_axes=(0, None, None)))
     v_observe = jax.vmap(envs.observe, in_axes=(0, 0, None, None))
     v_wheels = jax.vmap(demo_wheels)
 
-    @envs.jit
+    @jax.jit
     def rollout(key, state0, world, params):
         k_obs, k_steps = jax.random.split(key)
         obs0 = v_observe(jax.random.split(k_obs, n_robots), state0, world, params)
@@ -163,11 +163,10 @@ def main(argv: list[str] | None = None) -> None:
     import jax
     import numpy as np
 
-    from jaxais import compilation_cache, envs, host_devices
+    from jaxais import _speed, envs
     from jaxais.experiments import plotting
 
-    compilation_cache.enable()
-    host_devices.enable()
+    _speed.setup()
     world = envs.load_world(args.world)
     params = envs.default_params()
     run = make_run(world, params, args.robots, args.steps)

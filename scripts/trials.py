@@ -74,14 +74,13 @@ def main(argv: list[str] | None = None) -> None:
     # Imported after the flags are checked: a bad flag answers at once, without loading JAX.
     from tqdm import tqdm
 
-    from jaxais import compilation_cache, envs, host_devices
+    from jaxais import _speed, envs
     from jaxais.episode import EpisodeConfig
     from jaxais.experiments.records import build_systems, results_document, run_config
     from jaxais.immune.network import NetworkParams
     from jaxais.trials import run_trials
 
-    compilation_cache.enable()
-    host_devices.enable()
+    _speed.setup(cpu_device_per_core=True)
     name = label(args.system, args.random_set or "R1")
     world = envs.load_world(args.world)
     config = EpisodeConfig(

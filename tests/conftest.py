@@ -20,9 +20,6 @@ from jaxais.envs import reference as ref
 # Scripts keep a persistent compilation cache in the user's home by default; tests must not write
 # there (a test that wants a cache names its own directory).
 os.environ["JAXAIS_CACHE_DIR"] = "off"
-# Tests run evolve.py in-process: its small-loop threshold (jaxais.loop_kernels) would otherwise
-# enter this process's XLA_FLAGS, and every later test would compile differently.
-os.environ["JAXAIS_LOOP_KERNEL_BYTES"] = "off"
 
 BATCH = 8
 """Robots per batched call (a fixed size, so that no test triggers a new compilation)."""

@@ -106,7 +106,7 @@ def _start(reset_key, run_key, pose, world, sim_params, robot):
     return run.replace(sim=sim, obs=obs, anchor=sim.pose[:2])
 
 
-@envs.jit
+@jax.jit
 def _start_batch(reset_keys, run_keys, poses, world, sim_params, robots):
     return jax.vmap(_start, in_axes=(0, 0, 0, None, None, 0))(
         reset_keys, run_keys, poses, world, sim_params, robots
@@ -137,7 +137,7 @@ def _loop(runs, n_steps, world, sim_params, robots):
     return jax.lax.fori_loop(0, n_steps, body, (runs, trace))
 
 
-_loop_jit = envs.jit(_loop, small_kernels=True)
+_loop_jit = jax.jit(_loop)
 
 
 @dataclass
@@ -589,7 +589,7 @@ PARK_SECONDS = 30.0
 PARK_SEED = 3
 
 
-@envs.jit
+@jax.jit
 def _parked_antigens(keys, poses, world, sim_params):
     """[n_poses, n_keys] antigens of a robot standing still at each pose, one noise draw per key
     (what the simulator shows a robot whose wheels are at 0, iteration after iteration)."""

@@ -24,10 +24,8 @@ from jaxais.checkpointing import (
     state_to_tree,
 )
 
-# After a failed restore, orbax's abandoned reads post to a closed asyncio loop. The checkpoint
-# reader drops those reports (jaxais.orbax_reads), but pytest swaps sys.unraisablehook test by
-# test, so a late one can reach pytest's own hook, which turns it into a warning about nothing of
-# ours.
+# After a failed restore, orbax's abandoned reads post to a closed asyncio loop; a late report can
+# reach pytest's unraisable hook, which turns it into a warning about nothing of ours.
 pytestmark = pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
 
 INFO = {"world": "ga_maze", "seed": 0, "config": TINY.to_dict()}

@@ -60,7 +60,29 @@ def test_all_32_claims_hold_on_clear_results():
     ]
     assert all(c["held"] is True for c in ledger), [c for c in ledger if not c["held"]]
     assert claims.summary(ledger) == {"reproduced": 32, "total": 32, "evaluated": 32}
-    assert set(ledger[0]) == {"id", "world", "text", "held", "evidence"}
+    assert set(ledger[0]) == {
+        "id",
+        "world",
+        "text",
+        "held",
+        "evidence",
+        "ci_held",
+        "ci_verdict",
+        "ci_evidence",
+    }
+    # Clear results are clear with their intervals too: every claim holds with them.
+    assert all(c["ci_held"] is True for c in ledger), [c for c in ledger if not c["ci_held"]]
+    assert {c["ci_verdict"] for c in ledger} == {
+        claims.HELD_SEPARATED,
+        claims.HELD_ZERO_IN_CI,
+    }
+    assert claims.ci_summary(ledger) == {
+        "reproduced": 32,
+        "reproduced_with_ci": 32,
+        "contradicted_with_ci": 0,
+        "evaluated": 32,
+        "level": 0.95,
+    }
     assert all(c["text"] and c["evidence"] for c in ledger)
     # The real world has only the R1 unseeded systems.
     assert "real/SIE-f-sig-below/UIE-R2" not in by_id(ledger)
@@ -177,7 +199,87 @@ def test_alpha_sets_the_significance_threshold(alpha):
 def test_document_is_plain_json():
     ledger = claims.claims(results(worlds=("world2",)))
     doc = claims.document(ledger)
-    assert set(doc) == {"summary", "claims"}
+    assert set(doc) == {"summary", "ci_summary", "claims"}
     assert doc["summary"] == claims.summary(ledger)
+    assert doc["ci_summary"] == claims.ci_summary(ledger)
     assert doc["claims"] == ledger
     assert json.loads(json.dumps(doc, allow_nan=False)) == doc
+
+
+# --------------------------------------------------------------------------- with intervals
+
+
+def test_interval_readings():
+    res = results({"world1": {"HDC": (0, 1300)}, "world2": {"HDC": (1, 1300)}})
+    res["world2"]["UIE-R1"] = system(1, 510)  # f 259 vs SIE's 254: lower, not significantly
+    res["world1"]["SIE"][0] = trial(4000, 2500)  # one failure, by both caps
+    cis = stats.table3_ci(res)
+    got = by_id(claims.claims(res, cis=cis))
+    # A tie of means (c 1 = 1, both constant): held on the means, the intervals overlap.
+    tie = got["world2/SIE-lowest-c"]
+    assert (tie["held"], tie["ci_held"], tie["ci_verdict"]) == (True, False, claims.HELD_OVERLAP)
+    # UIE-R1 (c 1 here) and HDC tie with SIE; the first in table order is shown.
+    assert tie["ci_evidence"] == "SIE [1.00, 1.00]; UIE-R1 [1.00, 1.00]."
+    # HDC's c (0) is below SIE's (1) on every resample: contradicted.
+    low = got["world1/SIE-lowest-c"]
+    assert low["held"] is False and low["ci_verdict"] == claims.NOT_HELD_SEPARATED
+    assert low["ci_evidence"].endswith("HDC [0.00, 0.00].")
+    # Lower, not significantly; overlapping intervals.
+    sig = got["world2/SIE-f-sig-below/UIE-R1"]
+    assert (sig["held"], sig["ci_verdict"]) == (False, claims.NOT_HELD_OVERLAP)
+    lo, hi = cis["world2"]["UIE-R1"]["f"]
+    assert (
+        sig["ci_evidence"].startswith("SIE f [")
+        and f"UIE-R1 [{lo:.1f}, {hi:.1f}]" in (sig["ci_evidence"])
+    )
+    # One failure in 8: the Wilson interval of the rate excludes 0.
+    fail = got["world1/SIE-no-failures"]
+    assert (fail["held"], fail["ci_held"], fail["ci_verdict"]) == (
+        False,
+        False,
+        claims.NOT_HELD_ZERO_OUT,
+    )
+    wlo, whi = stats.proportion_ci(1, 8)
+    assert fail["ci_evidence"] == f"SIE failure rate [{100 * wlo:.2g}, {100 * whi:.2g}] % (Wilson)."
+    ok = got["world2/SIE-no-failures"]
+    assert (ok["ci_held"], ok["ci_verdict"]) == (True, claims.HELD_ZERO_IN_CI)
+    assert ok["ci_evidence"].startswith("SIE failure rate [0, 32] %")
+    assert got["H4"]["ci_verdict"] == claims.NOT_HELD_ZERO_OUT
+    counts = claims.ci_summary(list(got.values()))
+    assert counts["reproduced"] == claims.summary(list(got.values()))["reproduced"]
+    assert counts["reproduced_with_ci"] == sum(c["ci_held"] is True for c in got.values())
+    assert counts["contradicted_with_ci"] == sum(
+        c["ci_verdict"] in (claims.NOT_HELD_SEPARATED, claims.NOT_HELD_ZERO_OUT)
+        for c in got.values()
+    )
+    assert all(c["ci_verdict"] in claims.CI_VERDICTS for c in got.values())
+
+
+def test_held_but_overlapping_and_the_t_test_disagreeing():
+    # Intervals given by hand: SIE's f interval reaches into URL-R1's in world1.
+    res = results()
+    cis = stats.table3_ci(res)
+    cis["world1"]["URL-R1"]["f"] = [cis["world1"]["SIE"]["f"][1] - 1.0, 5000.0]
+    got = by_id(claims.claims(res, cis=cis))
+    sig = got["world1/SIE-f-sig-below/URL-R1"]
+    assert (sig["held"], sig["ci_held"], sig["ci_verdict"]) == (True, False, claims.HELD_OVERLAP)
+    assert got["world1/SRL-f-below/URL-R1"]["ci_verdict"] == claims.HELD_OVERLAP
+    assert got["H1"]["held"] is True and got["H1"]["ci_verdict"] == claims.HELD_OVERLAP
+    # Significance fails (alpha tiny) while the intervals separate as claimed.
+    got = by_id(claims.claims(res, alpha=1e-300))
+    sig = got["world1/SIE-f-sig-below/URL-R1"]
+    assert (sig["held"], sig["ci_held"], sig["ci_verdict"]) == (
+        False,
+        False,
+        claims.NOT_HELD_BY_TEST,
+    )
+
+
+def test_unevaluated_claims_have_no_interval_reading():
+    ledger = claims.claims(results(worlds=("world1",)))
+    for c in ledger:
+        if c["held"] is None:
+            assert c["ci_held"] is None and c["ci_verdict"] is None and c["ci_evidence"] == ""
+    counts = claims.ci_summary(ledger)
+    assert counts["evaluated"] == claims.summary(ledger)["evaluated"]
+    assert "of the" in claims.ci_headline(counts) and "95 %" in claims.ci_headline(counts)

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from jaxais.controllers import BRAITENBERG, braitenberg_params
-from jaxais.trials import TrialsConfig, make_trials, run_trials
+from jaxais.trials import TrialsConfig, make_trials, run_trials, summarise
 
 N = 2
 KEYS = ("tau", "collisions", "fitness", "trapped_s", "iterations")
@@ -87,6 +87,7 @@ def test_a_new_controller_plugs_into_the_loop_unchanged():
     assert_same_trials(got, want)
     assert all(set(r) & {"idiotypic_difference_rate", "replaced"} == set() for r in want)
     assert all(r["iterations"] > 0 for r in want)
+    assert summarise(want)["idiotypic_difference_rate"] is None  # no such rate: none reported
 
 
 def test_run_trials_takes_any_label_with_a_controller_but_checks_the_stls():

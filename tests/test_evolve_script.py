@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from test_ga import TINY
 
-from jaxais import ga, loop_kernels
+from jaxais import ga
 from jaxais.checkpointing import GACheckpointer
 from jaxais.seed import load_seed
 
@@ -47,10 +47,8 @@ TIME_KEYS = {
     "crossing_wall_time_s",
 }
 
-# After a failed restore, orbax's abandoned reads post to a closed asyncio loop. The checkpoint
-# reader drops those reports (jaxais.orbax_reads), but pytest swaps sys.unraisablehook test by
-# test, so a late one can reach pytest's own hook, which turns it into a warning about nothing of
-# ours.
+# After a failed restore, orbax's abandoned reads post to a closed asyncio loop; a late report can
+# reach pytest's unraisable hook, which turns it into a warning about nothing of ours.
 pytestmark = pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
 
 
@@ -122,7 +120,6 @@ def test_outputs(full_run: Path):
         assert {"best_f_generation_0", "best_f_final_generation", "best_f_overall"} <= p.keys()
         assert p["best_f_overall"] <= p["best_f_generation_0"]
     assert summary["wall_time_s"] > 0 and summary["compile_time_s"] >= 0
-    assert summary["loop_kernel_bytes"] is None  # off in the tests (conftest)
     assert (full_run / "fitness.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     seed, meta = load_seed(full_run / "seed")
     assert seed.antibodies.type.shape == (2, 8)
@@ -162,18 +159,16 @@ def test_check_seed_measures_the_recorded_rates(full_run: Path, capsys):
 
 
 def test_run_as_a_user_runs_it(tmp_path: Path, full_run: Path):
-    """The script as a process, with its defaults (small-loop kernels on): status 0, the same
-    seed as the in-process run (kernels off), nothing on stderr but the progress bar."""
+    """The script as a process, with its XLA flags (jaxais._speed): status 0, the same seed as the
+    in-process run (whose JAX started without them), nothing on stderr but the progress bar."""
     out = tmp_path / "run"
-    env = {k: v for k, v in os.environ.items() if k != loop_kernels.ENV}
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     cmd = [sys.executable, str(SCRIPT), *TINY_ARGS, "--generations", "3", "--out", str(out)]
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "error" not in proc.stderr.lower() and "Traceback" not in proc.stderr
     assert proc.stdout.startswith("3 generations in ") and str(out / "seed") in proc.stdout
     assert "crossing rate per seed set in 8 fresh starts" in proc.stdout
-    summary = json.loads((out / "summary.json").read_text())
-    assert summary["loop_kernel_bytes"] == loop_kernels.DEFAULT_BYTES
     assert_same_arrays(seed_arrays(out / "seed"), seed_arrays(full_run / "seed"))
 
 
@@ -299,23 +294,6 @@ def test_bad_flags_subprocess(tmp_path: Path):
         assert lines[0].startswith("evolve.py: error: "), (case, err)
         assert case[1 if case[0] == "--world" else 0] in lines[0], (case, err)
     assert _digest(keep) == before
-
-
-def test_bad_loop_kernel_setting_subprocess(tmp_path: Path):
-    """A malformed JAXAIS_LOOP_KERNEL_BYTES: one line naming it, status 2, nothing written."""
-    out = tmp_path / "run"
-    env = {**os.environ, "JAXAIS_DEBUG": "", "JAXAIS_LOOP_KERNEL_BYTES": "lots"}
-    proc = subprocess.run(
-        [sys.executable, str(SCRIPT), "--out", str(out)],
-        capture_output=True,
-        text=True,
-        env=env,
-        timeout=300,
-    )
-    lines = proc.stderr.strip().splitlines()
-    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
-    assert lines[0].startswith("evolve.py: error: JAXAIS_LOOP_KERNEL_BYTES='lots'"), lines
-    assert not (out / "summary.json").exists() and not (out / "seed").exists()
 
 
 @pytest.mark.parametrize(

@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 from jaxais import envs, ga
 from jaxais.checkpointing import state_to_tree
 from jaxais.controllers import LTL
-from jaxais.episode import EpisodeConfig, rollout
+from jaxais.episode import EpisodeConfig, _rollout
 from jaxais.immune.antibodies import (
     LIMITS_MIN,
     Antibodies,
@@ -582,9 +582,9 @@ def test_compare_diversity_reports_both_tests():
 
 
 def test_rollout_programs_per_world(tmp_path):
-    # Specialised (the GA's way), the task loop bakes the world into its programs: a world with
-    # the same shapes but other values must get programs of its own, and the same world must
-    # reuse its programs. Unspecialised, both worlds share one program, the world an argument.
+    # With a fixed world (the GA's way), the task loop bakes the world into its programs: a world
+    # with the same shapes but other values must get programs of its own, and the same world must
+    # reuse its programs. Otherwise both worlds share one program, the world an argument.
     source = (Path(envs.__file__).parent / "worlds" / "ga_maze.toml").read_text()
     assert "start_region = [0.1, 0.08, 0.28, 0.3]" in source
     moved = tmp_path / "moved.toml"
@@ -597,9 +597,9 @@ def test_rollout_programs_per_world(tmp_path):
     reset_keys = jax.random.split(jax.random.key(1), 2)
     run_keys = jax.random.split(jax.random.key(2), 2)
 
-    def final_x(world, cache, specialise):
-        batch = rollout(
-            reset_keys, run_keys, world, params, LTL, sets, config, None, cache, None, specialise
+    def final_x(world, cache, fixed_world):
+        batch = _rollout(
+            reset_keys, run_keys, world, params, LTL, sets, config, None, cache, None, fixed_world
         )
         return np.asarray(batch.runs.sim.pose[:, 0])
 

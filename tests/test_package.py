@@ -54,77 +54,9 @@ def test_reading_worlds_constants_and_the_seed_compiles_only_named_programs():
     out = run_python(code)
     assert out.returncode == 0, out.stderr[-2000:]
     compiled = set(out.stdout.split())
-    # The compiler-option probes (envs.compile) and eqs (1)-(2); the seed's limits are checked
-    # with NumPy.
-    assert compiled <= {"jit(<lambda>)", "jit(_seeded_paratopes)"}, compiled
+    # Eqs (1)-(2); the seed's limits are checked with NumPy.
+    assert compiled <= {"jit(_seeded_paratopes)"}, compiled
     assert "jit(_seeded_paratopes)" in compiled  # the listener saw the compiles that do happen
-
-
-def _clear_option_caches(ec) -> None:
-    for f in (
-        ec._every_option_accepted,
-        ec.compiler_options,
-        ec.quick_compile_options,
-        ec.small_kernel_options,
-    ):
-        f.cache_clear()
-
-
-@pytest.mark.parametrize("rejected", [None, "xla_cpu_use_fusion_emitters"])
-def test_compile_options_probe_once_and_fall_back(monkeypatch, rejected) -> None:
-    """One probe compile when XLA takes every option; the largest accepted set otherwise."""
-    import jax
-
-    from jaxais.envs import compile as ec
-
-    if jax.default_backend() != "cpu":
-        pytest.skip("the options are CPU options")
-
-    probes = []
-
-    def accepted(options):
-        probes.append(options)
-        return rejected not in options
-
-    monkeypatch.setattr(ec, "_accepted", accepted)
-    _clear_option_caches(ec)
-    try:
-        base = ec.compiler_options()
-        quick = ec.quick_compile_options()
-        small = ec.small_kernel_options()
-    finally:
-        _clear_option_caches(ec)
-    assert base == ec.CPU_COMPILER_OPTIONS
-    if rejected is None:
-        assert quick == {**ec.CPU_COMPILER_OPTIONS, **ec.QUICK_COMPILE_OPTIONS}
-        assert small == {**ec.CPU_COMPILER_OPTIONS, "xla_cpu_use_fusion_emitters": False}
-        assert len(probes) == 1
-    else:
-        assert quick == {**ec.CPU_COMPILER_OPTIONS, "xla_backend_optimization_level": 1}
-        assert small == ec.CPU_COMPILER_OPTIONS
-
-
-def test_jit_compiles_with_the_options_of_its_mode(monkeypatch) -> None:
-    """envs.jit hands jax.jit the option set its mode names (resolved at first use)."""
-    import jax
-
-    from jaxais.envs import compile as ec
-
-    monkeypatch.setattr(ec, "compiler_options", lambda: {"mode": "default"})
-    monkeypatch.setattr(ec, "quick_compile_options", lambda: {"mode": "quick"})
-    monkeypatch.setattr(ec, "small_kernel_options", lambda: {"mode": "small"})
-    seen = []
-
-    def fake_jit(fun, compiler_options, **kwargs):
-        seen.append(compiler_options)
-
-    monkeypatch.setattr(jax, "jit", fake_jit)
-    fun = lambda x: x
-    for kwargs in ({}, {"quick_compile": True}, {"small_kernels": True}):
-        ec.jit(fun, **kwargs)._jitted  # noqa: B018 (builds the jax.jit)
-    assert [o["mode"] for o in seen] == ["default", "quick", "small"]
-    with pytest.raises(ValueError, match="one of"):
-        ec.jit(fun, quick_compile=True, small_kernels=True)
 
 
 def _jaxais_imports(folder: str) -> dict[str, set[str]]:

@@ -113,13 +113,20 @@ def test_write_report_full(tmp_path, paper):
     assert path == tmp_path / "report.md"
     text = path.read_text()
     lines = text.splitlines()
-    counts = claims.summary(claims.claims(results))
+    ledger = claims.claims(results)
+    counts = claims.summary(ledger)
     assert counts["total"] == counts["evaluated"] == 32
-    # The ledger line opens the report, right after the title, then the table of claims.
+    # The ledger line opens the report, right after the title, then the line of the interval
+    # readings, then the table of claims.
     assert lines[0].startswith("# ") and lines[1] == ""
     assert lines[2] == f"**{counts['reproduced']} of 32 of the paper's claims reproduced**"
-    assert lines[4] == "| Claim | The paper says | Held | Evidence (ours) |"
-    assert lines[6].startswith("| world1/SIE-lowest-c | In Simulated World 1, ")
+    assert lines[4] == claims.ci_headline(claims.ci_summary(ledger))
+    assert lines[6] == (
+        "| Claim | The paper says | Held | Evidence (ours) | With 95 % CIs (ours) |"
+    )
+    assert lines[8].startswith("| world1/SIE-lowest-c | In Simulated World 1, ")
+    first = ledger[0]
+    assert lines[8].endswith(f"| {first['ci_verdict']}: {first['ci_evidence']} |")
     assert "| H4 | H4 is supported: " in text
     assert "could not be evaluated" not in text
     for heading in (
@@ -137,6 +144,13 @@ def test_write_report_full(tmp_path, paper):
     ):
         assert heading in text, heading
     assert "| SIE | 6 |" in text  # n column of Table 3
+    # Table 3 gives our means with their bootstrap intervals, labelled.
+    assert "| System | n | c ours [95 % CI] / paper | τ (s) ours [95 % CI] / paper |" in text
+    assert "95 % percentile bootstrap confidence interval of our mean (2000 resamples" in text
+    t3, ci = tables["table3"]["world1"]["SIE"], tables["table3_ci"]["world1"]["SIE"]
+    cell = f"| {t3['tau']:.0f} [{ci['tau'][0]:.0f}, {ci['tau'][1]:.0f}] / 562"
+    assert cell in text
+    assert "*With 95 % CIs* (holds): world1: SIE f [" in text  # under H1
     assert "trapped (s), ours |" in text and "| 12.5 |" in text
     assert "c + τ may exceed total" in text
     assert "| URL-R1 | 17 / 43 | 17 / 30 † | 17 / 57 |" in text  # 1 run of 6, by both caps
@@ -204,3 +218,13 @@ def test_write_report_uses_the_given_ledger(tmp_path, paper):
     assert lines[2] == "**0 of 1 of the paper's claims reproduced**"
     assert lines[6] == "| X | a claim | ✗ | a\\|b |"  # a pipe in the evidence is escaped
     assert sorted(p.name for p in (tmp_path / "figures").iterdir()) == ["box_world2.png"]
+
+
+def test_write_report_without_intervals(tmp_path, paper):
+    # Tables from before the intervals (no "table3_ci"): plain means, no brackets.
+    results = {"world2": {"SIE": [trial(100), trial(120)], "SRL": [trial(300), trial(340)]}}
+    tables = stats.build_tables(results)
+    del tables["table3_ci"], tables["ci"]
+    text = report.write_report(tmp_path, tables, results, paper, None, {}, None).read_text()
+    assert "| System | n | c ours / paper |" in text and "bootstrap" not in text
+    assert "| SIE | 2 | 0.0 / 2 | 110 / 659 " in text

@@ -51,8 +51,14 @@ SUMMARY_KEYS = {
 }
 
 
+TWO_DEVICES = {"XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
+"""Two CPU devices, over which a script's batch is sharded (the scripts make one per core)."""
+ONE_DEVICE = {"XLA_FLAGS": "--xla_force_host_platform_device_count=1"}
+
+
 def _env(**extra: str) -> dict[str, str]:
-    return {**os.environ, "JAXAIS_DEBUG": "", **extra}
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    return {**env, "JAXAIS_DEBUG": "", **extra}
 
 
 def _start(script: str, *args: object, **env: str) -> subprocess.Popen:
@@ -94,7 +100,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     cache = {"JAXAIS_CACHE_DIR": str(base / "jax_cache")}
     out = base / "trials"
     out.mkdir()
-    # 3 trials on 2 CPU devices: the batch is padded to 4 and sharded (jaxais.host_devices).
+    # 3 trials on 2 CPU devices: the batch is padded to 4 and sharded (jaxais.episode.rollout).
     trials_args = (
         "--system", "HDC", "--world", "world1", "--trials", 3, "--tau-cap", 10,
         "--out", out / "results.json", "--plot", out / "plot.png",
@@ -107,13 +113,13 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
         "reproduce.py", "--trials", 2, "--tau-cap", 10, "--worlds", "world1",
         "--seeds", seeds, "--out", rep_dir,
     )  # fmt: skip
-    first = _finish(_start("trials.py", *trials_args, **cache, JAXAIS_CPU_DEVICES="2"))
+    first = _finish(_start("trials.py", *trials_args, **cache, **TWO_DEVICES))
     _ok(first)
-    single = _start("trials.py", *one_args, JAXAIS_CPU_DEVICES="1", JAXAIS_CACHE_DIR="off")
+    single = _start("trials.py", *one_args, JAXAIS_CACHE_DIR="off", **ONE_DEVICE)
     cached = sorted(p.name.split("-")[0] for p in (base / "jax_cache").iterdir())
     shutil.move(out / "results.json", out / "first.json")
     shutil.move(out / "plot.png", out / "first.png")
-    second = _finish(_start("trials.py", *trials_args, **cache, JAXAIS_CPU_DEVICES="2"))
+    second = _finish(_start("trials.py", *trials_args, **cache, **TWO_DEVICES))
     return {
         "one_device": _finish(single),
         "one_device_json": one_device / "results.json",
@@ -199,8 +205,6 @@ def test_trials_script_user_errors(tmp_path: Path):
     for (_, words), proc in zip(cases, procs, strict=True):
         assert_user_error(_finish(proc), "trials.py", *words)
     assert_user_error(_finish(bad_suffix), "trials.py", ".json")
-    bad_devices = _start("trials.py", "--system", "HDC", "--out", out, JAXAIS_CPU_DEVICES="two")
-    assert_user_error(_finish(bad_devices), "trials.py", "JAXAIS_CPU_DEVICES", "positive integer")
     assert not out.exists() and not (tmp_path / "r.txt").exists()
 
 

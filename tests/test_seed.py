@@ -23,9 +23,8 @@ from jaxais.seed import (
     save_seed,
 )
 
-# After a failed restore, orbax's abandoned reads post to a closed asyncio loop. load_seed drops
-# those reports (jaxais.orbax_reads), but pytest swaps sys.unraisablehook test by test, so a late
-# one can reach pytest's own hook, which turns it into a warning that says nothing about the seed.
+# After a failed restore, orbax's abandoned reads post to a closed asyncio loop; a late report can
+# reach pytest's unraisable hook, which turns it into a warning that says nothing about the seed.
 pytestmark = pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
 
 PROVENANCE = {"command": "test_seed.py", "seed": 7, "version": "0.0-test"}

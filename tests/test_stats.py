@@ -293,15 +293,165 @@ def test_build_tables_is_plain_json():
     tables = stats.build_tables(res)
     assert set(tables) == {
         "table3",
+        "table3_ci",
         "table4",
         "table5",
+        "table5_ci",
+        "ci",
         "idiotypic_difference_rate",
         "trapped_s",
         "hypotheses",
     }
     assert tables["trapped_s"]["world1"]["SIE"] == 2.0
     assert tables["table4"]["world2"]["SIE vs SRL"]["tau"] == 100
+    assert tables["table3_ci"] == stats.table3_ci(res)
+    assert tables["table3_ci"]["world2"]["SIE"]["tau"] == [10.0, 10.0]
+    assert tables["table5_ci"]["world1"]["SIE"]["total"][0] == 0.0
+    assert tables["ci"]["resamples"] == stats.BOOTSTRAP_RESAMPLES == 2000
+    assert tables["ci"]["level"] == 0.95
+    assert set(tables["hypotheses"]["H1"]) >= {"ci_supported", "ci_contradicted", "ci_summary"}
     json.loads(json.dumps(tables, allow_nan=False))
+
+
+# --------------------------------------------------------------------------- intervals
+
+
+def percentile_ci_by_loop(x: list[float], seed: int, resamples: int, level: float = 0.95):
+    """The percentile bootstrap written out: one index drawn at a time from the same Generator
+    stream, plain-Python means, and the quantiles by sorting and linear interpolation
+    (Hyndman & Fan type 7)."""
+    rng = np.random.default_rng(seed)
+    n = len(x)
+    means = sorted(
+        math.fsum(x[int(rng.integers(0, n))] for _ in range(n)) / n for _ in range(resamples)
+    )
+
+    def quantile(q: float) -> float:
+        h = (resamples - 1) * q
+        i = math.floor(h)
+        j = min(i + 1, resamples - 1)
+        return means[i] + (h - i) * (means[j] - means[i])
+
+    tail = (1 - level) / 2
+    return quantile(tail), quantile(1 - tail)
+
+
+@pytest.mark.parametrize("n", [2, 7, 30])
+def test_bootstrap_ci_matches_a_loop_of_resamples(n):
+    x = list(np.random.default_rng(n).exponential(300.0, n))
+    lo, hi = stats.bootstrap_mean_ci(x, resamples=500, rng=np.random.default_rng(11))
+    ref = percentile_ci_by_loop(x, seed=11, resamples=500)
+    np.testing.assert_allclose([lo, hi], ref, rtol=1e-12)
+    assert lo <= np.mean(x) <= hi
+
+
+def test_bootstrap_ci_matches_scipy_percentile():
+    x = np.random.default_rng(5).lognormal(5.0, 1.0, 40)
+    got = stats.bootstrap_mean_ci(x, level=0.9, resamples=2000, rng=np.random.default_rng(7))
+    res = sps.bootstrap(
+        (x,),
+        np.mean,
+        method="percentile",
+        confidence_level=0.9,
+        n_resamples=2000,
+        rng=np.random.default_rng(7),
+    )
+    ci = res.confidence_interval
+    np.testing.assert_allclose(got, (ci.low, ci.high), rtol=1e-9)
+
+
+def test_bootstrap_ci_columns_share_their_resamples():
+    x = np.random.default_rng(2).normal(size=(25, 3))
+    lo, hi = stats.bootstrap_mean_ci(x, rng=4)
+    assert lo.shape == hi.shape == (3,)
+    for k in range(3):
+        np.testing.assert_allclose(
+            (lo[k], hi[k]), stats.bootstrap_mean_ci(x[:, k], rng=4), rtol=1e-12
+        )
+    # A linear function of the columns: its resampled means are that function of theirs.
+    f_lo, f_hi = stats.bootstrap_mean_ci(np.stack([x[:, 0], 3 * x[:, 0] + 1], axis=1), rng=4)
+    np.testing.assert_allclose(f_lo[1], 3 * f_lo[0] + 1, rtol=1e-12)
+    np.testing.assert_allclose(f_hi[1], 3 * f_hi[0] + 1, rtol=1e-12)
+
+
+def test_bootstrap_ci_is_deterministic_for_a_seed():
+    x = np.arange(20.0) ** 2
+    assert stats.bootstrap_mean_ci(x, rng=3) == stats.bootstrap_mean_ci(x, rng=3)
+    assert stats.bootstrap_mean_ci(x, rng=3) != stats.bootstrap_mean_ci(x, rng=4)
+
+
+def test_bootstrap_ci_degenerate_samples():
+    assert stats.bootstrap_mean_ci([42.5]) == (42.5, 42.5)  # one trial
+    assert stats.bootstrap_mean_ci([0.1] * 7) == (0.1, 0.1)  # zero variance: exactly x
+    lo, hi = stats.bootstrap_mean_ci([[4000.0, 3.0], [4000.0, 5.0]], resamples=1)
+    assert lo[0] == hi[0] == 4000.0 and np.isfinite([lo, hi]).all()
+    for bad in ([], np.zeros((0, 3))):
+        with pytest.raises(ValueError):
+            stats.bootstrap_mean_ci(bad)
+    with pytest.raises(ValueError):
+        stats.bootstrap_mean_ci([1.0, 2.0], level=1.0)
+    with pytest.raises(ValueError):
+        stats.bootstrap_mean_ci([1.0, 2.0], resamples=0)
+
+
+def test_bootstrap_ci_covers_the_mean_about_95_percent_of_the_time():
+    # 400 normal samples of 30 (true mean 0): the percentile interval's coverage is a little
+    # under 95 % at this size; 1.96 binomial SE is about 1.1 %.
+    rng = np.random.default_rng(0)
+    covered = 0
+    for _ in range(400):
+        lo, hi = stats.bootstrap_mean_ci(rng.normal(size=30), resamples=1000, rng=rng)
+        covered += lo <= 0.0 <= hi
+    assert 0.89 <= covered / 400 <= 0.98
+
+
+def test_proportion_ci_wilson():
+    z = sps.norm.ppf(0.975)
+    # 0 of n: [0, z^2 / (n + z^2)]; n of n mirrors it.
+    assert stats.proportion_ci(0, 30) == (0.0, pytest.approx(z**2 / (30 + z**2)))
+    assert stats.proportion_ci(30, 30) == (pytest.approx(30 / (30 + z**2)), 1.0)
+    assert stats.proportion_ci(0, 1000)[1] == pytest.approx(0.00383, abs=1e-5)
+    # The Wilson bounds are the two roots of |k/n - p| = z sqrt(p (1 - p) / n).
+    for k, n in ((1, 30), (7, 20), (300, 1000)):
+        lo, hi = stats.proportion_ci(k, n)
+        assert 0 < lo < k / n < hi < 1
+        for p in (lo, hi):
+            assert abs(k / n - p) == pytest.approx(z * math.sqrt(p * (1 - p) / n), rel=1e-9)
+    for k, n in ((-1, 5), (6, 5), (0, 0)):
+        with pytest.raises(ValueError):
+            stats.proportion_ci(k, n)
+
+
+def test_ci_below_is_strict_separation():
+    assert stats.ci_below([1, 2], [2.5, 3])
+    assert not stats.ci_below([1, 2], [2, 3])  # touching intervals overlap
+    assert not stats.ci_below([2.5, 3], [1, 2])
+
+
+def test_table3_ci():
+    res = small_results()
+    ci = stats.table3_ci(res)
+    assert list(ci["world1"]) == ["SIE", "UIE-R2", "HDC"]
+    assert set(ci["world1"]["SIE"]) == set(stats.METRICS)
+    # Capped c: HDC's counts 2, 100, 100, 2 resample to means within [2, 100].
+    lo, hi = ci["world1"]["HDC"]["c"]
+    assert 2.0 <= lo < 51.0 < hi <= 100.0
+    # A system's intervals depend on its own trials, the seed and the names only.
+    alone = stats.table3_ci({"world1": {"HDC": res["world1"]["HDC"]}})
+    assert alone["world1"]["HDC"] == ci["world1"]["HDC"]
+    assert stats.table3_ci(res) == ci
+    assert stats.table3_ci(res, seed=1)["world1"]["HDC"] != ci["world1"]["HDC"]
+    # One trial, and zero variance, give point intervals.
+    single = stats.table3_ci({"real": {"SIE": [trial(77.0, 3)]}})["real"]["SIE"]
+    assert single == {"c": [3.0, 3.0], "tau": [77.0, 77.0], "f": [50.5, 50.5]}
+
+
+def test_table5_ci():
+    ci = stats.table5_ci(small_results())
+    hdc = ci["world1"]["HDC"]
+    for key, k in (("c", 2), ("tau", 2), ("total", 3)):
+        assert hdc[key] == pytest.approx([100 * b for b in stats.proportion_ci(k, 4)])
+    assert ci["world1"]["SIE"]["total"][0] == 0.0
 
 
 # --------------------------------------------------------------------------- hypotheses
@@ -396,3 +546,36 @@ def test_hypothesis_summary_has_the_numbers_without_the_rule():
     h = stats.hypotheses(paper_like())["H2"]
     assert h["evidence"].endswith(h["summary"])
     assert "Rule:" not in h["summary"] and "world1: SIE f 100 vs SRL 200" in h["summary"]
+
+
+def test_hypotheses_with_intervals():
+    h = stats.hypotheses(paper_like())
+    assert all(v["ci_supported"] and not v["ci_contradicted"] for v in h.values())
+    assert "all pairs separated" in h["H1"]["ci_summary"]
+    assert "separated in 3 of 3 worlds" in h["H2"]["ci_summary"]
+    assert "SIE failure rate [0, 32] % (Wilson)" in h["H4"]["ci_summary"]  # 0 of 8
+    # SRL reversed, clearly, in the real world: H2 fails and the intervals contradict it.
+    h = stats.hypotheses(paper_like({"real": {"SRL": 50}}))
+    assert not h["H2"]["ci_supported"] and h["H2"]["ci_contradicted"]
+    # Given intervals (as from table3_ci): H2 supported on the means and t-tests, but SIE's and
+    # SRL's intervals overlap in world2 and the real world: held, not with intervals.
+    res = paper_like()
+    cis = stats.table3_ci(res)
+    for w in ("world2", "real"):
+        cis[w]["SRL"]["f"] = [cis[w]["SIE"]["f"][1], 250.0]  # touching counts as overlapping
+    h = stats.hypotheses(res, cis=cis)
+    assert h["H2"]["supported"] and "significant in 3 of 3 worlds" in h["H2"]["summary"]
+    assert not h["H2"]["ci_supported"] and not h["H2"]["ci_contradicted"]
+    assert "separated in 1 of 3 worlds" in h["H2"]["ci_summary"]
+    assert h["H1"]["ci_supported"]  # SRL is not in H1's SIE pairs, and still below URL-*
+    cis["world1"]["URL-R2"]["f"] = [0.0, 1.0]  # below SIE's: separated the other way
+    h1 = stats.hypotheses(res, cis=cis)["H1"]
+    assert h1["supported"] and not h1["ci_supported"] and h1["ci_contradicted"]
+    assert "separated the other way: world1: URL-R2 below SIE" in h1["ci_summary"]
+    # A failure contradicts H4 with its interval too.
+    res = paper_like()
+    res["real"]["SIE"][0] = trial(4000, 0)
+    h4 = stats.hypotheses(res)["H4"]
+    assert not h4["ci_supported"] and h4["ci_contradicted"]
+    untestable = stats.hypotheses({"world1": {"HDC": trials_with_f(100)}})["H1"]
+    assert not untestable["ci_supported"] and untestable["ci_summary"].startswith("Not testable")

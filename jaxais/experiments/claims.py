@@ -19,6 +19,34 @@ the capped c (Table 3's). A claim whose world or systems have no results is not 
 (``held`` is ``None``); so is a hypothesis that :func:`~jaxais.experiments.stats.hypotheses` finds
 not testable. The worlds, their systems and the significance level are
 :mod:`jaxais.experiments.protocol`'s.
+
+With intervals. Every claim also has a reading with 95 % confidence intervals, beside ``held``
+(which is unchanged): ``ci_held`` (``None`` when not evaluated), ``ci_verdict`` and
+``ci_evidence`` (the intervals). The means' intervals are the percentile bootstrap ones of
+Table 3 (:func:`jaxais.experiments.stats.table3_ci`), the failure rate's the Wilson interval
+(:func:`~jaxais.experiments.stats.proportion_ci`). A claim holds with its intervals
+(``ci_held``) when it holds and:
+
+* "lowest" (1-3): SIE's interval lies wholly below every other system's (SIE's upper bound
+  under the smallest lower bound of the others); a tie of means never does;
+* "lower" (6, 7) and "significantly lower" (5): the first system's interval lies wholly below
+  the second's;
+* "0 % failure rate" (4): the interval of SIE's failure rate contains 0. A sample cannot show a
+  rate of exactly 0, only bound it (with no failure in n trials the upper bound is about
+  3.8 / (n + 3.8)); one failure puts the interval above 0, so here ``ci_held`` is ``held``;
+* H1-H4: as :func:`jaxais.experiments.stats.hypotheses` reads them with intervals
+  (``ci_supported``): each "lower" and "significantly lower" of the rule is a separation.
+
+Two independent 95 % intervals that do not overlap mean a difference at the 95 % level whatever
+the standard errors, and at about the 99.4 % level when they are equal
+(:func:`~jaxais.experiments.stats.ci_below`); a "significantly lower" claim needs its 99 %
+t-test as well, so ``ci_held`` is never weaker than ``held``. It is a conservative reading:
+overlapping intervals do not show that two means are equal.
+``ci_verdict`` is one of :data:`CI_VERDICTS`: "held, CIs separated" (``ci_held``), "held, CIs
+overlap" (held on the means alone), "not held, CIs overlap", "not held, CIs separated" (some
+comparison of the claim separated the other way: the data contradict it), and for the 0 %
+claims "held, CI contains 0 %" / "not held, CI excludes 0 %". A claim that fails only its
+t-test while its intervals separate as claimed reads "not held, CIs separated as claimed".
 """
 
 from __future__ import annotations
@@ -28,7 +56,23 @@ from typing import Any
 
 from . import protocol, stats
 
-__all__ = ["HYPOTHESES", "claims", "document", "headline", "summary"]
+__all__ = [
+    "CI_VERDICTS",
+    "HELD_OVERLAP",
+    "HELD_SEPARATED",
+    "HELD_ZERO_IN_CI",
+    "HYPOTHESES",
+    "NOT_HELD_BY_TEST",
+    "NOT_HELD_OVERLAP",
+    "NOT_HELD_SEPARATED",
+    "NOT_HELD_ZERO_OUT",
+    "ci_headline",
+    "ci_summary",
+    "claims",
+    "document",
+    "headline",
+    "summary",
+]
 
 HYPOTHESES = {
     "H1": "Seeded STL systems outperform unseeded STL systems.",
@@ -39,6 +83,25 @@ HYPOTHESES = {
     "should not be necessary in the STL phase.",
 }
 """The paper's hypotheses (section 2), verbatim."""
+
+HELD_SEPARATED = "held, CIs separated"
+HELD_OVERLAP = "held, CIs overlap"
+NOT_HELD_OVERLAP = "not held, CIs overlap"
+NOT_HELD_SEPARATED = "not held, CIs separated"
+NOT_HELD_BY_TEST = "not held, CIs separated as claimed"
+HELD_ZERO_IN_CI = "held, CI contains 0 %"
+NOT_HELD_ZERO_OUT = "not held, CI excludes 0 %"
+CI_VERDICTS = (
+    HELD_SEPARATED,
+    HELD_OVERLAP,
+    NOT_HELD_OVERLAP,
+    NOT_HELD_SEPARATED,
+    NOT_HELD_BY_TEST,
+    HELD_ZERO_IN_CI,
+    NOT_HELD_ZERO_OUT,
+)
+"""The ``ci_verdict`` values (see the module docstring)."""
+_CONTRADICTED = (NOT_HELD_SEPARATED, NOT_HELD_ZERO_OUT)
 
 _METRIC_WORDS = {"c": "the lowest mean c", "tau": "the fastest mean τ", "f": "the best mean f"}
 _PAIR_CLAIMS = (
@@ -51,8 +114,40 @@ def _fmt(x: float) -> str:
     return f"{x:.1f}" if abs(x) >= 100 else f"{x:.2f}"
 
 
-def _claim(cid: str, world: str | None, text: str, held: bool | None, evidence: str) -> dict:
-    return {"id": cid, "world": world, "text": text, "held": held, "evidence": evidence}
+def _claim(
+    cid: str,
+    world: str | None,
+    text: str,
+    held: bool | None,
+    evidence: str,
+    ci: tuple[bool, str, str] | None = None,
+) -> dict:
+    """A ledger entry; ``ci = (ci_held, ci_verdict, ci_evidence)``, ``None`` when not evaluated."""
+    ci_held, ci_verdict, ci_evidence = (None, None, "") if ci is None else ci
+    return {
+        "id": cid,
+        "world": world,
+        "text": text,
+        "held": held,
+        "evidence": evidence,
+        "ci_held": ci_held,
+        "ci_verdict": ci_verdict,
+        "ci_evidence": ci_evidence,
+    }
+
+
+def _ci_reading(held: bool, as_claimed: bool, against: bool, evidence: str) -> tuple:
+    """``(ci_held, ci_verdict, ci_evidence)`` of a comparison: ``as_claimed`` when the intervals
+    separate the way the claim says, ``against`` when some separate the other way."""
+    if held:
+        return as_claimed, HELD_SEPARATED if as_claimed else HELD_OVERLAP, evidence
+    if against:
+        return False, NOT_HELD_SEPARATED, evidence
+    return False, NOT_HELD_BY_TEST if as_claimed else NOT_HELD_OVERLAP, evidence
+
+
+def _ci(iv) -> str:
+    return f"[{_fmt(float(iv[0]))}, {_fmt(float(iv[1]))}]"
 
 
 def _missing(needed: Sequence[str], have: Sequence[str], world: str) -> str | None:
@@ -70,7 +165,7 @@ def _mean(results: stats.Results, system: str, metric: str) -> float:
 # --------------------------------------------------------------------------- per-world claims
 
 
-def _lowest(world: str, results: stats.Results, have: list[str], metric: str) -> dict:
+def _lowest(world: str, results: stats.Results, have: list[str], metric: str, cis: Mapping) -> dict:
     cid = f"{world}/SIE-lowest-{metric}"
     text = (
         f"In {protocol.WORLD_NAMES[world]}, the seeded idiotypic system (SIE) has "
@@ -89,7 +184,15 @@ def _lowest(world: str, results: stats.Results, have: list[str], metric: str) ->
     absent = [s for s in protocol.systems_for_world(world) if s not in have]
     if absent:
         evidence += f"; no results for {', '.join(absent)}"
-    return _claim(cid, world, text, held, evidence + ".")
+    ci = {s: cis[s][metric] for s in have}
+    nearest = min(others, key=lambda s: ci[s][0])  # the smallest lower bound
+    below = min(others, key=lambda s: ci[s][1])  # the smallest upper bound
+    as_claimed = stats.ci_below(ci["SIE"], ci[nearest])
+    against = stats.ci_below(ci[below], ci["SIE"])
+    shown = below if against else nearest
+    ci_evidence = f"SIE {_ci(ci['SIE'])}; {shown} {_ci(ci[shown])}."
+    reading = _ci_reading(held, as_claimed, against, ci_evidence)
+    return _claim(cid, world, text, held, evidence + ".", reading)
 
 
 def _no_failures(world: str, results: stats.Results, have: list[str]) -> dict:
@@ -107,11 +210,18 @@ def _no_failures(world: str, results: stats.Results, have: list[str]) -> dict:
         f"{failed} of {len(trials)} SIE trials failed ({100 * failed / len(trials):.0f} %; "
         f"by c: {by_c}, by τ: {by_tau})."
     )
-    return _claim(cid, world, text, failed == 0, evidence)
+    lo, hi = stats.proportion_ci(failed, len(trials))
+    ci_evidence = f"SIE failure rate [{100 * lo:.2g}, {100 * hi:.2g}] % (Wilson)."
+    reading = (
+        (True, HELD_ZERO_IN_CI, ci_evidence)
+        if failed == 0
+        else (False, NOT_HELD_ZERO_OUT, ci_evidence)
+    )
+    return _claim(cid, world, text, failed == 0, evidence, reading)
 
 
 def _sig_below(
-    world: str, results: stats.Results, have: list[str], other: str, alpha: float
+    world: str, results: stats.Results, have: list[str], other: str, alpha: float, cis: Mapping
 ) -> dict:
     cid = f"{world}/SIE-f-sig-below/{other}"
     text = (
@@ -129,52 +239,86 @@ def _sig_below(
         f"SIE f {_fmt(a.mean())} vs {other} {_fmt(b.mean())}; p={p:.2g} "
         f"(level {stats.significance_level(p)})."
     )
-    return _claim(cid, world, text, held, evidence)
+    return _claim(cid, world, text, held, evidence, _pair_reading(held, "SIE", other, cis))
 
 
-def _lower(world: str, results: stats.Results, have: list[str], a: str, b: str, text: str) -> dict:
+def _pair_reading(held: bool, a: str, b: str, cis: Mapping) -> tuple:
+    """The interval reading of "a's f is (significantly) lower than b's"."""
+    ci_a, ci_b = cis[a]["f"], cis[b]["f"]
+    evidence = f"{a} f {_ci(ci_a)} vs {b} {_ci(ci_b)}."
+    return _ci_reading(held, stats.ci_below(ci_a, ci_b), stats.ci_below(ci_b, ci_a), evidence)
+
+
+def _lower(
+    world: str, results: stats.Results, have: list[str], a: str, b: str, text: str, cis: Mapping
+) -> dict:
     cid = f"{world}/{a}-f-below/{b}"
     text = f"In {protocol.WORLD_NAMES[world]}, {text}"
     why = _missing([a, b], have, world)
     if why:
         return _claim(cid, world, text, None, why)
     fa, fb = _mean(results, a, "f"), _mean(results, b, "f")
-    return _claim(cid, world, text, fa < fb, f"{a} f {_fmt(fa)} vs {b} {_fmt(fb)}.")
+    held = fa < fb
+    reading = _pair_reading(held, a, b, cis)
+    return _claim(cid, world, text, held, f"{a} f {_fmt(fa)} vs {b} {_fmt(fb)}.", reading)
 
 
-def _world_claims(world: str, results: stats.Results, alpha: float) -> list[dict]:
+def _world_claims(world: str, results: stats.Results, alpha: float, cis: Mapping) -> list[dict]:
     systems = protocol.systems_for_world(world)
     have = [s for s in systems if len(results.get(s, ())) > 0]
-    out = [_lowest(world, results, have, m) for m in stats.METRICS]
+    out = [_lowest(world, results, have, m, cis) for m in stats.METRICS]
     out.append(_no_failures(world, results, have))
-    out += [_sig_below(world, results, have, u, alpha) for u in protocol.UNSEEDED if u in systems]
-    out += [_lower(world, results, have, a, b, text) for a, b, text in _PAIR_CLAIMS]
+    out += [
+        _sig_below(world, results, have, u, alpha, cis) for u in protocol.UNSEEDED if u in systems
+    ]
+    out += [_lower(world, results, have, a, b, text, cis) for a, b, text in _PAIR_CLAIMS]
     return out
+
+
+def _hypothesis_reading(h: str, verdict: Mapping[str, Any]) -> tuple:
+    held, ci_held = bool(verdict["supported"]), bool(verdict["ci_supported"])
+    if h == "H4":  # a 0 % claim: see the module docstring
+        return ci_held, HELD_ZERO_IN_CI if held else NOT_HELD_ZERO_OUT, verdict["ci_summary"]
+    if held:
+        label = HELD_SEPARATED if ci_held else HELD_OVERLAP
+    else:
+        label = NOT_HELD_SEPARATED if verdict["ci_contradicted"] else NOT_HELD_OVERLAP
+    return ci_held, label, verdict["ci_summary"]
 
 
 # --------------------------------------------------------------------------- public
 
 
-def claims(results_by_world: stats.ResultsByWorld, alpha: float = protocol.ALPHA) -> list[dict]:
+def claims(
+    results_by_world: stats.ResultsByWorld,
+    alpha: float = protocol.ALPHA,
+    cis: stats.CIs | None = None,
+) -> list[dict]:
     """The paper's 32 claims, each judged on our results (see the module docstring for rules).
 
     Args:
         results_by_world: ``{world: {system: [trial record]}}``; worlds other than the paper's
             three count only for H1-H4.
         alpha: significance threshold of the t-tests (the paper's 0.01).
+        cis: :func:`~jaxais.experiments.stats.table3_ci` of ``results_by_world`` (computed here
+            when ``None``).
 
     Returns:
         32 dicts ``{"id": str, "world": str | None, "text": str, "held": bool | None,
-        "evidence": str}`` in a fixed order: world1, world2, real (10, 10, 8 claims), then
-        H1-H4. ``held`` is ``None`` when the claim's data are missing.
+        "evidence": str, "ci_held": bool | None, "ci_verdict": str | None, "ci_evidence":
+        str}`` in a fixed order: world1, world2, real (10, 10, 8 claims), then H1-H4. ``held``
+        and ``ci_held`` are ``None`` (and ``ci_verdict`` too) when the claim's data are missing.
     """
+    cis = stats.table3_ci(results_by_world) if cis is None else cis
     out = []
     for world in protocol.WORLDS:
-        out += _world_claims(world, results_by_world.get(world, {}), alpha)
-    for h, verdict in stats.hypotheses(results_by_world, alpha).items():
+        out += _world_claims(world, results_by_world.get(world, {}), alpha, cis.get(world, {}))
+    for h, verdict in stats.hypotheses(results_by_world, alpha, cis).items():
         testable = not verdict["summary"].startswith("Not testable")
         held = bool(verdict["supported"]) if testable else None
-        out.append(_claim(h, None, f"{h} is supported: {HYPOTHESES[h]}", held, verdict["summary"]))
+        reading = _hypothesis_reading(h, verdict) if testable else None
+        text = f"{h} is supported: {HYPOTHESES[h]}"
+        out.append(_claim(h, None, text, held, verdict["summary"], reading))
     return out
 
 
@@ -188,9 +332,28 @@ def summary(ledger: Sequence[Mapping[str, Any]]) -> dict[str, int]:
     }
 
 
+def ci_summary(ledger: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """Counts of the interval readings: ``{"reproduced": claims held, "reproduced_with_ci":
+    claims that hold with their intervals, "contradicted_with_ci": claims whose intervals
+    contradict them ("not held, CIs separated" or "not held, CI excludes 0 %"), "evaluated":
+    claims with data, "level": the intervals' confidence level}``. Entries without interval
+    fields (an older ledger) count as not held with intervals."""
+    evaluated = [c for c in ledger if c["held"] is not None]
+    return {
+        "reproduced": sum(c["held"] is True for c in evaluated),
+        "reproduced_with_ci": sum(c.get("ci_held") is True for c in evaluated),
+        "contradicted_with_ci": sum(c.get("ci_verdict") in _CONTRADICTED for c in evaluated),
+        "evaluated": len(evaluated),
+        "level": stats.CI_LEVEL,
+    }
+
+
 def document(ledger: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """The ``claims.json`` document: ``{"summary": summary(ledger), "claims": [...]}``."""
-    return stats.jsonable({"summary": summary(ledger), "claims": list(ledger)})
+    """The ``claims.json`` document: ``{"summary": summary(ledger), "ci_summary":
+    ci_summary(ledger), "claims": [...]}``."""
+    return stats.jsonable(
+        {"summary": summary(ledger), "ci_summary": ci_summary(ledger), "claims": list(ledger)}
+    )
 
 
 def headline(counts: Mapping[str, int]) -> str:
@@ -199,3 +362,17 @@ def headline(counts: Mapping[str, int]) -> str:
     M counts the evaluated claims only; :func:`summary` gives the counts.
     """
     return f"**{counts['reproduced']} of {counts['evaluated']} of the paper's claims reproduced**"
+
+
+def ci_headline(counts: Mapping[str, Any]) -> str:
+    """The line under the headline: how many claims hold, and how many are contradicted, with
+    their intervals (:func:`ci_summary`'s counts)."""
+    level = f"{100 * counts['level']:g} %"
+    others = counts["evaluated"] - counts["reproduced"]
+    return (
+        f"With {level} confidence intervals: {counts['reproduced_with_ci']} of the "
+        f"{counts['reproduced']} reproduced claims also hold with their intervals (separated, "
+        f"or for a 0 % failure rate containing 0); {counts['contradicted_with_ci']} of the "
+        f"{others} others are contradicted by them (separated the other way, or a failure "
+        "rate's interval above 0); the rest are undecided at that level (intervals overlap)."
+    )

@@ -34,6 +34,8 @@ _T5_COLS = (("c", "c cap", 0), ("tau", "τ cap", 0), ("total", "total", 0))
 _METRIC_NAME = {"c": "c", "tau": "τ", "f": "f", "total": "total"}
 _RANK_MARK = "†"
 _SIG_MARK = "‡"
+_LEVEL = f"{100 * stats.CI_LEVEL:g} %"
+"""The confidence level of the report's intervals, as text."""
 _SIG_LEVEL = stats.significance_level(protocol.ALPHA)
 """Table 4's level at the paper's significance threshold (99)."""
 
@@ -154,9 +156,13 @@ def _flagged(diffs: Sequence[Mapping[str, Any]]) -> set[tuple[str, str, str]]:
 
 
 def _claims_section(ledger: Sequence[Mapping[str, Any]]) -> list[str]:
-    """The ledger line, a note on unevaluated claims, and one table row per claim."""
+    """The ledger line, the line of the interval readings (when the ledger has them), a note on
+    unevaluated claims, and one table row per claim."""
     counts = claims.summary(ledger)
     lines = [claims.headline(counts), ""]
+    with_ci = any("ci_verdict" in c for c in ledger)
+    if with_ci:
+        lines += [claims.ci_headline(claims.ci_summary(ledger)), ""]
     missing = counts["total"] - counts["evaluated"]
     if missing:
         lines += [
@@ -165,10 +171,15 @@ def _claims_section(ledger: Sequence[Mapping[str, Any]]) -> list[str]:
             "",
         ]
     mark = {True: "✓", False: "✗", None: "–"}
-    body = [
-        [c["id"], c["text"], mark[c["held"]], c["evidence"].replace("|", "\\|")] for c in ledger
-    ]
-    return lines + _table(["Claim", "The paper says", "Held", "Evidence (ours)"], body, "llcl")
+    header = ["Claim", "The paper says", "Held", "Evidence (ours)"]
+    body = [[c["id"], c["text"], mark[c["held"]], c["evidence"]] for c in ledger]
+    if with_ci:
+        header.append(f"With {_LEVEL} CIs (ours)")
+        for row, c in zip(body, ledger, strict=True):
+            verdict = c.get("ci_verdict")
+            row.append("–" if verdict is None else f"{verdict}: {c.get('ci_evidence', '')}")
+    body = [[cell.replace("|", "\\|") for cell in row] for row in body]
+    return lines + _table(header, body, "llcl" + "l" * with_ci)
 
 
 def _side_by_side(
@@ -179,14 +190,18 @@ def _side_by_side(
     flagged: set[tuple[str, str, str]],
     n_trials: Mapping[str, Mapping[str, int]] | None,
     extra: tuple[str, Mapping[str, Mapping[str, Any]]] | None = None,
+    intervals: Mapping[str, Mapping[str, Mapping[str, Sequence[float]]]] | None = None,
+    note: str = "",
 ) -> list[str]:
     """Our table beside the paper's, per world; ``extra = (header, {world: {system: value}})``
-    adds a last column of ours alone (one decimal)."""
-    lines = [f"### {title}", ""]
+    adds a last column of ours alone (one decimal); ``intervals`` (``{world: {system: {key:
+    [lo, hi]}}}``) puts ``[lo, hi]`` after each of our values; ``note`` opens the section."""
+    lines = [f"### {title}", ""] + ([note, ""] if note else [])
+    ci = f" [{_LEVEL} CI]" if intervals else ""
     for world in _worlds(ours, paper):
         mine, theirs = ours.get(world, {}), paper.get(world, {})
         header = ["System"] + (["n"] if n_trials is not None else [])
-        header += [f"{h} ours / paper" for _, h, _ in cols]
+        header += [f"{h} ours{ci} / paper" for _, h, _ in cols]
         header += [extra[0]] if extra else []
         body = []
         for s in _rows(mine, theirs):
@@ -195,12 +210,26 @@ def _side_by_side(
                 a = mine.get(s, {}).get(key)
                 b = theirs.get(s, {}).get(key)
                 mark = f" {_RANK_MARK}" if (world, s, key) in flagged else ""
-                row.append(f"{_num(a, dec)} / {_num(b)}{mark}")
+                iv = (intervals or {}).get(world, {}).get(s, {}).get(key)
+                span = f" [{_num(iv[0], dec)}, {_num(iv[1], dec)}]" if iv else ""
+                row.append(f"{_num(a, dec)}{span} / {_num(b)}{mark}")
             if extra:
                 row.append(_num(extra[1].get(world, {}).get(s), 1))
             body.append(row)
         lines += [f"**{world}**", ""] + _table(header, body)
     return lines
+
+
+def _interval_note(settings: Mapping[str, Any]) -> str:
+    """What the brackets of Table 3 are (``tables["ci"]``, :func:`stats.ci_settings`)."""
+    level = 100 * float(settings.get("level", stats.CI_LEVEL))
+    resamples = settings.get("resamples", stats.BOOTSTRAP_RESAMPLES)
+    seed = settings.get("seed", stats.BOOTSTRAP_SEED)
+    return (
+        f"Brackets: {level:g} % percentile bootstrap confidence interval of our mean "
+        f"({resamples} resamples of each system's trials with replacement, seed {seed}; c, τ "
+        "and f from the same resamples)."
+    )
 
 
 def _table4_section(ours: Mapping[str, Any], paper: Mapping[str, Any]) -> list[str]:
@@ -285,6 +314,9 @@ def _hypotheses_section(ours: Mapping[str, Any], paper: Mapping[str, Any]) -> li
     lines += _table(["", "Hypothesis", "Ours", "Paper"], body, align="llll")
     for h in names:
         lines += [f"**{h}.** {ours.get(h, {}).get('evidence', 'Not evaluated.')}", ""]
+        if "ci_summary" in ours.get(h, {}):
+            held = "holds" if ours[h].get("ci_supported") else "does not hold"
+            lines += [f"*With {_LEVEL} CIs* ({held}): {ours[h]['ci_summary']}", ""]
         if "paper_says" in paper.get(h, {}):
             lines += [f"*Paper:* {paper[h]['paper_says']}.", ""]
     return lines
@@ -620,6 +652,7 @@ def write_report(
     ]
     lines += _hypotheses_section(tables["hypotheses"], paper.get("hypotheses", {}))
     lines += ["## Tables", ""]
+    intervals = tables.get("table3_ci")
     lines += _side_by_side(
         "Table 3: mean c, τ and f",
         tables["table3"],
@@ -628,6 +661,8 @@ def write_report(
         _flagged(diffs3),
         n_trials,
         ("trapped (s), ours", trapped) if has_trapped else None,
+        intervals,
+        _interval_note(tables.get("ci", {})) if intervals else "",
     )
     lines += _side_by_side(
         "Table 5: failure rates (%) by collision cap, by time cap and overall",

@@ -23,11 +23,25 @@ Degenerate samples never raise or return NaN:
 * an empty group is a caller error and raises ``ValueError``.
 
 :func:`jsonable` turns the infinities into ``None`` when results are written as JSON.
+
+Confidence intervals (:func:`table3_ci`, :func:`table5_ci`). Every Table 3 mean has a 95 %
+percentile bootstrap interval: the trials of a system are resampled with replacement
+:data:`BOOTSTRAP_RESAMPLES` (2000) times, the mean of each resample is taken, and the interval
+runs from the 2.5th to the 97.5th percentile of those means (linear interpolation, as
+``np.quantile`` and ``scipy.stats.bootstrap(method="percentile")`` do). c, tau and f of one
+system share the same resamples of its trials. The draws come from a NumPy Generator seeded with
+``(seed, crc32(world), crc32(system))``, so an interval depends on the seed and on that
+system's trials only, never on which other systems or worlds are present, and every caller
+(tables, hypotheses, claims) gets the same interval. A system with one trial, or with the same
+value in every trial, gets the point interval ``[x, x]``. A failure rate (Table 5) has a 95 %
+Wilson score interval (:func:`proportion_ci`), which stays informative at 0 of n failures
+(upper bound about 3.8 / (n + 3.8)), where a bootstrap would collapse onto ``[0, 0]``.
 """
 
 from __future__ import annotations
 
 import math
+import zlib
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, Literal, TypedDict
 
@@ -37,12 +51,19 @@ from scipy import stats as sps
 from jaxais.experiments import protocol
 
 __all__ = [
+    "BOOTSTRAP_RESAMPLES",
+    "BOOTSTRAP_SEED",
+    "CI_LEVEL",
+    "CIs",
     "FAILURE_COLUMNS",
     "METRICS",
     "Results",
     "ResultsByWorld",
     "TrialRecord",
+    "bootstrap_mean_ci",
     "build_tables",
+    "ci_below",
+    "ci_settings",
     "cohens_d",
     "comparison_pairs",
     "comparisons",
@@ -52,11 +73,14 @@ __all__ = [
     "jsonable",
     "mann_whitney_u",
     "metric_values",
+    "proportion_ci",
     "significance_level",
     "student_t",
     "table3",
+    "table3_ci",
     "table4",
     "table5",
+    "table5_ci",
     "trapped_times",
     "welch_t",
 ]
@@ -67,6 +91,15 @@ FAILURE_COLUMNS: tuple[str, ...] = ("c", "tau", "total")
 """Table 5 keys: failures by collision cap, by time cap, overall."""
 
 _RECORD_KEY = {"tau": "tau", "f": "fitness"}
+
+CI_LEVEL = 0.95
+"""Confidence level of the report's intervals."""
+BOOTSTRAP_RESAMPLES = 2000
+"""Bootstrap resamples B per interval. Efron & Tibshirani (1993, ch. 19) ask for B >= 1000 for
+percentile intervals; at 2000 the Monte Carlo error of a 2.5 % endpoint is a few per cent of the
+interval's width."""
+BOOTSTRAP_SEED = 0
+"""Seed of the bootstrap draws (with the world and system names, see the module docstring)."""
 
 
 class TrialRecord(TypedDict):
@@ -96,6 +129,8 @@ Results = Mapping[str, Sequence[Mapping[str, Any]]]
 """One world's trials: ``{system: [TrialRecord]}``."""
 ResultsByWorld = Mapping[str, Results]
 """``{world: {system: [TrialRecord]}}``."""
+CIs = Mapping[str, Mapping[str, Mapping[str, Sequence[float]]]]
+"""Intervals as :func:`table3_ci` gives them: ``{world: {system: {metric: [lo, hi]}}}``."""
 
 
 # --------------------------------------------------------------------------- systems and pairs
@@ -256,6 +291,99 @@ def significance_level(p: float) -> int:
     return int(math.floor(100.0 * (1.0 - float(p)) + 0.5))
 
 
+# --------------------------------------------------------------------------- intervals
+
+
+def bootstrap_mean_ci(
+    values: Sequence[float] | np.ndarray,
+    level: float = CI_LEVEL,
+    resamples: int = BOOTSTRAP_RESAMPLES,
+    rng: np.random.Generator | int | None = BOOTSTRAP_SEED,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Percentile bootstrap confidence interval of the mean.
+
+    The rows of ``values`` are resampled with replacement ``resamples`` times in one draw,
+    ``rng.integers(0, n, (resamples, n))`` (the draw ``scipy.stats.bootstrap`` makes), the mean of
+    each resample is taken, and the interval is the ``(1 - level) / 2`` and ``(1 + level) / 2``
+    quantiles of those means (``np.quantile``'s linear interpolation).
+
+    Args:
+        values: ``[n]`` observations, or ``[n, k]``: k statistics of n trials resampled together
+            (the same rows in every column).
+        level: confidence level in (0, 1).
+        resamples: number of resamples, at least 1.
+        rng: a NumPy Generator, or a seed for ``np.random.default_rng``.
+
+    Returns:
+        ``(lo, hi)``, float64 arrays of shape ``[]`` or ``[k]``; ``lo == hi == x`` when n = 1 or
+        every observation is x.
+
+    Raises:
+        ValueError: no observations, a level outside (0, 1) or fewer than one resample.
+    """
+    x = np.asarray(values, dtype=np.float64)
+    if x.ndim not in (1, 2) or x.shape[0] == 0:
+        raise ValueError(f"need [n] or [n, k] values with n >= 1, got shape {x.shape}")
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must be in (0, 1), got {level}")
+    if resamples < 1:
+        raise ValueError(f"resamples must be >= 1, got {resamples}")
+    rng = np.random.default_rng(rng)
+    idx = rng.integers(0, x.shape[0], (resamples, x.shape[0]))  # [B, n]
+    columns = x[:, None] if x.ndim == 1 else x
+    # One column at a time: a [B, n] gather each, not [B, n, k].
+    means = np.stack([col[idx].mean(axis=1) for col in columns.T], axis=-1)  # [B, k]
+    tail = (1.0 - level) / 2.0
+    lo, hi = np.quantile(means, [tail, 1.0 - tail], axis=0)
+    # Every resample's mean lies in [min, max]; clipping only removes rounding (a constant
+    # sample's summed means can miss x by an ulp), so zero variance gives exactly [x, x].
+    lo = np.clip(lo, columns.min(axis=0), columns.max(axis=0))
+    hi = np.clip(hi, columns.min(axis=0), columns.max(axis=0))
+    if x.ndim == 1:
+        return lo[0], hi[0]
+    return lo, hi
+
+
+def proportion_ci(successes: int, n: int, level: float = CI_LEVEL) -> tuple[float, float]:
+    """Wilson score interval of a proportion ``successes / n`` (e.g. a failure rate).
+
+    ``(k + z^2/2) / (n + z^2) +- z / (n + z^2) sqrt(k (n - k) / n + z^2 / 4)`` with z the
+    normal quantile of ``(1 + level) / 2``: inside [0, 1], ``[0, z^2 / (n + z^2)]`` at k = 0 and
+    ``[n / (n + z^2), 1]`` at k = n.
+
+    Raises:
+        ValueError: n < 1, k outside [0, n] or a level outside (0, 1).
+    """
+    if n < 1 or not 0 <= successes <= n:
+        raise ValueError(f"need 0 <= successes <= n and n >= 1, got {successes} of {n}")
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must be in (0, 1), got {level}")
+    z2 = float(sps.norm.ppf(0.5 + level / 2.0)) ** 2
+    centre = (successes + z2 / 2.0) / (n + z2)
+    half = math.sqrt(z2) / (n + z2) * math.sqrt(successes * (n - successes) / n + z2 / 4.0)
+    lo = 0.0 if successes == 0 else max(0.0, centre - half)
+    hi = 1.0 if successes == n else min(1.0, centre + half)
+    return lo, hi
+
+
+def ci_below(a: Sequence[float], b: Sequence[float]) -> bool:
+    """Whether interval ``a = (lo, hi)`` lies wholly below interval ``b``: ``a_hi < b_lo``.
+
+    For two independent estimates with standard errors s_a and s_b, non-overlapping 95 %
+    intervals mean ``|difference| > 1.96 (s_a + s_b) >= 1.96 sqrt(s_a^2 + s_b^2)``: a
+    difference at the 95 % level whatever the standard errors, and at about the 99.4 % level
+    (z = 1.96 sqrt(2) = 2.77) when they are equal. It is a conservative reading of "a is lower
+    than b"; overlapping intervals do not show that the means are equal.
+    """
+    return float(a[1]) < float(b[0])
+
+
+def _bootstrap_rng(seed: int, world: str, system: str) -> np.random.Generator:
+    """The Generator of one system's intervals in one world (see the module docstring)."""
+    names = [zlib.crc32(world.encode()), zlib.crc32(system.encode())]
+    return np.random.default_rng([int(seed), *names])
+
+
 # --------------------------------------------------------------------------- tables
 
 
@@ -275,15 +403,19 @@ def table3(results_by_world: ResultsByWorld) -> dict[str, dict[str, dict[str, fl
     return out
 
 
-def _failure_row(trials: Sequence[Mapping[str, Any]]) -> dict[str, float]:
-    n = len(trials)
+def _failure_counts(trials: Sequence[Mapping[str, Any]]) -> dict[str, int]:
     causes = [failure_causes(t) for t in trials]
     failed = [bool(t.get("failed")) or bool(b) for t, b in zip(trials, causes, strict=True)]
     return {
-        "c": 100.0 * sum("collisions" in b for b in causes) / n,
-        "tau": 100.0 * sum("time" in b for b in causes) / n,
-        "total": 100.0 * sum(failed) / n,
+        "c": sum("collisions" in b for b in causes),
+        "tau": sum("time" in b for b in causes),
+        "total": sum(failed),
     }
+
+
+def _failure_row(trials: Sequence[Mapping[str, Any]]) -> dict[str, float]:
+    n = len(trials)
+    return {k: 100.0 * v / n for k, v in _failure_counts(trials).items()}
 
 
 def table5(results_by_world: ResultsByWorld) -> dict[str, dict[str, dict[str, float]]]:
@@ -301,6 +433,51 @@ def table5(results_by_world: ResultsByWorld) -> dict[str, dict[str, dict[str, fl
         world: {s: _failure_row(results[s]) for s in _ordered_systems(results)}
         for world, results in results_by_world.items()
     }
+
+
+def table3_ci(
+    results_by_world: ResultsByWorld,
+    level: float = CI_LEVEL,
+    resamples: int = BOOTSTRAP_RESAMPLES,
+    seed: int = BOOTSTRAP_SEED,
+) -> dict[str, dict[str, dict[str, list[float]]]]:
+    """Percentile bootstrap intervals of every Table 3 mean (:func:`bootstrap_mean_ci`).
+
+    c, tau and f of a system share its resamples; the draws of a system depend on ``seed``,
+    its world's and its own name only (the module docstring), so the result is deterministic.
+
+    Returns:
+        ``{world: {system: {"c": [lo, hi], "tau": [lo, hi], "f": [lo, hi]}}}``, the systems of
+        :func:`table3`.
+    """
+    out: dict[str, dict[str, dict[str, list[float]]]] = {}
+    for world, results in results_by_world.items():
+        out[world] = {}
+        for s in _ordered_systems(results):
+            values = np.stack([metric_values(results[s], m) for m in METRICS], axis=1)
+            lo, hi = bootstrap_mean_ci(values, level, resamples, _bootstrap_rng(seed, world, s))
+            out[world][s] = {m: [float(lo[i]), float(hi[i])] for i, m in enumerate(METRICS)}
+    return out
+
+
+def table5_ci(
+    results_by_world: ResultsByWorld, level: float = CI_LEVEL
+) -> dict[str, dict[str, dict[str, list[float]]]]:
+    """Wilson score intervals (:func:`proportion_ci`) of every Table 5 failure rate, in %.
+
+    Returns:
+        ``{world: {system: {"c": [lo, hi], "tau": [lo, hi], "total": [lo, hi]}}}`` in [0, 100].
+    """
+    out: dict[str, dict[str, dict[str, list[float]]]] = {}
+    for world, results in results_by_world.items():
+        out[world] = {}
+        for s in _ordered_systems(results):
+            n = len(results[s])
+            counts = _failure_counts(results[s])
+            out[world][s] = {
+                k: [100.0 * v for v in proportion_ci(counts[k], n, level)] for k in FAILURE_COLUMNS
+            }
+    return out
 
 
 def _compare_metric(a: np.ndarray, b: np.ndarray) -> dict[str, float | int]:
@@ -419,7 +596,16 @@ def _f(results: Results, system: str) -> np.ndarray:
     return metric_values(results[system], "f")
 
 
-def _h1(results_by_world: ResultsByWorld, alpha: float) -> dict[str, Any]:
+def _interval(iv: Sequence[float]) -> str:
+    return f"[{_fmt(float(iv[0]))}, {_fmt(float(iv[1]))}]"
+
+
+def _ci_view(ok: bool, against: bool, parts: list[str]) -> dict[str, Any]:
+    """The CI fields of a verdict: ``ci_supported``, ``ci_contradicted``, ``ci_summary``."""
+    return {"ci_supported": ok, "ci_contradicted": against, "ci_summary": "; ".join(parts) + "."}
+
+
+def _h1(results_by_world: ResultsByWorld, alpha: float, cis: CIs) -> dict[str, Any]:
     rule = (
         "Rule: in every world with SIE and unseeded results, each seeded system has a lower mean f "
         "than each unseeded system with the same selection (SIE < UIE-*, SRL < URL-*) and SIE's f "
@@ -432,12 +618,23 @@ def _h1(results_by_world: ResultsByWorld, alpha: float) -> dict[str, Any]:
     ]
     if not worlds:
         return _untestable("no world has SIE and unseeded")
-    fails, parts = [], []
+    fails, parts, ci_parts, overlap, reversed_ = [], [], [], [], []
     for w in worlds:
         res = results_by_world[w]
         have = _ordered_systems(res)
         unseeded = [s for s in protocol.UNSEEDED if s in have]
         mean = {s: float(_f(res, s).mean()) for s in have}
+        ci = {s: cis[w][s]["f"] for s in have}
+        pairs = [("SIE", u) for u in unseeded]
+        pairs += [("SRL", u) for u in unseeded if u.startswith("URL") and "SRL" in have]
+        overlap += [f"{w}: {a}/{b}" for a, b in pairs if not ci_below(ci[a], ci[b])]
+        reversed_ += [f"{w}: {b} below {a}" for a, b in pairs if ci_below(ci[b], ci[a])]
+        nearest = min(unseeded, key=lambda u: ci[u][0])
+        srl_ci = f", SRL {_interval(ci['SRL'])}" if "SRL" in have else ""
+        ci_parts.append(
+            f"{w}: SIE f {_interval(ci['SIE'])}{srl_ci} vs nearest unseeded {nearest} "
+            f"{_interval(ci[nearest])}"
+        )
         worst_p = 0.0
         for u in unseeded:
             # SIE < UIE-* is implied by the significance check below.
@@ -455,10 +652,13 @@ def _h1(results_by_world: ResultsByWorld, alpha: float) -> dict[str, Any]:
             f"{w}: SIE f {_fmt(mean['SIE'])}{srl} vs unseeded {_fmt(lo)}-{_fmt(hi)} "
             f"(SIE vs unseeded max {_p(worst_p)})"
         )
-    return _verdict(not fails, rule, parts, fails)
+    ci_parts.append("overlapping: " + ", ".join(overlap) if overlap else "all pairs separated")
+    ci_parts += ["separated the other way: " + ", ".join(reversed_)] if reversed_ else []
+    view = _ci_view(not fails and not overlap, bool(reversed_), ci_parts)
+    return _verdict(not fails, rule, parts, fails) | view
 
 
-def _beats(results_by_world: ResultsByWorld, other: str, alpha: float) -> dict[str, Any]:
+def _beats(results_by_world: ResultsByWorld, other: str, alpha: float, cis: CIs) -> dict[str, Any]:
     """SIE has a lower mean f than ``other`` in every world, significantly in a strict majority."""
     rule = (
         f"Rule: SIE's mean f is lower than {other}'s in every world tested, and significantly "
@@ -467,9 +667,13 @@ def _beats(results_by_world: ResultsByWorld, other: str, alpha: float) -> dict[s
     worlds = _worlds(results_by_world, ["SIE", other])
     if not worlds:
         return _untestable(f"no world has SIE and {other}")
-    fails, parts, n_sig = [], [], 0
+    fails, parts, n_sig, ci_parts, n_sep, against = [], [], 0, [], 0, False
     for w in worlds:
         a, b = _f(results_by_world[w], "SIE"), _f(results_by_world[w], other)
+        ci_a, ci_b = cis[w]["SIE"]["f"], cis[w][other]["f"]
+        n_sep += ci_below(ci_a, ci_b)
+        against |= ci_below(ci_b, ci_a)
+        ci_parts.append(f"{w}: SIE f {_interval(ci_a)} vs {other} {_interval(ci_b)}")
         _, p = student_t(a, b)
         lower = a.mean() < b.mean()
         n_sig += bool(lower and p < alpha)
@@ -482,7 +686,9 @@ def _beats(results_by_world: ResultsByWorld, other: str, alpha: float) -> dict[s
     if 2 * n_sig <= len(worlds):
         fails.append(f"significant in only {n_sig} of {len(worlds)} worlds")
     parts.append(f"significant in {n_sig} of {len(worlds)} worlds")
-    return _verdict(not fails, rule, parts, fails)
+    ci_parts.append(f"separated in {n_sep} of {len(worlds)} worlds")
+    view = _ci_view(not fails and 2 * n_sep > len(worlds), against, ci_parts)
+    return _verdict(not fails, rule, parts, fails) | view
 
 
 def _h4(results_by_world: ResultsByWorld) -> dict[str, Any]:
@@ -490,19 +696,24 @@ def _h4(results_by_world: ResultsByWorld) -> dict[str, Any]:
     worlds = _worlds(results_by_world, ["SIE"])
     if not worlds:
         return _untestable("no SIE results")
-    parts, fails = [], []
+    parts, fails, ci_parts = [], [], []
     for w in worlds:
-        row = _failure_row(results_by_world[w]["SIE"])
-        n = len(results_by_world[w]["SIE"])
+        trials = results_by_world[w]["SIE"]
+        row = _failure_row(trials)
+        n = len(trials)
         parts.append(f"{w}: {row['total']:.0f} % of {n} trials failed")
         if row["total"] > 0:
             fails.append(f"{w}: {row['total']:.0f} % failures")
-    return _verdict(not fails, rule, parts, fails)
+        lo, hi = proportion_ci(_failure_counts(trials)["total"], n)
+        ci_parts.append(f"{w}: SIE failure rate [{100 * lo:.2g}, {100 * hi:.2g}] % (Wilson)")
+    # A 0 % claim cannot be shown by a sample, only bounded: it holds with its CI when the CI
+    # of the rate contains 0 (no failure), and any failure puts the Wilson CI above 0.
+    return _verdict(not fails, rule, parts, fails) | _ci_view(not fails, bool(fails), ci_parts)
 
 
 def _untestable(why: str) -> dict[str, Any]:
     text = f"Not testable: {why}."
-    return {"supported": False, "evidence": text, "summary": text}
+    return {"supported": False, "evidence": text, "summary": text} | _ci_view(False, False, [text])
 
 
 def _verdict(ok: bool, rule: str, parts: list[str], fails: list[str]) -> dict[str, Any]:
@@ -513,7 +724,9 @@ def _verdict(ok: bool, rule: str, parts: list[str], fails: list[str]) -> dict[st
     return {"supported": ok, "evidence": f"{head} {rule} {summary}", "summary": summary}
 
 
-def hypotheses(results_by_world: ResultsByWorld, alpha: float = protocol.ALPHA) -> dict[str, dict]:
+def hypotheses(
+    results_by_world: ResultsByWorld, alpha: float = protocol.ALPHA, cis: CIs | None = None
+) -> dict[str, dict]:
     """Verdicts on the paper's hypotheses H1-H4 (section 2), judged on fitness f.
 
     Worlds missing from the results (or lacking the systems a rule needs) are skipped; a
@@ -529,15 +742,31 @@ def hypotheses(results_by_world: ResultsByWorld, alpha: float = protocol.ALPHA) 
       worlds; on the paper's own numbers H2 is significant in 2 of 3 worlds, H3 in 2 of 3).
     * **H4** (no replacement needed when seeded): SIE has no failed trial in any world.
 
+    Each verdict also has a reading with the 95 % intervals (``ci_supported``), stricter than
+    ``supported``: it holds when the hypothesis is supported and every "lower" and "significantly
+    lower" in its rule is also a separation of the f intervals (:func:`table3_ci`,
+    :func:`ci_below`): for H1 every pair of the rule (SIE/unseeded, SRL/URL-*); for H2 and H3
+    a strict majority of the worlds. H4's 0 % can only be bounded: its CI reading is the rule
+    itself (with no failure the Wilson interval of the rate contains 0; after one it does not).
+    ``ci_contradicted`` says whether some pair of the rule is separated the other way (H4: some
+    failure).
+
+    Args:
+        results_by_world: the trials.
+        alpha: significance threshold of the t-tests.
+        cis: :func:`table3_ci` of ``results_by_world`` (computed here when ``None``).
+
     Returns:
-        ``{"H1": {"supported": bool, "evidence": str, "summary": str}, ..., "H4": {...}}``; the
-        evidence states the verdict, the rule, the per-world numbers and any violations; the
-        summary only the numbers and violations (it starts "Not testable" when untestable).
+        ``{"H1": {"supported": bool, "evidence": str, "summary": str, "ci_supported": bool,
+        "ci_contradicted": bool, "ci_summary": str}, ..., "H4": {...}}``; the evidence states the
+        verdict, the rule, the per-world numbers and any violations; the summary only the numbers
+        and violations (it starts "Not testable" when untestable); the CI summary the intervals.
     """
+    cis = table3_ci(results_by_world) if cis is None else cis
     return {
-        "H1": _h1(results_by_world, alpha),
-        "H2": _beats(results_by_world, "SRL", alpha),
-        "H3": _beats(results_by_world, "HDC", alpha),
+        "H1": _h1(results_by_world, alpha, cis),
+        "H2": _beats(results_by_world, "SRL", alpha, cis),
+        "H3": _beats(results_by_world, "HDC", alpha, cis),
         "H4": _h4(results_by_world),
     }
 
@@ -563,21 +792,45 @@ def jsonable(obj: Any) -> Any:
     return obj
 
 
-def build_tables(results_by_world: ResultsByWorld, alpha: float = protocol.ALPHA) -> dict[str, Any]:
+def ci_settings() -> dict[str, Any]:
+    """How the tables' intervals were made (``tables.json``'s ``"ci"``)."""
+    return {
+        "level": CI_LEVEL,
+        "table3": "percentile bootstrap of the mean; a system's trials resampled with "
+        "replacement, c, tau and f together",
+        "resamples": BOOTSTRAP_RESAMPLES,
+        "seed": BOOTSTRAP_SEED,
+        "table5": "Wilson score interval of the proportion, in %",
+    }
+
+
+def build_tables(
+    results_by_world: ResultsByWorld, alpha: float = protocol.ALPHA, cis: CIs | None = None
+) -> dict[str, Any]:
     """All of the report's tables, JSON-serialisable.
 
+    Args:
+        results_by_world: the trials.
+        alpha: significance threshold of the t-tests.
+        cis: :func:`table3_ci` of ``results_by_world`` (computed here when ``None``).
+
     Returns:
-        ``{"table3": table3(...), "table4": table4(...), "table5": table5(...),
+        ``{"table3": table3(...), "table3_ci": table3_ci(...), "table4": table4(...),
+        "table5": table5(...), "table5_ci": table5_ci(...), "ci": ci_settings(),
         "idiotypic_difference_rate": idiotypic_difference_rates(...),
         "trapped_s": trapped_times(...), "hypotheses": hypotheses(..., alpha)}``.
     """
+    cis = table3_ci(results_by_world) if cis is None else cis
     return jsonable(
         {
             "table3": table3(results_by_world),
+            "table3_ci": cis,
             "table4": table4(results_by_world),
             "table5": table5(results_by_world),
+            "table5_ci": table5_ci(results_by_world),
+            "ci": ci_settings(),
             "idiotypic_difference_rate": idiotypic_difference_rates(results_by_world),
             "trapped_s": trapped_times(results_by_world),
-            "hypotheses": hypotheses(results_by_world, alpha),
+            "hypotheses": hypotheses(results_by_world, alpha, cis),
         }
     )

@@ -1,0 +1,32 @@
+"""Baselines beside the paper's systems [ours].
+
+:mod:`jaxais.baselines.neural`: a small neural controller (an MLP from the IR and camera
+features to the wheel speeds) trained by OpenES on the gymnax-style environment, and run under
+the task loop like SIE and HDC (:data:`NEURAL`). Its training settings,
+:class:`~jaxais.baselines.config.TrainConfig`, live in a module free of JAX, so a script checks
+its flags before JAX starts; the other names load on first use.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from jaxais.baselines.config import TrainConfig
+
+_EXPORTS = (
+    "MLPParams",
+    "NEURAL",
+    "TrainResult",
+    "load_params",
+    "make_train",
+    "neural_controller",
+    "save_params",
+)
+__all__ = ["TrainConfig", *_EXPORTS]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        return getattr(importlib.import_module("jaxais.baselines.neural"), name)
+    raise AttributeError(f"module 'jaxais.baselines' has no attribute {name!r}")

@@ -388,9 +388,9 @@ def run_script(main: Callable[[], object]) -> NoReturn:
 
     For a script's ``if __name__ == "__main__":`` block only. Once a JAX script is done, with its
     files written and closed, Python's interpreter teardown (XLA's client, its thread pools and
-    compiled programs, every module) still took 0.5-0.6 s of wall time on a 2-core CPU
-    (``trials.py`` and ``evolve.py``). Here the process ends at once instead (``os._exit``) after
-    flushing stdout and stderr; ``atexit`` handlers do not run.
+    compiled programs, every module) still takes a noticeable part of a second
+    (docs/performance.md). Here the process ends at once instead (``os._exit``) after flushing
+    stdout and stderr; ``atexit`` handlers do not run.
 
     The exit status is 0 when ``main`` returns (what it returns is for in-process callers, e.g.
     tests, and is ignored), or that of a ``SystemExit`` it raises, as ``sys.exit`` gives it (a

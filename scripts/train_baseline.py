@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import platform
 import sys
 import time
 from pathlib import Path
@@ -91,22 +90,12 @@ def train_config(args: argparse.Namespace) -> TrainConfig:
 
 
 def versions() -> dict[str, str]:
-    import jax
-    import jaxlib
-    import numpy as np
+    """The run's versions (:func:`jaxais.experiments.records.versions`) and optax's."""
     import optax
 
-    import jaxais
+    from jaxais.experiments.records import versions as run_versions
 
-    return {
-        "jaxais": jaxais.__version__,
-        "jax": jax.__version__,
-        "jaxlib": jaxlib.__version__,
-        "numpy": np.__version__,
-        "optax": optax.__version__,
-        "python": platform.python_version(),
-        "backend": jax.default_backend(),
-    }
+    return run_versions() | {"optax": optax.__version__}
 
 
 # ------------------------------------------------------------------------------------ training

@@ -48,4 +48,9 @@ def __getattr__(name: str) -> Any:
     try:  # submodules, e.g. jaxais.envs after `import jaxais`
         return importlib.import_module(f"jaxais.{name}")
     except ModuleNotFoundError:
+        if name == "envs":  # envs/ is mapped into the package by the install, not by folders
+            raise ImportError(
+                "jaxais.envs not found: this checkout's jaxais/ folder shadows the installed "
+                "package; install it editable (pip install -e .) or run outside the checkout"
+            ) from None
         raise AttributeError(f"module 'jaxais' has no attribute {name!r}") from None

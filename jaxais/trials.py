@@ -13,9 +13,10 @@ Two ways to run them:
 - :func:`make_trials` builds an experiment as one pure function, ``run(key, params)`` ->
   per-trial arrays, jitted, which ``vmap`` batches over seeds (keys) and parameter grids (a
   params pytree with a leading axis): what sweeps are made of.
-- :func:`run_trials` runs several systems' trials as one batch from the host, with a progress
-  bar, and returns trial records (what the scripts and the paper's tables use). Its trials are
-  those of ``make_trials``: the same keys, the same numbers.
+- :func:`run_trials` runs several systems' trials from the host, with a progress bar, through a
+  refilling pool of slots (or as one batch, to keep every trajectory), and returns trial records
+  (what the scripts and the paper's tables use). Its trials are those of ``make_trials``: the
+  same keys, the same numbers.
 
 Both run any :class:`~jaxais.controllers.Controller` (default: the STL network).
 """
@@ -23,6 +24,7 @@ Both run any :class:`~jaxais.controllers.Controller` (default: the STL network).
 from __future__ import annotations
 
 import dataclasses
+import time
 import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -35,6 +37,7 @@ import numpy as np
 from jaxais import envs
 from jaxais.controllers import STL, Controller, stl_for
 from jaxais.episode import EpisodeConfig, advance, outcome, rollout, start_batch
+from jaxais.pool import run_pool
 from jaxais.systems import LABELS
 
 STL_CONFIG = EpisodeConfig(tau_cap=4000.0, collision_cap=100, stop_at_collision_cap=False)
@@ -214,8 +217,11 @@ def run_trials(
     progress: Any = None,
     timings: dict[str, float] | None = None,
     controller: Controller | None = None,
+    slots: int = 1024,
 ) -> dict[str, TrialSet]:
-    """Run every system's trials in one batch.
+    """Run every system's trials: with ``config.record``, as one batch to its slowest run's end
+    (every trajectory kept); otherwise through a refilling pool (:func:`jaxais.pool.run_pool`),
+    where a run that ended frees its slot for the next. The records are the same either way.
 
     Args:
         world: the world.
@@ -225,11 +231,14 @@ def run_trials(
             (``"SIE@hold=1"``: then the random streams of the plain label).
         n_trials: trials per system (or per label).
         seed: the run's seed, in [0, 2**32).
-        config: caps and recording (``config.record`` keeps trajectories).
-        progress: optional tqdm-like object with ``update(n)``, advanced in simulated iterations.
-        timings: optional dict collecting ``compile_s`` and ``run_s``.
+        config: caps and recording (``config.record`` keeps every trial's trajectory).
+        progress: optional tqdm-like object with ``update(n)``, advanced in simulated
+            iterations of the batch with ``config.record``, else in trials ended.
+        timings: optional dict collecting ``run_s`` (and ``compile_s`` with ``config.record``;
+            the pool's compiles are part of its ``run_s``).
         controller: the controller every system runs (default: the STL network, the smallest
             variant that runs these systems, :func:`~jaxais.controllers.stl_for`).
+        slots: runs live at once in the pool (without ``config.record``).
 
     Returns:
         label -> :class:`TrialSet`.
@@ -257,31 +266,52 @@ def run_trials(
             for name, s in systems.items()
         ],
     )
-    update = None if progress is None else progress.update
     if controller is None:
         # Parts of the network no system in the batch uses (replacement, idiotypic selection,
         # learning) are left out of the program: same trials, a smaller and faster loop.
         controller = stl_for(params)
-    batch = rollout(
-        reset_keys,
-        run_keys,
-        world,
-        sim_params,
-        controller,
-        params,
-        config,
-        update,
-        _COMPILED,
-        timings,
-    )
-    res = outcome(batch.runs, config, float(sim_params.dt))
-    if controller.stats is not None:
-        res |= jax.device_get(jax.vmap(controller.stats)(batch.runs.ctrl, params))
+    update = None if progress is None else progress.update
+    if config.record:
+        # One batch to its slowest run's end: every trial's trajectory is kept.
+        batch = rollout(
+            reset_keys,
+            run_keys,
+            world,
+            sim_params,
+            controller,
+            params,
+            config,
+            update,
+            _COMPILED,
+            timings,
+        )
+        res = outcome(batch.runs, config, float(sim_params.dt))
+        if controller.stats is not None:
+            res |= jax.device_get(jax.vmap(controller.stats)(batch.runs.ctrl, params))
+        chunks = np.asarray(batch.runs.t) // config.chunk
+        poses = np.asarray(batch.poses)
+        # Boxes and the goal stay where reset put them: the final state holds the placement.
+        placed = batch.runs.sim
+    else:
+        # The runs go through a refilling pool: a slot whose run ended starts the next one, so
+        # ended runs stop costing (the same numbers: :mod:`jaxais.pool`).
+        t = time.perf_counter()
+        res = run_pool(
+            reset_keys,
+            run_keys,
+            params,
+            world,
+            sim_params,
+            controller,
+            config,
+            slots,
+            progress=update,
+        )
+        if timings is not None:
+            timings["run_s"] = timings.get("run_s", 0.0) + time.perf_counter() - t
+        placed = _reset(reset_keys, world, sim_params)
+    placed_boxes, placed_goal = np.asarray(placed.boxes), np.asarray(placed.goal)
     extra = sorted(set(res) - set(_OUTCOME_KEYS))
-    chunks = np.asarray(batch.runs.t) // config.chunk
-    poses = np.asarray(batch.poses)
-    # Boxes and the goal stay where reset put them: the final state holds the start placement.
-    placed_boxes, placed_goal = np.asarray(batch.runs.sim.boxes), np.asarray(batch.runs.sim.goal)
 
     out, start = {}, 0
     for name in systems:
@@ -310,6 +340,12 @@ def run_trials(
         out[name] = TrialSet(records, trajectories if config.record else None, placements)
         start += counts[name]
     return out
+
+
+@jax.jit
+def _reset(reset_keys: jax.Array, world: envs.World, sim_params: envs.SimParams) -> envs.State:
+    """The worlds of runs with these reset keys [n] at t = 0 (where their objects stay)."""
+    return jax.vmap(envs.reset, in_axes=(0, None, None))(reset_keys, world, sim_params)
 
 
 _OUTCOME_KEYS = (

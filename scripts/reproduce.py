@@ -6,17 +6,20 @@
 
 Runs the paper's protocol (SPEC 9): 30 trials of each system per simulated world and 20 in
 `real`; the unseeded systems with both random sets R1 and R2 in the simulated worlds and R1 only
-in `real`. All systems of a world run as one compiled, vmapped batch. Writes DIR/tables.json,
+in `real`. All systems of a world run as one compiled, vmapped pool of runs, each slot refilled
+when its run ends (sharded over every process's devices with the jax.distributed flags, as in
+scripts/sweep.py; process 0 writes). Writes DIR/tables.json,
 DIR/claims.json (the paper's 32 claims, each held or not, also read with 95 % confidence
 intervals, and a summary), DIR/report.md (opening with the claims ledger; Table 3 with 95 %
 bootstrap intervals; figures in DIR/figures/), every trial in DIR/trials/ and DIR/run.json
 (the config, seeds and timings needed to regenerate it all). Only the first trial of each
-system is drawn; the records of all trials are kept.
+system is drawn (run again with its trajectory recorded); the records of all trials are kept.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import shlex
 import subprocess
@@ -24,6 +27,7 @@ import sys
 import time
 from pathlib import Path
 
+from jaxais import distributed
 from jaxais.cli import (
     ArgumentParser,
     UserError,
@@ -57,10 +61,19 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="run the LTL (scripts/evolve.py, defaults, PRNG seed --seed) first and use its seed",
     )
     p.add_argument("--seed", type=int, default=0, help="PRNG seed of the trials (and of --evolve)")
+    nn = p.add_mutually_exclusive_group()
+    nn.add_argument(
+        "--baseline",
+        default=None,
+        help="trained neural controller beside SIE and HDC (default: the shipped "
+        "checkpoints/neural; scripts/train_baseline.py makes one)",
+    )
+    nn.add_argument("--no-baseline", action="store_true", help="run the paper's systems only")
     p.add_argument(
         "--worlds", default=",".join(protocol.WORLDS), help="comma-separated subset of worlds"
     )
     protocol.add_cap_arguments(p)
+    distributed.add_arguments(p)
     p.add_argument(
         "--generations",
         type=int,
@@ -120,6 +133,9 @@ def main(argv: list[str] | None = None) -> None:
         raise UserError("--tau-cap must be > 0 and --collision-cap >= 1")
     if args.generations is not None and args.generations < 1:
         raise UserError(f"--generations must be >= 1, got {args.generations}")
+    distributed.check(args)
+    if args.evolve and args.coordinator:
+        raise UserError("--evolve runs on one process; evolve first, then pass --seeds DIR")
     out = Path(args.out)
     if args.evolve:
         _check_fresh_ltl_dir(out / "ltl", args)
@@ -129,6 +145,8 @@ def main(argv: list[str] | None = None) -> None:
     from tqdm import tqdm
 
     from jaxais import _speed, envs
+    from jaxais.baselines.config import NN_LABEL
+    from jaxais.baselines.neural import NEURAL, load_params
     from jaxais.episode import EpisodeConfig
     from jaxais.experiments import claims, report, stats
     from jaxais.experiments.plotting import draw_world
@@ -142,9 +160,14 @@ def main(argv: list[str] | None = None) -> None:
     )
     from jaxais.immune.network import NetworkParams
     from jaxais.seed import default_seed_dir
-    from jaxais.trials import run_trials
+    from jaxais.trials import run_trials, summarise
 
     _speed.setup(cpu_device_per_core=True)
+    distributed.initialize(args)  # before JAX computes anything
+    import jax
+
+    # Every process runs every trial's share (and gets every number); process 0 writes.
+    lead = jax.process_index() == 0
     started = time.perf_counter()
     timings: dict[str, float] = {}
     seeds_dir = Path(args.seeds) if args.seeds else default_seed_dir()
@@ -159,13 +182,23 @@ def main(argv: list[str] | None = None) -> None:
             raise UserError("the LTL run (scripts/evolve.py) failed; see its message above")
         timings["ltl_s"] = time.perf_counter() - t
         seeds_dir = ltl_dir / "seed"
-    # Read once, and early: a missing or corrupt seed fails before any trial runs.
+    # Read once, and early: a missing or corrupt seed (or baseline) fails before any trial runs.
     loaded = load_ltl_seed(seeds_dir)
+    if not args.no_baseline:
+        try:
+            nn_params, nn_info = load_params(args.baseline)
+        except ValueError as err:
+            raise UserError(f"--baseline: {err}") from None
+        # What made the weights (train_baseline.py's config.json holds the rest).
+        nn_info = {"config": nn_info.get("config"), "seed": nn_info.get("seed")}
 
     network = NetworkParams()
     params = envs.default_params()
-    config = EpisodeConfig(tau_cap=args.tau_cap, collision_cap=args.collision_cap, record=True)
-    results_by_world, trajectories, placements, configs = {}, {}, {}, {}
+    config = EpisodeConfig(tau_cap=args.tau_cap, collision_cap=args.collision_cap)
+    # The report draws each system's first trial: it runs again, alone and recorded (the same
+    # keys, so the same run as in the pooled trials).
+    example = dataclasses.replace(config, record=True)
+    results_by_world, baseline_by_world, trajectories, placements, configs = {}, {}, {}, {}, {}
     (out / "trials").mkdir(exist_ok=True)
     for name in worlds:
         world = envs.load_world(name)
@@ -173,27 +206,44 @@ def main(argv: list[str] | None = None) -> None:
         n = args.trials if args.trials is not None else protocol.trials_for_world(name)
         systems, seed_info = build_systems(labels, seeds_dir, network, loaded)
         world_t: dict[str, float] = {}
-        total = config.max_iterations(params.dt)
-        with tqdm(total=total, desc=f"{name}: {len(labels)} systems x {n} trials",
-                  unit="it", file=sys.stderr) as bar:  # fmt: skip
+        k = len(labels) + (not args.no_baseline)
+        with tqdm(total=n * k, desc=f"{name}: {k} systems x {n} trials",
+                  unit="run", file=sys.stderr, disable=not lead) as bar:  # fmt: skip
             results = run_trials(world, systems, n, args.seed, config, params, bar, world_t)
-            bar.update(bar.total - bar.n)
+            if not args.no_baseline:
+                nn = {NN_LABEL: nn_params}
+                nn = run_trials(world, nn, n, args.seed, config, params, bar, world_t,
+                                controller=NEURAL)  # fmt: skip
+                baseline_by_world[name] = {NN_LABEL: nn[NN_LABEL].records}
+        first = run_trials(world, systems, 1, args.seed, example, params, None, world_t)
         for key, value in world_t.items():
             timings[f"{name}_{key}"] = value
             timings[key] = timings.get(key, 0.0) + value
         cfg = run_config(world, name, config, network, params, seed_info)
         configs[name] = cfg
         results_by_world[name] = {k: v.records for k, v in results.items()}
-        # A copy: a view would keep the batch's whole pose buffer ([n, K, 3]) alive.
-        trajectories[name] = {k: v.trajectories[0][:, :2].copy() for k, v in results.items()}
-        placements[name] = {k: v.placements[0] for k, v in results.items()}
+        trajectories[name] = {k: v.trajectories[0][:, :2] for k, v in first.items()}
+        placements[name] = {k: v.placements[0] for k, v in first.items()}
+        if not lead:
+            continue
         for label, trial_set in results.items():
             doc = results_document(label, name, args.seed, trial_set, cfg)
             atomic_write_json(out / "trials" / f"{name}_{label}.json", doc)
+        for label, records in baseline_by_world.get(name, {}).items():
+            nn_cfg = {k: v for k, v in cfg.items() if k not in ("network", "readings", "ltl_seed")}
+            doc = {"system": label, "label": label, "world": name, "seed": args.seed,
+                   "config": nn_cfg | {"baseline": nn_info}, "trials": records,
+                   "summary": summarise(records)}  # fmt: skip
+            atomic_write_json(out / "trials" / f"{name}_{label}.json", doc)
 
+    if not lead:
+        return
     t = time.perf_counter()
     cis = stats.table3_ci(results_by_world)  # once, for the tables and the claims
     tables = stats.build_tables(results_by_world, cis=cis)
+    if baseline_by_world:
+        tables["baseline"] = stats.baseline_tables(results_by_world, baseline_by_world)
+        tables["baseline"]["weights"] = nn_info
     atomic_write_json(out / "tables.json", tables)
     ledger = claims.claims(results_by_world, cis=cis)
     timings["statistics_s"] = time.perf_counter() - t
@@ -225,6 +275,7 @@ def main(argv: list[str] | None = None) -> None:
         lambda ax, world_name, placement=None: draw_world(ax, loaded[world_name], placement),
         claims_ledger=ledger,
         example_placements=placements,
+        baseline=tables.get("baseline"),
     )
     verdicts = ", ".join(
         f"{h} {'supported' if v['supported'] else 'not supported'}"

@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from jaxais.baselines.config import TrainConfig
+from jaxais.baselines.config import NN_LABEL, TrainConfig
 from jaxais.cli import (
     ArgumentParser,
     UserError,
@@ -39,8 +39,6 @@ from jaxais.experiments import protocol
 BUILTIN_WORLDS = ("ga_maze", "world1", "world2", "real")
 """The simulator's built-in worlds (``envs.BUILTIN_WORLDS``, named here without loading JAX)."""
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "checkpoints" / "neural"
-NN_LABEL = "NN"
-"""The trained controller's label (it names its trials' random stream)."""
 REFERENCE = ("SIE", "HDC")
 """The paper's systems it runs beside."""
 _DEFAULTS = TrainConfig()

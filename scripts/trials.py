@@ -3,9 +3,12 @@
     python scripts/trials.py --system SIE --world world1 --trials 30 --seed 0 --out results.json
     python scripts/trials.py --system UIE --random-set R2 --world world2 --out u.json --plot u.png
 
-All trials run as one compiled, vmapped batch; the progress bar counts simulated iterations of
-the longest-running trial (a trial stops when it finishes or hits a cap: 4000 s, 100 collisions).
-The same arguments give the same results.json, byte for byte.
+The trials run in a compiled, vmapped pool of slots, each refilled when its trial ends (a trial
+stops when it finishes or hits a cap: 4000 s, 100 collisions); the progress bar counts trials
+ended. With --plot they run as one batch that keeps every trajectory, and the bar counts
+simulated iterations of the longest-running trial. The pool is sharded over every process's
+devices with the jax.distributed flags (as in scripts/sweep.py; process 0 writes). The same
+arguments give the same results.json, byte for byte.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ import argparse
 import sys
 import time
 
+from jaxais import distributed
 from jaxais.cli import (
     ArgumentParser,
     UserError,
@@ -53,6 +57,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     protocol.add_cap_arguments(p)
     p.add_argument("--out", required=True, help="results JSON file")
     p.add_argument("--plot", default=None, help="also draw the trajectories to this PNG")
+    distributed.add_arguments(p)
     return p.parse_args(argv)  # fmt: skip
 
 
@@ -70,6 +75,7 @@ def main(argv: list[str] | None = None) -> None:
     check_output_file(args.out, (".json",))
     if args.plot:
         check_output_file(args.plot, (".png",))
+    distributed.check(args)
 
     # Imported after the flags are checked: a bad flag answers at once, without loading JAX.
     from tqdm import tqdm
@@ -81,6 +87,10 @@ def main(argv: list[str] | None = None) -> None:
     from jaxais.trials import run_trials
 
     _speed.setup(cpu_device_per_core=True)
+    distributed.initialize(args)  # before JAX computes anything
+    import jax
+
+    lead = jax.process_index() == 0  # every process runs its share; process 0 writes
     name = label(args.system, args.random_set or "R1")
     world = envs.load_world(args.world)
     config = EpisodeConfig(
@@ -90,11 +100,14 @@ def main(argv: list[str] | None = None) -> None:
     systems, seed_info = build_systems([name], args.seeds, network)
     params = envs.default_params()
     start = time.perf_counter()
-    total = config.max_iterations(params.dt)
-    with tqdm(total=total, desc=f"{name} in {world.name}", unit="it", file=sys.stderr) as bar:
+    total, unit = (config.max_iterations(params.dt), "it") if args.plot else (args.trials, "run")
+    desc = f"{name} in {world.name}"
+    with tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, disable=not lead) as bar:
         results = run_trials(world, systems, args.trials, args.seed, config, params, bar)
         bar.update(bar.total - bar.n)
     wall = time.perf_counter() - start
+    if not lead:
+        return
     cfg = run_config(world, args.world, config, network, params, seed_info)
     cfg["command"] = "trials.py " + " ".join(sys.argv[1:] if argv is None else argv)
     doc = results_document(name, world.name, args.seed, results[name], cfg)

@@ -1,8 +1,9 @@
 """Runs across processes (``jaxais.distributed``): two CPU processes on localhost, joined by
 ``jax.distributed``, give the results of one process bit for bit.
 
-The test starts three ``scripts/sweep.py`` runs at once (one alone, two joined over a loopback
-port) on a tiny grid, so the whole module costs about one compile's wall time.
+The test starts three ``scripts/sweep.py`` runs (one alone, two joined over a loopback port) on
+a tiny grid and three ``scripts/trials.py`` runs likewise, all at once, so the whole module costs
+about one compile's wall time.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from jaxais import distributed
 
 ROOT = Path(__file__).resolve().parent.parent
 ARGS = ["--grid", "k1=0.85,1.6", "--grid", "k2=1.1", "--trials", "3", "--tau-cap", "8"]
+TRIALS = ["--system", "HDC", "--trials", "3", "--tau-cap", "8"]
 
 
 def _free_port() -> int:
@@ -29,12 +31,13 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def _start(out: Path, *extra: str) -> subprocess.Popen:
+def _start(out: Path, *extra: str, script: str = "sweep.py") -> subprocess.Popen:
     env = {**os.environ, "JAXAIS_DEBUG": ""}
     for name in distributed.ENV.values():
         env.pop(name, None)
+    args = ARGS if script == "sweep.py" else TRIALS
     return subprocess.Popen(
-        [sys.executable, "scripts/sweep.py", *ARGS, "--out", str(out), *extra],
+        [sys.executable, f"scripts/{script}", *args, "--out", str(out), *extra],
         cwd=ROOT,
         env=env,
         stdout=subprocess.PIPE,
@@ -46,13 +49,16 @@ def _start(out: Path, *extra: str) -> subprocess.Popen:
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("dist")
-    port = _free_port()
-    joined = ["--coordinator", f"127.0.0.1:{port}", "--num-processes", "2"]
-    procs = {
-        "alone": _start(tmp / "alone"),
-        "p0": _start(tmp / "p0", *joined, "--process-id", "0"),
-        "p1": _start(tmp / "p1", *joined, "--process-id", "1"),
-    }
+    procs = {}
+    for script, prefix, out in (("sweep.py", "", ""), ("trials.py", "trials_", ".json")):
+        joined = ["--coordinator", f"127.0.0.1:{_free_port()}", "--num-processes", "2"]
+        procs |= {
+            f"{prefix}alone": _start(tmp / f"{prefix}alone{out}", script=script),
+            f"{prefix}p0": _start(tmp / f"{prefix}p0{out}", *joined, "--process-id", "0",
+                                  script=script),
+            f"{prefix}p1": _start(tmp / f"{prefix}p1{out}", *joined, "--process-id", "1",
+                                  script=script),
+        }  # fmt: skip
     done = {name: p.communicate(timeout=480) for name, p in procs.items()}
     for name, p in procs.items():
         assert p.returncode == 0, (name, done[name][1][-3000:])
@@ -71,6 +77,15 @@ def test_two_processes_give_one_processs_results_bit_for_bit(runs):
 def test_only_process_0_writes(runs):
     assert (runs / "p0" / "sweep.json").is_file()
     assert not (runs / "p1" / "sweep.json").exists()
+    assert (runs / "trials_p0.json").is_file()
+    assert not (runs / "trials_p1.json").exists()
+
+
+def test_two_processes_give_one_processs_trials_bit_for_bit(runs):
+    alone = json.loads((runs / "trials_alone.json").read_text())
+    joined = json.loads((runs / "trials_p0.json").read_text())
+    assert len(alone["trials"]) == 3
+    assert joined["trials"] == alone["trials"] and joined["summary"] == alone["summary"]
 
 
 @pytest.mark.parametrize(

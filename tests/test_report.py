@@ -228,3 +228,29 @@ def test_write_report_without_intervals(tmp_path, paper):
     text = report.write_report(tmp_path, tables, results, paper, None, {}, None).read_text()
     assert "| System | n | c ours / paper |" in text and "bootstrap" not in text
     assert "| SIE | 2 | 0.0 / 2 | 110 / 659 " in text
+
+
+def test_write_report_sets_a_baseline_beside_sie_and_hdc(tmp_path, paper):
+    results = {"world2": {"SIE": [trial(100), trial(120)], "HDC": [trial(300), trial(340)]}}
+    nn = {"world2": {"NN": [trial(200), trial(4000, 2)]}}  # f 100, 2008; one failed by time
+    baseline = stats.baseline_tables(results, nn)
+    text = report.write_report(
+        tmp_path, stats.build_tables(results), results, paper, None, {}, None, baseline=baseline
+    ).read_text()
+    section = text[text.index("## Beyond the paper: a modern baseline") :]
+    p_sie = baseline["tests"]["world2"]["NN vs SIE"]["welch_p"]
+    p_hdc = baseline["tests"]["world2"]["NN vs HDC"]["welch_p"]
+    lo, hi = baseline["table3_ci"]["world2"]["NN"]["f"]
+    assert (lo, hi) == (100.0, 2008.0)  # two trials: the bootstrap's means lie between them
+    assert (
+        f"| NN | 1.0 [0.0, 2.0] | 2100 [200, 4000] | 1054 [100, 2008] | 50 "
+        f"[{baseline['table5_ci']['world2']['NN']['total'][0]:.0f}, "
+        f"{baseline['table5_ci']['world2']['NN']['total'][1]:.0f}] | "
+        f"SIE: {p_sie:.2g}; HDC: {p_hdc:.2g} |"
+    ) in section
+    assert "| SIE | 0.0 [0.0, 0.0] | 110 [100, 120] | 55 [50, 60] | 0 [0, " in section
+    # Without a baseline there is no such section.
+    plain = report.write_report(
+        tmp_path, stats.build_tables(results), results, paper, None, {}, None
+    ).read_text()
+    assert "Beyond the paper" not in plain

@@ -240,7 +240,13 @@ def test_reproduce_end_to_end(runs):
     for name in figures:
         assert name in report  # every figure is shown in the report
     trial_files = sorted(p.name for p in (out / "trials").iterdir())
-    assert trial_files == sorted(f"world1_{label}.json" for label in LABELS)
+    assert trial_files == sorted(f"world1_{label}.json" for label in (*LABELS, "NN"))
+    # The shipped neural baseline ran beside SIE and HDC, under the same protocol.
+    nn = json.loads((out / "trials" / "world1_NN.json").read_text())
+    assert len(nn["trials"]) == 2 and nn["config"]["episode"]["tau_cap"] == 10.0
+    assert nn["config"]["baseline"]["config"]["hidden"] > 0
+    assert list(tables["baseline"]["table3"]["world1"]) == ["SIE", "HDC", "NN"]
+    assert "## Beyond the paper: a modern baseline" in report
     for label in LABELS:
         doc = json.loads((out / "trials" / f"world1_{label}.json").read_text())
         assert doc["label"] == label and len(doc["trials"]) == 2
@@ -263,6 +269,7 @@ def test_reproduce_user_errors(tmp_path: Path):
         (["--worlds", "mars"], ["--worlds"]),
         (["--trials", "1"], ["--trials"]),
         (["--tau-cap", "0"], ["--tau-cap"]),
+        (["--baseline", tmp_path / "none", "--worlds", "world1"], ["--baseline", "none"]),
     ]
     procs = [_start("reproduce.py", *args, "--out", out) for args, _ in cases]
     for (_, words), proc in zip(cases, procs, strict=True):

@@ -531,6 +531,27 @@ def test_run_trials_rejects_seeds_outside_their_range():
             run_trials(F.world(), sie, 2, seed, F.CONFIG)
 
 
+def test_pooled_trials_equal_the_recorded_batch():
+    """Without recording, run_trials goes through the refilling pool: with one slot, each run
+    starts when the one before ended, and every record and placement is the batch's."""
+    pooled = run_trials(
+        F.world(),
+        {k: F.systems()[k] for k in ("SIE", "HDC")},
+        2,
+        0,
+        dataclasses.replace(F.CONFIG, record=False),
+        F.sim_params(),
+        slots=1,
+    )
+    batch = trials(SIE_HDC, 0)
+    for name in batch:
+        assert pooled[name].trajectories is None
+        assert pooled[name].records == batch[name].records
+        for a, b in zip(pooled[name].placements, batch[name].placements, strict=True):
+            np.testing.assert_array_equal(a.goal, b.goal)
+            np.testing.assert_array_equal(a.boxes, b.boxes)
+
+
 def test_trial_sets_keep_where_each_trial_had_its_boxes_and_goal():
     """Placements: the boxes and goal of each trial's start state (reset places the goal and
     random boxes anew per trial), the same for every system's trial i."""

@@ -8,6 +8,10 @@ from __future__ import annotations
 import dataclasses
 import math
 
+NN_LABEL = "NN"
+"""The trained controller's label in trial sets and reports (it names its trials' random
+stream, :func:`jaxais.trials.batch_keys`)."""
+
 
 @dataclasses.dataclass(frozen=True)
 class TrainConfig:

@@ -392,6 +392,46 @@ def _idiotypic_section(rates: Mapping[str, Any], paper: Mapping[str, Any]) -> li
     return lines + _table(["System", *worlds], body)
 
 
+def _baseline_section(baseline: Mapping[str, Any] | None) -> list[str]:
+    """Systems beyond the paper beside some of its systems (:func:`stats.baseline_tables`)."""
+    if not baseline:
+        return []
+    against = ", ".join(baseline["against"])
+    trained = (baseline.get("weights") or {}).get("config") or {}
+    where = f" in {trained['world']}" if "world" in trained else ""
+    lines = [
+        "## Beyond the paper: a modern baseline",
+        "",
+        "A small neural controller (an MLP from the IR and camera features to the wheel speeds, "
+        f"trained by an evolution strategy{where}; `scripts/train_baseline.py`, "
+        f"`docs/baseline.md`), run under the same protocol, seed and worlds as {against}. "
+        f"Brackets: {_LEVEL} intervals (bootstrap for the means, Wilson for the failure rate); "
+        "p: two-sided Welch t-test of f.",
+        "",
+    ]
+    t3, ci3 = baseline["table3"], baseline["table3_ci"]
+    t5, ci5 = baseline["table5"], baseline["table5_ci"]
+    for world in t3:
+        header = ["System", "c", "τ (s)", "f", "failed (%)", "p (f) against it"]
+        body = []
+        for s, row in t3[world].items():
+            cells = [s]
+            for key, dec in (("c", 1), ("tau", 0), ("f", 0)):
+                lo, hi = ci3[world][s][key]
+                cells.append(f"{_num(row[key], dec)} [{_num(lo, dec)}, {_num(hi, dec)}]")
+            lo, hi = ci5[world][s]["total"]
+            cells.append(f"{_num(t5[world][s]['total'])} [{_num(lo)}, {_num(hi)}]")
+            tests = [
+                f"{pair.split(' vs ')[1]}: {_p(test['welch_p'])}"
+                for pair, test in baseline["tests"].get(world, {}).items()
+                if pair.startswith(f"{s} vs ")
+            ]
+            cells.append("; ".join(tests) or "–")
+            body.append(cells)
+        lines += [f"**{world}**", ""] + _table(header, body)
+    return lines
+
+
 def _ltl_populations(ltl: Mapping[str, Any]) -> list[dict[str, Any]]:
     """Per-population best f (generation 0, final generation, any generation) of a summary."""
     if "populations" in ltl:
@@ -567,6 +607,7 @@ def write_report(
     world_drawer: WorldDrawer | None = None,
     claims_ledger: Sequence[Mapping[str, Any]] | None = None,
     example_placements: Mapping[str, Mapping[str, Any]] | None = None,
+    baseline: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write ``out_dir/report.md`` and its figures in ``out_dir/figures/``.
 
@@ -595,6 +636,8 @@ def write_report(
             (computed here at the 99 % level when ``None``).
         example_placements: ``{world: {system: placement}}``: where each example trajectory's
             trial had its boxes and goal (``jaxais.trials.Placement``), passed to the drawer.
+        baseline: :func:`jaxais.experiments.stats.baseline_tables` of systems beyond the
+            paper, shown in a section of their own after the idiotypic difference rates.
 
     Returns:
         The path of ``report.md``.
@@ -681,6 +724,7 @@ def write_report(
     lines += _ordering_section(diffs3, diffs5, tables["table4"], p4)
     lines += _robustness_section(stats.comparisons(results_by_world), p4, alpha)
     lines += _idiotypic_section(tables.get("idiotypic_difference_rate", {}), paper)
+    lines += _baseline_section(baseline)
     lines += _ltl_section(ltl_summary, ltl_fig)
     lines += ["## Figures", ""]
     for caption, name in figures:

@@ -60,6 +60,7 @@ __all__ = [
     "Results",
     "ResultsByWorld",
     "TrialRecord",
+    "baseline_tables",
     "bootstrap_mean_ci",
     "build_tables",
     "ci_below",
@@ -790,6 +791,61 @@ def jsonable(obj: Any) -> Any:
     if isinstance(obj, float | np.floating):
         return float(obj) if math.isfinite(obj) else None
     return obj
+
+
+def baseline_tables(
+    results_by_world: ResultsByWorld,
+    baseline_by_world: ResultsByWorld,
+    against: Sequence[str] = ("SIE", "HDC"),
+    alpha: float = protocol.ALPHA,
+) -> dict[str, Any]:
+    """Systems beyond the paper (e.g. the neural baseline) beside some of the paper's.
+
+    Args:
+        results_by_world: the paper's systems' trials.
+        baseline_by_world: ``{world: {system: [TrialRecord]}}`` of the other systems, run under
+            the same protocol, seed and worlds.
+        against: the paper's systems to set them beside (those a world has).
+
+    Returns:
+        ``{"against": [...], "table3": ..., "table3_ci": ..., "table5": ..., "table5_ci": ...,
+        "tests": {world: {"NN vs SIE": {"welch_t", "welch_p", "mann_whitney_u",
+        "mann_whitney_p", "significant"}}}}``: the tables as :func:`table3` etc. give them for
+        the systems of both, and two-sided tests of f between each baseline and each of
+        ``against`` at level ``alpha``.
+    """
+    merged = {
+        world: {s: results_by_world[world][s] for s in against if s in results_by_world[world]}
+        | dict(extra)
+        for world, extra in baseline_by_world.items()
+    }
+    tests: dict[str, dict[str, dict[str, Any]]] = {}
+    for world, extra in baseline_by_world.items():
+        tests[world] = {}
+        for name, mine in extra.items():
+            for other in against:
+                if other not in merged[world]:
+                    continue
+                a, b = metric_values(mine, "f"), metric_values(merged[world][other], "f")
+                t, p = welch_t(a, b)
+                u, p_u = mann_whitney_u(a, b)
+                tests[world][f"{name} vs {other}"] = {
+                    "welch_t": t,
+                    "welch_p": p,
+                    "mann_whitney_u": u,
+                    "mann_whitney_p": p_u,
+                    "significant": bool(p < alpha),
+                }
+    return jsonable(
+        {
+            "against": list(against),
+            "table3": table3(merged),
+            "table3_ci": table3_ci(merged),
+            "table5": table5(merged),
+            "table5_ci": table5_ci(merged),
+            "tests": tests,
+        }
+    )
 
 
 def ci_settings() -> dict[str, Any]:

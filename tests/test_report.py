@@ -243,12 +243,13 @@ def test_write_report_sets_a_baseline_beside_sie_and_hdc(tmp_path, paper):
     lo, hi = baseline["table3_ci"]["world2"]["NN"]["f"]
     assert (lo, hi) == (100.0, 2008.0)  # two trials: the bootstrap's means lie between them
     assert (
-        f"| NN | 1.0 [0.0, 2.0] | 2100 [200, 4000] | 1054 [100, 2008] | 50 "
-        f"[{baseline['table5_ci']['world2']['NN']['total'][0]:.0f}, "
-        f"{baseline['table5_ci']['world2']['NN']['total'][1]:.0f}] | "
+        f"| NN | 1.0 [0.0, 2.0] | 2100 [200, 4000] | 1054 [100, 2008] | 50.0 "
+        f"[{baseline['table5_ci']['world2']['NN']['total'][0]:.1f}, "
+        f"{baseline['table5_ci']['world2']['NN']['total'][1]:.1f}] | "
         f"SIE: {p_sie:.2g}; HDC: {p_hdc:.2g} |"
     ) in section
-    assert "| SIE | 0.0 [0.0, 0.0] | 110 [100, 120] | 55 [50, 60] | 0 [0, " in section
+    assert "| SIE | 0.0 [0.0, 0.0] | 110 [100, 120] | 55 [50, 60] | 0.0 [0.0, " in section
+    assert "same protocol, seed and worlds as SIE and HDC." in section
     # Without a baseline there is no such section.
     plain = report.write_report(
         tmp_path, stats.build_tables(results), results, paper, None, {}, None

@@ -316,8 +316,7 @@ class Ablation:
         trials: variant -> world -> label -> :class:`~jaxais.trials.TrialSet`.
         calls: one dict per batch run: world, variants, the episode config's switched fields,
             ir_noise, systems (tagged labels run), shared (variant -> label -> tagged label run
-            for it, where not its own), runs, compiled (a new program was compiled), compile_s,
-            run_s.
+            for it, where not its own), runs, run_s (compiles included).
     """
 
     trials: dict[str, dict[str, dict[str, TrialSet]]]
@@ -360,8 +359,9 @@ def run_ablation(
         labels: the systems (default: the paper's protocol in each world).
         network: network constants (default: the paper's).
         share: see :func:`batch_systems`.
-        progress: optional tqdm-like bar: advanced in simulated iterations, its total should be
-            ``len(worlds) * len(plan_calls(variants, base)) * base.max_iterations(dt)``.
+        progress: optional tqdm-like bar, advanced in runs ended (in simulated iterations with
+            ``base.record``); its ``reset(total=...)``, where it has one, is called first with
+            the total.
         runner: ``run_trials`` or a stand-in with its signature (tests).
 
     Returns:
@@ -372,6 +372,7 @@ def run_ablation(
     by_name = {v.name: v for v in variants}
     out: dict[str, dict[str, dict[str, TrialSet]]] = {v.name: {} for v in variants}
     log: list[dict[str, Any]] = []
+    plan = []  # every batch first, so the bar knows its total
     for world_name in worlds:
         world = envs.load_world(world_name)
         world_labels = list(protocol.systems_for_world(world_name) if labels is None else labels)
@@ -386,43 +387,50 @@ def run_ablation(
         }
         for call in calls:
             batch, source = batch_systems(call.variants, systems, share)
-            first = by_name[call.variants[0]]
-            sim_params = first.sim_params()
-            done = _Counter(progress)
-            if progress is not None and hasattr(progress, "set_description_str"):
-                progress.set_description_str(
-                    f"{world_name}: {', '.join(call.variants)} ({len(batch)} systems x {n})"
-                )
-            timings: dict[str, float] = {}
-            before = len(trials_module._COMPILED)
-            results = run(world, batch, n, seed, call.config, sim_params, done, timings)
-            if progress is not None:
-                progress.update(max(0, call.config.max_iterations(sim_params.dt) - done.n))
-            for name in call.variants:
-                out[name][world_name] = {
-                    label: results[tagged] for label, tagged in source[name].items()
-                }
-            log.append(
-                {
-                    "world": world_name,
-                    "variants": list(call.variants),
-                    "episode": {
-                        "collision_rule": call.config.collision_rule,
-                        "stop_at_collision_cap": call.config.stop_at_collision_cap,
-                    },
-                    "ir_noise": call.ir_noise,
-                    "systems": list(batch),
-                    "shared": {
-                        name: {lab: t for lab, t in src.items() if t != f"{lab}@{name}"}
-                        for name, src in source.items()
-                        if any(t != f"{lab}@{name}" for lab, t in src.items())
-                    },
-                    "runs": len(batch) * n,
-                    "compiled": len(trials_module._COMPILED) > before,
-                    "compile_s": timings.get("compile_s", 0.0),
-                    "run_s": timings.get("run_s", 0.0),
-                }
+            plan.append((world_name, world, n, call, batch, source))
+
+    def units(n: int, call: Call, batch: dict) -> int:
+        """The progress a batch makes: its runs, or its iterations when it keeps poses."""
+        dt = by_name[call.variants[0]].sim_params().dt
+        return call.config.max_iterations(dt) if call.config.record else len(batch) * n
+
+    if progress is not None and hasattr(progress, "reset"):
+        progress.reset(total=sum(units(n, call, batch) for _, _, n, call, batch, _ in plan))
+    for world_name, world, n, call, batch, source in plan:
+        first = by_name[call.variants[0]]
+        sim_params = first.sim_params()
+        done = _Counter(progress)
+        if progress is not None and hasattr(progress, "set_description_str"):
+            progress.set_description_str(
+                f"{world_name}: {', '.join(call.variants)} ({len(batch)} systems x {n})"
             )
+        timings: dict[str, float] = {}
+        results = run(world, batch, n, seed, call.config, sim_params, done, timings)
+        if progress is not None:  # a batch that ended early completes its share
+            progress.update(max(0, units(n, call, batch) - done.n))
+        for name in call.variants:
+            out[name][world_name] = {
+                label: results[tagged] for label, tagged in source[name].items()
+            }
+        log.append(
+            {
+                "world": world_name,
+                "variants": list(call.variants),
+                "episode": {
+                    "collision_rule": call.config.collision_rule,
+                    "stop_at_collision_cap": call.config.stop_at_collision_cap,
+                },
+                "ir_noise": call.ir_noise,
+                "systems": list(batch),
+                "shared": {
+                    name: {lab: t for lab, t in src.items() if t != f"{lab}@{name}"}
+                    for name, src in source.items()
+                    if any(t != f"{lab}@{name}" for lab, t in src.items())
+                },
+                "runs": len(batch) * n,
+                "run_s": timings.get("compile_s", 0.0) + timings.get("run_s", 0.0),
+            }
+        )
     return Ablation(out, log)
 
 

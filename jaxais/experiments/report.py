@@ -396,7 +396,8 @@ def _baseline_section(baseline: Mapping[str, Any] | None) -> list[str]:
     """Systems beyond the paper beside some of its systems (:func:`stats.baseline_tables`)."""
     if not baseline:
         return []
-    against = ", ".join(baseline["against"])
+    names = list(baseline["against"])
+    against = " and ".join([", ".join(names[:-1]), names[-1]] if len(names) > 1 else names)
     trained = (baseline.get("weights") or {}).get("config") or {}
     where = f" in {trained['world']}" if "world" in trained else ""
     lines = [
@@ -420,7 +421,7 @@ def _baseline_section(baseline: Mapping[str, Any] | None) -> list[str]:
                 lo, hi = ci3[world][s][key]
                 cells.append(f"{_num(row[key], dec)} [{_num(lo, dec)}, {_num(hi, dec)}]")
             lo, hi = ci5[world][s]["total"]
-            cells.append(f"{_num(t5[world][s]['total'])} [{_num(lo)}, {_num(hi)}]")
+            cells.append(f"{_num(t5[world][s]['total'], 1)} [{_num(lo, 1)}, {_num(hi, 1)}]")
             tests = [
                 f"{pair.split(' vs ')[1]}: {_p(test['welch_p'])}"
                 for pair, test in baseline["tests"].get(world, {}).items()

@@ -6,10 +6,17 @@ finished ones). The pool keeps ``slots`` runs live instead: after every segment 
 runs that ended are read out, and their slots start the next runs of the queue.
 
 A run's numbers are those it has in any batch (:func:`jaxais.trials.make_trials`,
-:func:`jaxais.trials.run_trials`): its randomness comes from its own keys and its iteration count
-alone, and slots are refilled only at batch ticks that are multiples of ``align`` iterations, so
-a controller's periodic steps (the STL's idiotope, every ``idiotope_period`` iterations, which
-reads the batch tick) keep their phase.
+:func:`jaxais.trials.run_trials` with recording): its randomness comes from its own keys and its
+iteration count alone, and slots are refilled only at batch ticks that are multiples of ``align``
+iterations, so a controller's periodic steps (the STL's idiotope, every ``idiotope_period``
+iterations, which reads the batch tick) keep their phase. Bit for bit, that holds for
+controllers whose arithmetic XLA compiles alike in every program: the STL network and the
+neural baseline (tested). A controller with dot products can round
+differently here than in a batch's program, or on two devices than on one, since XLA picks a
+dot's summation order per program, and over thousands of steps a few of its runs then take
+other paths: the same distribution, not the same bits. The neural baseline's MLP did (2 of 30
+runs in world1 differed between the pool and one batch), until it summed in a fixed order
+(:func:`jaxais.baselines.neural.policy_in_order`).
 """
 
 from __future__ import annotations

@@ -8,6 +8,7 @@ each program is compiled once, so the file runs in well under a minute on a 2-co
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from pathlib import Path
 
@@ -32,11 +33,12 @@ from jaxais.baselines.neural import (
     openes,
     percept_features,
     policy,
+    policy_in_order,
     save_params,
 )
 from jaxais.controllers import Percept
 from jaxais.episode import EpisodeConfig
-from jaxais.trials import TrialsConfig, make_trials
+from jaxais.trials import STL_CONFIG, TrialsConfig, make_trials, run_trials
 
 TINY = TrainConfig(world="real", generations=3, pairs=4, episodes=2, steps=60, hidden=8)
 
@@ -78,11 +80,35 @@ def test_percept_features_equal_the_gymnax_observation():
     obs, feats, wheels, blue = jax.jit(jax.vmap(both))(jax.random.split(jax.random.key(0), 64))
     np.testing.assert_array_equal(np.asarray(feats), np.asarray(obs[:, :10]))
     np.testing.assert_array_equal(np.asarray(feats), np.asarray(jax.vmap(obs_features)(obs)))
-    action = jax.vmap(policy, in_axes=(None, 0))(params, obs[:, :10])
-    np.testing.assert_allclose(np.asarray(wheels), 1000.0 * np.asarray(action), rtol=1e-6)
+    action = jax.vmap(policy_in_order, in_axes=(None, 0))(params, obs[:, :10])
+    # Eager ops round apart from a fused program's multiply-adds: equal to float32 precision.
+    np.testing.assert_allclose(np.asarray(wheels), 1000.0 * np.asarray(action), atol=1e-5)
     blue = np.asarray(blue)
     assert (blue > 0).any() and (blue == 0).any()  # both branches of the centroid
     assert np.all(np.asarray(feats)[blue == 0, 9] == 0.0)
+
+
+def test_policy_in_order_is_the_mlp():
+    params = init_mlp(jax.random.key(2), 16)
+    x = np.asarray(jax.random.uniform(jax.random.key(3), (50, 10), minval=-1.0), np.float32)
+    p = jax.tree.map(lambda a: np.asarray(a, np.float64), params)
+    want = np.tanh(np.tanh(x @ p.w1 + p.b1) @ p.w2 + p.b2)  # float64, NumPy's own order
+    got = jax.jit(jax.vmap(policy_in_order, in_axes=(None, 0)))(params, x)
+    np.testing.assert_allclose(np.asarray(got), want, atol=1e-6)
+    np.testing.assert_allclose(got, jax.vmap(policy, in_axes=(None, 0))(params, x), atol=1e-6)
+
+
+def test_a_trial_is_the_same_run_in_the_pool_and_in_one_batch():
+    """30 full-length trials of the shipped weights in world1 are the same runs bit for bit
+    whether one batch plays them or the refilling pool does (with the policy's dots left to XLA,
+    2 of these 30 runs took other paths)."""
+    params, _ = load_params()
+    world = envs.load_world("world1")
+    nn = {"NN": params}
+    pooled = run_trials(world, nn, 30, 0, STL_CONFIG, controller=NEURAL)["NN"].records
+    recorded = dataclasses.replace(STL_CONFIG, record=True)
+    batch = run_trials(world, nn, 30, 0, recorded, controller=NEURAL)["NN"].records
+    assert pooled == batch
 
 
 # -------------------------------------------------------------------------------------- OpenES

@@ -153,9 +153,32 @@ def init_mlp(key: jax.Array, hidden: int) -> MLPParams:
 
 
 def policy(params: MLPParams, x: jnp.ndarray) -> jnp.ndarray:
-    """Wheel speeds (left, right) [2] in [-1, 1] from the features ``x`` [10]."""
+    """Wheel speeds (left, right) [2] in [-1, 1] from the features ``x`` [10] (training's)."""
     h = jnp.tanh(x @ params.w1 + params.b1)
     return jnp.tanh(h @ params.w2 + params.b2)
+
+
+def _dense_in_order(x: jnp.ndarray, w: jnp.ndarray, b: jnp.ndarray) -> jnp.ndarray:
+    """``x @ w + b`` for x [K], w [K, M], summed input by input in a fixed order."""
+    out = b
+    for k in range(x.shape[-1]):
+        out = out + x[k] * w[k]
+    return out
+
+
+def policy_in_order(params: MLPParams, x: jnp.ndarray) -> jnp.ndarray:
+    """:func:`policy` with its sums in a fixed order: what the controller runs.
+
+    XLA picks a dot's summation order per compiled program, so ``policy``'s last bits differ
+    between the task loop's programs (one batch or the refilling pool, one device or two), and
+    over a run's thousands of steps a few runs then take other paths (2 of 30 in world1, between
+    the pool and one batch). As a fixed sequence of multiply-adds it compiles to the same
+    arithmetic in each of those programs, so a trial is the same run whichever plays it
+    (``tests/test_neural.py``; two devices against one checked by hand). Training keeps
+    ``policy``, so the shipped weights stay what their command makes.
+    """
+    h = jnp.tanh(_dense_in_order(x, params.w1, params.b1))
+    return jnp.tanh(_dense_in_order(h, params.w2, params.b2))
 
 
 def neural_controller() -> Controller:
@@ -176,7 +199,7 @@ def neural_controller() -> Controller:
 
     def act(key, state, pc: Percept, params: MLPParams):
         del key
-        return state, policy(params, percept_features(pc)) * MAX_WHEEL_SPEED
+        return state, policy_in_order(params, percept_features(pc)) * MAX_WHEEL_SPEED
 
     def stats(state, params):
         del state, params

@@ -217,15 +217,13 @@ def evaluate(args: argparse.Namespace, command: str) -> None:
         world = envs.load_world(name)
         n = protocol.trials_for_world(name)
         t0 = time.perf_counter()
-        total = STL_CONFIG.max_iterations(sim.dt)
-        with tqdm(total=2 * total, desc=f"{name}", unit="it", file=sys.stderr) as bar:
+        total = n * (len(systems) + 1)  # runs (the trials go through a refilling pool)
+        with tqdm(total=total, desc=f"{name}", unit="run", file=sys.stderr) as bar:
             results = run_trials(world, systems, n, args.eval_seed, STL_CONFIG, sim, bar)
-            bar.update(total - bar.n)
             results |= run_trials(
                 world, {NN_LABEL: params}, n, args.eval_seed, STL_CONFIG, sim, bar,
                 controller=NEURAL,
             )  # fmt: skip
-            bar.update(bar.total - bar.n)
         doc["timings_s"][name] = round(time.perf_counter() - t0, 1)
         entry: dict[str, Any] = {"systems": {}, "tests": {}}
         for label, trial_set in results.items():

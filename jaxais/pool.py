@@ -22,6 +22,7 @@ runs in world1 differed between the pool and one batch), until it summed in a fi
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -88,6 +89,13 @@ def _programs(controller: Controller, config: EpisodeConfig, chunks: int, shardi
         return spread(batch.replace(runs=runs, chunks=aligned))
 
     return _Programs(jax.jit(start), jax.jit(step), jax.jit(refill))
+
+
+def segment_length(chunk: int, period: int = 1, about: int = 600) -> int:
+    """A pool's ``align``: the smallest multiple of ``chunk`` and of a controller's ``period``
+    (the STL's idiotope period) at or above ``about`` iterations (one host check each)."""
+    align = math.lcm(chunk, period)
+    return align * max(1, -(-about // align))
 
 
 _CACHE: dict = {}

@@ -37,7 +37,7 @@ import numpy as np
 from jaxais import envs
 from jaxais.controllers import STL, Controller, stl_for
 from jaxais.episode import EpisodeConfig, advance, outcome, rollout, start_batch
-from jaxais.pool import run_pool
+from jaxais.pool import run_pool, segment_length
 from jaxais.systems import LABELS
 
 STL_CONFIG = EpisodeConfig(tau_cap=4000.0, collision_cap=100, stop_at_collision_cap=False)
@@ -295,18 +295,14 @@ def run_trials(
     else:
         # The runs go through a refilling pool: a slot whose run ended starts the next one, so
         # ended runs stop costing (the same numbers: :mod:`jaxais.pool`).
+        # Refills keep the phase of the STL's idiotope schedule (a static field, one per batch).
+        period = getattr(getattr(params, "network", None), "idiotope_period", 1)
+        align = segment_length(config.chunk, period)
         t = time.perf_counter()
         res = run_pool(
-            reset_keys,
-            run_keys,
-            params,
-            world,
-            sim_params,
-            controller,
-            config,
-            slots,
-            progress=update,
-        )
+            reset_keys, run_keys, params, world, sim_params, controller, config, slots, align,
+            update,
+        )  # fmt: skip
         if timings is not None:
             timings["run_s"] = timings.get("run_s", 0.0) + time.perf_counter() - t
         placed = _reset(reset_keys, world, sim_params)

@@ -22,7 +22,7 @@ from scipy import stats as sps
 
 from jaxais.controllers import stl_for
 from jaxais.experiments import sweep
-from jaxais.pool import run_pool
+from jaxais.pool import run_pool, segment_length
 from jaxais.trials import _keys, stream_id
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -59,6 +59,14 @@ def test_one_slot_refilled_gives_make_trials_runs_bit_for_bit():
             np.testing.assert_array_equal(got[k], want[k], err_msg=f"seed {seed}: {k}")
         for k in ("tau", "fitness", "trapped_s"):  # the same counts, times dt in float64 here
             np.testing.assert_allclose(got[k], want[k], rtol=1e-6, err_msg=f"seed {seed}: {k}")
+
+
+def test_segment_length_is_a_common_multiple_of_about_600():
+    assert segment_length(25) == 600
+    assert segment_length(25, 120) == 600  # the paper's idiotope period: 5 redraws a segment
+    assert segment_length(25, 7) == 700  # lcm 175, four times
+    assert segment_length(25, 1000) == 1000
+    assert segment_length(25, 7, about=1) == 175
 
 
 def test_pool_rejects_bad_alignments_and_slot_counts():

@@ -32,7 +32,7 @@ from scipy import stats as sps
 from jaxais import envs
 from jaxais.controllers import System, stl_for
 from jaxais.episode import EpisodeConfig
-from jaxais.pool import run_pool
+from jaxais.pool import run_pool, segment_length
 from jaxais.trials import _keys, stream_id
 
 PARAMETERS: dict[str, tuple[str, type]] = {
@@ -218,8 +218,7 @@ def run_sweep(
     streams = np.full(trials.size, stream_id(label), np.uint32)
     reset_keys, run_keys = _keys(jax.random.key(seed), streams, trials)
     params = jax.tree.map(lambda a: np.repeat(a, n_trials, axis=0), grid)
-    align = math.lcm(config.chunk, int(base.network.idiotope_period))
-    align *= max(1, 600 // align)  # segments of about 600 iterations (one host check each)
+    align = segment_length(config.chunk, int(base.network.idiotope_period))
     start = time.perf_counter()
     res = run_pool(
         reset_keys,

@@ -160,7 +160,7 @@ def main(argv: list[str] | None = None) -> None:
     )
     from jaxais.immune.network import NetworkParams
     from jaxais.seed import default_seed_dir
-    from jaxais.trials import run_trials, summarise
+    from jaxais.trials import run_trials
 
     _speed.setup(cpu_device_per_core=True)
     distributed.initialize(args)  # before JAX computes anything
@@ -211,10 +211,10 @@ def main(argv: list[str] | None = None) -> None:
                   unit="run", file=sys.stderr, disable=not lead) as bar:  # fmt: skip
             results = run_trials(world, systems, n, args.seed, config, params, bar, world_t)
             if not args.no_baseline:
-                nn = {NN_LABEL: nn_params}
-                nn = run_trials(world, nn, n, args.seed, config, params, bar, world_t,
-                                controller=NEURAL)  # fmt: skip
-                baseline_by_world[name] = {NN_LABEL: nn[NN_LABEL].records}
+                baseline_by_world[name] = run_trials(
+                    world, {NN_LABEL: nn_params}, n, args.seed, config, params, bar, world_t,
+                    controller=NEURAL,
+                )  # fmt: skip
         first = run_trials(world, systems, 1, args.seed, example, params, None, world_t)
         for key, value in world_t.items():
             timings[f"{name}_{key}"] = value
@@ -229,11 +229,11 @@ def main(argv: list[str] | None = None) -> None:
         for label, trial_set in results.items():
             doc = results_document(label, name, args.seed, trial_set, cfg)
             atomic_write_json(out / "trials" / f"{name}_{label}.json", doc)
-        for label, records in baseline_by_world.get(name, {}).items():
+        for label, trial_set in baseline_by_world.get(name, {}).items():
+            # The run's config without the network's parts, with what made the weights.
             nn_cfg = {k: v for k, v in cfg.items() if k not in ("network", "readings", "ltl_seed")}
-            doc = {"system": label, "label": label, "world": name, "seed": args.seed,
-                   "config": nn_cfg | {"baseline": nn_info}, "trials": records,
-                   "summary": summarise(records)}  # fmt: skip
+            nn_cfg["baseline"] = nn_info
+            doc = results_document(label, name, args.seed, trial_set, nn_cfg)
             atomic_write_json(out / "trials" / f"{name}_{label}.json", doc)
 
     if not lead:
@@ -242,7 +242,8 @@ def main(argv: list[str] | None = None) -> None:
     cis = stats.table3_ci(results_by_world)  # once, for the tables and the claims
     tables = stats.build_tables(results_by_world, cis=cis)
     if baseline_by_world:
-        tables["baseline"] = stats.baseline_tables(results_by_world, baseline_by_world)
+        records = {w: {k: ts.records for k, ts in d.items()} for w, d in baseline_by_world.items()}
+        tables["baseline"] = stats.baseline_tables(results_by_world, records)
         tables["baseline"]["weights"] = nn_info
     atomic_write_json(out / "tables.json", tables)
     ledger = claims.claims(results_by_world, cis=cis)

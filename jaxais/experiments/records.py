@@ -128,8 +128,12 @@ def results_document(
     trials: TrialSet,
     config: dict[str, Any],
 ) -> dict[str, Any]:
-    """The results.json of one system in one world."""
-    system, random_set = parse_label(label)
+    """The results.json of one system in one world (a label beyond the paper's, e.g. the
+    neural baseline's "NN", is its own system, with no random set)."""
+    try:
+        system, random_set = parse_label(label)
+    except ValueError:
+        system, random_set = label, None
     return {
         "system": system,
         "label": label,

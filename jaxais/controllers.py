@@ -97,6 +97,10 @@ class Controller(NamedTuple):
     - ``stats(state, params) -> dict[str, scalar]`` (optional): what a finished run records
       beyond the loop's own counts, e.g. the STL's idiotypic difference rate (NaN where it
       does not apply).
+    - ``choices(state) -> [k] int32`` (optional): what the controller has chosen for each
+      situation it tells apart, -1 where it has not chosen yet (the STL: the set last selected
+      for each antigen). The loop measures lock-ups with it (:class:`jaxais.episode.Run`'s
+      ``locked``): a controller without it never counts as locked.
 
     ``params`` is the controller's own pytree; every key is a typed PRNG key of its own (the
     loop gives learn and act one each per iteration). Controllers are compared by identity when
@@ -107,6 +111,7 @@ class Controller(NamedTuple):
     learn: Callable[..., Any]
     act: Callable[..., Any]
     stats: Callable[..., dict[str, Any]] | None = None
+    choices: Callable[..., jnp.ndarray] | None = None
 
 
 # --------------------------------------------------------------- the immune controllers' bouts
@@ -278,6 +283,7 @@ class STLState:
             antigen column is ``bout.antigen``. bout: the behaviour acting now.
         differences: selections with alpha != beta. selections: selections made (one per bout).
         replaced: antibodies replaced so far.
+        chosen: [y] the set last selected for each antigen (-1: never selected yet).
     """
 
     antibodies: Antibodies
@@ -291,6 +297,7 @@ class STLState:
     differences: jnp.ndarray
     selections: jnp.ndarray
     replaced: jnp.ndarray
+    chosen: jnp.ndarray
 
 
 def stl_controller(
@@ -328,6 +335,7 @@ def stl_controller(
             differences=jnp.int32(0),
             selections=jnp.int32(0),
             replaced=jnp.int32(0),
+            chosen=jnp.full(P.shape[1], -1, jnp.int32),
         )
 
     def learn(key, s: STLState, pc: Percept, system: System):
@@ -381,7 +389,9 @@ def stl_controller(
         u = jax.random.uniform(key, (2 + 2 * x,))  # a new bout's, then the tie-breaks
         select, bout = _next_bout(s.bout, pc, u[:2], system.readings.hold)
         if idiotypic:
-            alpha, beta, N = _idiotypic_select(u[2:], s.P, s.I, s.N, pc.m, system.network)
+            alpha, beta, N = _idiotypic_select(
+                u[2:], s.P, s.I, s.N, pc.m, system.network, system.readings.alpha_on_self
+            )
             idio = system.idiotypic
             chosen = jnp.where(idio, beta, alpha)
             differ = idio & (alpha != beta) & select
@@ -392,7 +402,13 @@ def stl_controller(
         else:  # no run in the batch is idiotypic: stage 1 alone, the clones never change
             chosen = _select_alpha(u[2 : 2 + x], s.P, pc.m)  # the alpha of the stages above
         acting = jnp.where(select, chosen, s.acting).astype(jnp.int32)
-        s = s.replace(acting=acting, bout=bout, selections=s.selections + select.astype(jnp.int32))
+        column = select & (jnp.arange(s.chosen.shape[0]) == pc.m)
+        s = s.replace(
+            acting=acting,
+            bout=bout,
+            selections=s.selections + select.astype(jnp.int32),
+            chosen=jnp.where(column, acting, s.chosen),
+        )
         ab = take(s.antibodies, (acting, bout.antigen))
         return s, _wheel_speeds(bout.u, ab, pc.blue_pixels, pc.centroid)
 
@@ -403,7 +419,10 @@ def stl_controller(
             "replaced": s.replaced,
         }
 
-    return Controller(init=init, learn=learn, act=act, stats=stats)
+    def choices(s: STLState):
+        return s.chosen
+
+    return Controller(init=init, learn=learn, act=act, stats=stats, choices=choices)
 
 
 LTL = ltl_controller()

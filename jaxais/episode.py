@@ -50,7 +50,10 @@ class EpisodeConfig:
         finish_streak: ... on this many consecutive iterations [paper: 3].
         trap_radius, trap_window: a robot is trapped while it has stayed within ``trap_radius``
             m of one point for at least ``trap_window`` s; the whole stay counts as trapped time
-            [ours: 0.1 m, under three body diameters; 10 s].
+            [ours: 0.1 m, under three body diameters; 10 s]. It is *locked* while it is trapped
+            and its controller's choices (``Controller.choices``: for the STL, the antibody
+            selected for each antigen) have not changed over the whole stay: the same antibody
+            keeps being selected for its antigen while the robot does not move away [ours].
         chunk: iterations per inner loop; trajectories are sampled once per chunk.
         segment: iterations per compiled call of :func:`rollout`'s driver (progress granularity).
         record: keep the trajectory (one pose per chunk).
@@ -105,6 +108,8 @@ class Run:
         streak: consecutive iterations with more than finish_pixels goal pixels.
         anchor: [2] centre of the current trap disc. still: iterations spent within it.
         trapped: iterations counted as trapped (EpisodeConfig.trap_radius, trap_window).
+        unchanged: iterations spent within the disc with the controller's choices unchanged.
+        locked: iterations counted as locked (trapped with unchanged choices, EpisodeConfig).
         t: iterations so far. status: RUNNING, FINISHED, FAILED_COLLISIONS or FAILED_TIME.
     """
 
@@ -120,6 +125,8 @@ class Run:
     anchor: jnp.ndarray
     still: jnp.ndarray
     trapped: jnp.ndarray
+    unchanged: jnp.ndarray
+    locked: jnp.ndarray
     t: jnp.ndarray
     status: jnp.ndarray
 
@@ -155,6 +162,8 @@ def start(
         anchor=sim.pose[:2],
         still=jnp.int32(0),
         trapped=jnp.int32(0),
+        unchanged=jnp.int32(0),
+        locked=jnp.int32(0),
         t=jnp.int32(0),
         status=jnp.int32(RUNNING),
     )
@@ -239,7 +248,15 @@ def _iterate(
     away = jnp.sum((pos - run.anchor) ** 2) > config.trap_radius**2
     still = jnp.where(away, 0, run.still + 1)
     window = config.trap_iterations(sim_params.dt)
-    trapped = run.trapped + jnp.where(still == window, window, (still > window).astype(jnp.int32))
+    trapped = run.trapped + _stay_counted(still, window)
+    # Locked: the same stay with no choice changed (a first choice for a situation is no change).
+    if controller.choices is None:
+        unchanged = jnp.int32(0)
+    else:
+        before, after = controller.choices(run.ctrl), controller.choices(ctrl)
+        changed = jnp.any((after != before) & (before >= 0))
+        unchanged = jnp.where(away | changed, 0, run.unchanged + 1)
+    locked = run.locked + _stay_counted(unchanged, window)
     # The iteration that detects the end records the counts and status and moves nothing; a run
     # that ended earlier keeps everything. One select over the whole run, three over the counts.
     live = run.status == RUNNING
@@ -258,9 +275,17 @@ def _iterate(
         anchor=jnp.where(away, pos, run.anchor),
         still=still,
         trapped=trapped,
+        unchanged=unchanged,
+        locked=locked,
         t=run.t + 1,
     )
     return jax.tree.map(lambda a, b: jnp.where(live & (status == RUNNING), a, b), moved, counted)
+
+
+def _stay_counted(stay: jnp.ndarray, window: int) -> jnp.ndarray:
+    """Iterations a stay adds to its count: none before the window, all of it at the window,
+    then one per iteration."""
+    return jnp.where(stay == window, window, (stay > window).astype(jnp.int32))
 
 
 @pytree_dataclass
@@ -568,7 +593,7 @@ def _rollout(
 
 def outcome(runs: Run, config: EpisodeConfig, dt: float, xp: Any = np) -> dict[str, Any]:
     """Per-run τ (s, capped), collisions (raw and capped), f = (ρc + τ)/2 with ρ = 8 and the
-    capped c (SPEC 9), the failures, trapped time and the status.
+    capped c (SPEC 9), the failures, trapped and locked time and the status.
 
     Args:
         xp: ``numpy`` (default: on the host, τ in float64) or ``jax.numpy`` (inside a traced
@@ -576,7 +601,8 @@ def outcome(runs: Run, config: EpisodeConfig, dt: float, xp: Any = np) -> dict[s
 
     Returns:
         Arrays [n]: tau, collisions (raw), collisions_capped, fitness, failed_collisions
-        (c > cap), failed_time (the time cap reached), trapped_s, status, iterations.
+        (c > cap), failed_time (the time cap reached), trapped_s, locked_s, status,
+        iterations.
     """
     status = xp.asarray(runs.status)
     t = xp.asarray(runs.t)
@@ -591,6 +617,7 @@ def outcome(runs: Run, config: EpisodeConfig, dt: float, xp: Any = np) -> dict[s
         "failed_collisions": raw > config.collision_cap,
         "failed_time": status == FAILED_TIME,
         "trapped_s": xp.asarray(runs.trapped) * dt,
+        "locked_s": xp.asarray(runs.locked) * dt,
         "status": status,
         "iterations": t,
     }

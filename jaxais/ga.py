@@ -152,18 +152,18 @@ def _is_real(value: Any) -> bool:
 class GAConfig:
     """Static settings of a GA run (they fix array shapes and the loop length).
 
-    The defaults [ours] are tuned for SPEC 10's demand that the seed's sets reliably cross the
-    maze ("a seed whose populations do not reliably cross the maze is a failed LTL run"; "evaluate
+    The defaults [ours] are tuned for SPEC 10's demand that the seed's sets reliably cross the maze
+    ("a seed whose populations do not reliably cross the maze is a failed LTL run"; "evaluate
     robustly ... and stop on success ... with a generation cap"), and by nothing else (not by the
-    STL trials): the default ``scripts/evolve.py`` run writes a seed whose five sets each cross
-    in at least 80 % of 50 fresh starts. ``docs/reproduction/ltl_seeds.md`` records the runs of
-    PRNG seeds 0, 1, 2 (generations, wall time, crossing rates). The settings were compared by
-    what the GA is for, generations to the success stop, in the maze with its start pocket
-    (seeds 0, 1, 2, 200-generation cap; measured before the keys-first change, on other random
-    streams): one start per robot with the checked best as elite and uniform crossover stopped
-    after 44, 170, 42 generations; the same with RL-assisted crossover after 128, 200 (cap,
-    lowest set 68 %), 186. Three starts per robot and 20 checks (seed 0, 80 generations) left
-    one of the five sets under 80 % in each of the three variants tried.
+    STL trials): the default ``scripts/evolve.py`` run writes a seed whose five sets each cross in
+    at least 80 % of 50 fresh starts. ``docs/seeds/seeds.md`` records the runs of PRNG seeds 0-9
+    (generations, crossing rates; wall times in its ``run.json``). The settings were compared by
+    what the GA is for, generations to the success stop, in the maze with its start pocket (seeds 0,
+    1, 2, 200-generation cap; measured before the keys-first change, on other random streams): one
+    start per robot with the checked best as elite and uniform crossover stopped after 44, 170, 42
+    generations; the same with RL-assisted crossover after 128, 200 (cap, lowest set 68 %), 186.
+    Three starts per robot and 20 checks (seed 0, 80 generations) left one of the five sets
+    under 80 % in each of the three variants tried.
 
     Attributes:
         populations: independent populations P [paper: 5].

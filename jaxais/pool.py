@@ -59,7 +59,7 @@ def _programs(controller: Controller, config: EpisodeConfig, chunks: int, shardi
     def readout(batch, params):
         runs = batch.runs
         out = {"t": runs.t, "status": runs.status, "collisions": runs.collisions}
-        out["trapped"] = runs.trapped
+        out["trapped"], out["locked"] = runs.trapped, runs.locked
         if controller.stats is not None:
             out |= jax.vmap(controller.stats)(runs.ctrl, params)
         if sharding is not None:  # every host reads every run's counts
@@ -184,7 +184,7 @@ def run_pool(
             keep = np.concatenate([keep, np.full(b - keep.size, np.flatnonzero(~live)[0])])
             batch = batch.replace(runs=_take(batch.runs, keep), poses=batch.poses[keep])
             idx, live = idx[keep], live[keep]
-    counts = {name: got.pop(name) for name in ("t", "status", "collisions", "trapped")}
+    counts = {name: got.pop(name) for name in ("t", "status", "collisions", "trapped", "locked")}
     return outcome(_Finished(**counts), config, float(sim_params.dt)) | got
 
 
@@ -196,6 +196,7 @@ class _Finished:
     status: np.ndarray
     collisions: np.ndarray
     trapped: np.ndarray
+    locked: np.ndarray
 
 
 def useful_iterations(result: dict[str, np.ndarray]) -> int:

@@ -69,7 +69,9 @@ class TrialSet:
         records: one dict per trial: tau (s), collisions (the raw count), collisions_capped
             (at 100, what Table 3 averages), fitness (with the capped c), failed,
             failed_collisions (c > 100), failed_time (4000 s reached), failed_by (a list of
-            "collisions", "time"; both can hold), trapped_s, idiotypic_difference_rate,
+            "collisions", "time"; both can hold), trapped_s, locked_s (trapped with the same
+            antibody selected for each antigen, :class:`~jaxais.episode.EpisodeConfig`),
+            idiotypic_difference_rate,
             iterations, replaced.
         trajectories: [n] arrays [T_i, 3] of poses sampled every ``chunk`` iterations, or None.
         placements: [n] :class:`Placement`: each trial's boxes and goal, to draw its trajectory
@@ -161,7 +163,7 @@ def make_trials(config: TrialsConfig):
     controller's params, e.g. a :class:`System`; every trial gets them) in ``config.world``,
     each to its end, and returns a dict of arrays [n_trials]: :func:`jaxais.episode.outcome`'s
     (tau, collisions, collisions_capped, fitness, failed_collisions, failed_time, trapped_s,
-    status, iterations) and the controller's ``stats`` (for the STL:
+    locked_s, status, iterations) and the controller's ``stats`` (for the STL:
     idiotypic_difference_rate, NaN where not idiotypic, and replaced). It is jitted, and
     ``jax.vmap`` batches it over keys (seeds) and over a params pytree with a leading axis (a
     grid: several values of k1, of b, of the penalties ...); ``sim_params`` (default
@@ -324,6 +326,7 @@ def run_trials(
                 "failed_time": by_t,
                 "failed_by": [cap for cap, on in (("collisions", by_c), ("time", by_t)) if on],
                 "trapped_s": float(res["trapped_s"][i]),
+                "locked_s": float(res["locked_s"][i]),
                 "iterations": int(res["iterations"][i]),
             }
             for key in extra:  # the controller's stats; NaN (does not apply) is None
@@ -352,6 +355,7 @@ _OUTCOME_KEYS = (
     "failed_collisions",
     "failed_time",
     "trapped_s",
+    "locked_s",
     "status",
     "iterations",
 )
@@ -361,6 +365,7 @@ def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
     """Means and failure rates of a list of trial records."""
     arr = lambda k: np.asarray([r[k] for r in records], float)
     rates = [r.get("idiotypic_difference_rate") for r in records]  # None: does not apply
+    locked = [r.get("locked_s") for r in records]  # None: a record from before lock-ups
     n = len(records)
     return {
         "n": n,
@@ -371,6 +376,7 @@ def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
         "failed_by_collisions": sum(r["failed_collisions"] for r in records) / n,
         "failed_by_time": sum(r["failed_time"] for r in records) / n,
         "trapped_s": float(arr("trapped_s").mean()),
+        "locked_s": None if any(x is None for x in locked) else float(np.mean(locked)),
         "idiotypic_difference_rate": (
             None if any(x is None for x in rates) else float(np.mean(rates))
         ),

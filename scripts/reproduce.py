@@ -14,6 +14,8 @@ intervals, and a summary), DIR/report.md (opening with the claims ledger; Table 
 bootstrap intervals; figures in DIR/figures/), every trial in DIR/trials/ and DIR/run.json
 (the config, seeds and timings needed to regenerate it all). Only the first trial of each
 system is drawn (run again with its trajectory recorded); the records of all trials are kept.
+SIE also runs with a selection every iteration (``hold=1``, trials/WORLD_SIE_hold1.json) for
+the report's calibration point: its idiotypic difference rate beside the paper's 20 %.
 """
 
 from __future__ import annotations
@@ -142,6 +144,7 @@ def main(argv: list[str] | None = None) -> None:
     out.mkdir(parents=True, exist_ok=True)
     check_writable_dir(out)
 
+    import numpy as np
     from tqdm import tqdm
 
     from jaxais import _speed, envs
@@ -199,17 +202,23 @@ def main(argv: list[str] | None = None) -> None:
     # keys, so the same run as in the pooled trials).
     example = dataclasses.replace(config, record=True)
     results_by_world, baseline_by_world, trajectories, placements, configs = {}, {}, {}, {}, {}
+    # SIE again with a selection every iteration: its difference rate beside the paper's 20 %
+    # (the report's calibration point), on the plain label's worlds and random streams.
+    calibration_by_world, calibrated = {}, "SIE@hold=1"
     (out / "trials").mkdir(exist_ok=True)
     for name in worlds:
         world = envs.load_world(name)
         labels = list(protocol.systems_for_world(name))
         n = args.trials if args.trials is not None else protocol.trials_for_world(name)
         systems, seed_info = build_systems(labels, seeds_dir, network, loaded)
+        sie = systems["SIE"]
+        hold1 = {calibrated: sie.replace(readings=sie.readings.replace(hold=np.int32(1)))}
         world_t: dict[str, float] = {}
-        k = len(labels) + (not args.no_baseline)
+        k = len(labels) + 1 + (not args.no_baseline)
         with tqdm(total=n * k, desc=f"{name}: {k} systems x {n} trials",
                   unit="run", file=sys.stderr, disable=not lead) as bar:  # fmt: skip
-            results = run_trials(world, systems, n, args.seed, config, params, bar, world_t)
+            results = run_trials(world, systems | hold1, n, args.seed, config, params, bar, world_t)
+            calibration = results.pop(calibrated)
             if not args.no_baseline:
                 baseline_by_world[name] = run_trials(
                     world, {NN_LABEL: nn_params}, n, args.seed, config, params, bar, world_t,
@@ -222,6 +231,7 @@ def main(argv: list[str] | None = None) -> None:
         cfg = run_config(world, name, config, network, params, seed_info)
         configs[name] = cfg
         results_by_world[name] = {k: v.records for k, v in results.items()}
+        calibration_by_world[name] = {"SIE": calibration.records}
         trajectories[name] = {k: v.trajectories[0][:, :2] for k, v in first.items()}
         placements[name] = {k: v.placements[0] for k, v in first.items()}
         if not lead:
@@ -229,6 +239,8 @@ def main(argv: list[str] | None = None) -> None:
         for label, trial_set in results.items():
             doc = results_document(label, name, args.seed, trial_set, cfg)
             atomic_write_json(out / "trials" / f"{name}_{label}.json", doc)
+        doc = results_document(calibrated, name, args.seed, calibration, cfg)
+        atomic_write_json(out / "trials" / f"{name}_SIE_hold1.json", doc)
         for label, trial_set in baseline_by_world.get(name, {}).items():
             # The run's config without the network's parts, with what made the weights.
             nn_cfg = {k: v for k, v in cfg.items() if k not in ("network", "readings", "ltl_seed")}
@@ -241,6 +253,9 @@ def main(argv: list[str] | None = None) -> None:
     t = time.perf_counter()
     cis = stats.table3_ci(results_by_world)  # once, for the tables and the claims
     tables = stats.build_tables(results_by_world, cis=cis)
+    tables["calibration"] = stats.calibration(
+        results_by_world, calibration_by_world, {"k1": network.k1, "k2": network.k2}
+    )
     if baseline_by_world:
         records = {w: {k: ts.records for k, ts in d.items()} for w, d in baseline_by_world.items()}
         tables["baseline"] = stats.baseline_tables(results_by_world, records)

@@ -223,6 +223,7 @@ def state(
         differences=jnp.int32(0),
         selections=jnp.int32(0),
         replaced=jnp.int32(0),
+        chosen=jnp.full(P.shape[1], -1, jnp.int32),
     )
 
 

@@ -52,7 +52,7 @@ def by_name(name: str) -> ablation.Variant:
 
 def test_each_variant_switches_what_its_name_says():
     names = [v.name for v in ablation.VARIANTS]
-    assert len(set(names)) == len(names) == 9
+    assert len(set(names)) == len(names) == 11
     assert by_name("ours").switched() == []
     singles = {
         "hold=1": ("hold", 1),
@@ -62,6 +62,8 @@ def test_each_variant_switches_what_its_name_says():
         "stop_at_collision_cap=True": ("stop_at_collision_cap", True),
         "hdc_tracks=True": ("hdc_tracks", True),
         "ir_noise=0": ("ir_noise", False),
+        "alpha_on_self=True": ("alpha_on_self", True),
+        "penalties=swapped": ("swap_penalties", True),
     }
     for name, (field, value) in singles.items():
         v = by_name(name)
@@ -118,6 +120,15 @@ def test_variant_systems_carry_the_variants_data():
     assert by_name("hold=1").config(BASE) == BASE
     np.testing.assert_array_equal(np.asarray(by_name("ir_noise=0").sim_params().ir_noise), 0)
     assert F.tree_equal(by_name("ours").sim_params(), envs.default_params())
+    # The old network reading and the swapped penalties are data of the systems.
+    own = ablation.variant_systems(by_name("alpha_on_self=True"), LABELS, seed)
+    swapped = ablation.variant_systems(by_name("penalties=swapped"), LABELS, seed)
+    for label in LABELS:
+        assert bool(own[label].readings.alpha_on_self)
+        assert not bool(ours[label].readings.alpha_on_self)
+        assert float(swapped[label].network.penalty_idiotypic) == 1.0
+        assert float(swapped[label].network.penalty_non_idiotypic) == 0.5
+        assert F.tree_equal(swapped[label].readings, ours[label].readings)
 
 
 # ---------------------------------------------------------------------------------- batching
@@ -158,7 +169,15 @@ class Recorder:
 def test_traced_variants_share_one_batch_per_world():
     calls = ablation.plan_calls(ablation.VARIANTS, BASE)
     assert [c.variants for c in calls] == [
-        ("ours", "hold=1", "count_encounters=False", "sigma0_floor=0", "hdc_tracks=True"),
+        (
+            "ours",
+            "hold=1",
+            "count_encounters=False",
+            "sigma0_floor=0",
+            "hdc_tracks=True",
+            "alpha_on_self=True",
+            "penalties=swapped",
+        ),
         ("collision_rule=entry",),
         ("stop_at_collision_cap=True",),
         ("ir_noise=0",),
@@ -176,7 +195,11 @@ def test_traced_variants_share_one_batch_per_world():
     assert (world, trials, seed, config) == ("world1", 2, 5, BASE)
     traced = ("ours", "hold=1", "count_encounters=False", "sigma0_floor=0")
     # The tracking HDC's other six systems are ours: run once, shared.
-    assert labels == [f"{lab}@{v}" for v in traced for lab in LABELS] + ["HDC@hdc_tracks=True"]
+    assert labels == (
+        [f"{lab}@{v}" for v in traced for lab in LABELS]
+        + ["HDC@hdc_tracks=True"]
+        + [f"{lab}@{v}" for v in ("alpha_on_self=True", "penalties=swapped") for lab in LABELS]
+    )
     assert result.calls[0]["shared"] == {
         "hdc_tracks=True": {lab: f"{lab}@ours" for lab in LABELS if lab != "HDC"}
     }
@@ -208,9 +231,15 @@ def test_traced_variants_share_one_batch_per_world():
     for v in doc["variants"]:
         assert set(v["claims"]) == {"reproduced", "evaluated", "total"}
         assert set(v["worlds"]) == {"world1", "real"}
-        assert set(v["worlds"]["world1"]) == {"SIE", "HDC", "URL-R1"}
+        assert set(v["worlds"]["world1"]) == {"SIE", "HDC", "UIE-R1", "URL-R1"}
+        assert {"f", "failure_rate", "trapped_s", "locked_s", "replaced"} == set(
+            v["worlds"]["world1"]["SIE"]
+        )
     table = ablation.markdown(doc)
-    assert table.count("\n| `") == 9 and "world1 SIE f" in table and "real SIE fail %" in table
+    assert "world1 SIE f" in table and "real SIE fail %" in table and "world1 UIE-R1 f" in table
+    # One row per variant, then UIE against URL for ours and the swapped penalties per world.
+    assert table.count("\n| `") == 11 + 2 * 2
+    assert "| `penalties=swapped` | real |" in table
 
 
 # ---------------------------------------------------------------------------------- real runs

@@ -46,6 +46,7 @@ def _select_counting_traces(key, P, I, N, antigen, params):
 
 
 idiotypic_select = jax.jit(_select_counting_traces)
+idiotypic_select_reading = jax.jit(nw.idiotypic_select)
 idiotypic_select_batch = jax.jit(jax.vmap(nw.idiotypic_select))
 
 hyp = settings(max_examples=30, deadline=None)
@@ -100,14 +101,17 @@ def ref_concentrations(N, Phi):
     return Phi * N / N.sum()
 
 
-def ref_select(P, I, N, m, b, k1, k2, k3, Phi):
-    """Eqs (5)-(10) with explicit loops; assumes no ties (continuous random inputs)."""
+def ref_select(P, I, N, m, b, k1, k2, k3, Phi, alpha_on_self=False):
+    """Eqs (5)-(10) with explicit loops; assumes no ties (continuous random inputs). Alpha acts
+    on the other sets only (section 4.3) unless ``alpha_on_self``."""
     P, I, N = (np.asarray(a, np.float64) for a in (P, I, N))
     x, y = P.shape
     n = int(np.argmax(P[:, m]))
     C = ref_concentrations(N, Phi)
     eps, delta = np.zeros(x), np.zeros(x)
     for i in range(x):
+        if i == n and not alpha_on_self:
+            continue
         for j in range(y):
             eps[i] += k1 * (1 - P[i, j]) * I[n, j] * C[i, j] * C[n, j]
             delta[i] += k2 * P[n, j] * I[i, j] * C[i, j] * C[n, j]
@@ -341,52 +345,93 @@ HAND_N = jnp.ones((3, 2))
 HAND_PARAMS = nw.network_params(b=10.0, k1=1.0, k2=1.0, k3=0.5, Phi=6.0)
 
 
-def test_select_hand_worked():
-    # Antigen 0: P[:, 0] = [0.75, 0.5, 0.25] -> alpha = set 0, I_0 = [0, 1], P_0 = [0.75, 0.875].
-    # eps_i = sum_j (1 - P_ij) I_0j = 1 - P_i1 = [0.125, 0.375, 0.875]
-    # delta_i = sum_j P_0j I_ij = [0.875 (I_0 = e1), 0.75 (I_1 = e0), 0.875 (I_2 = e1)]
-    # S2 = P_i0 + eps - delta = [0.75 + 0.125 - 0.875, 0.5 + 0.375 - 0.75, 0.25 + 0.875 - 0.875]
-    #    = [0, 0.125, 0.25]
-    # N_i0 = 10 * S2 + 1 * (1 - 0.5) = [0.5, 1.75, 3.0]; column 1 unchanged; sum N = 8.25
-    # lambda = 6 / 8.25 * N_i0 * S2 = 6 / 8.25 * [0, 0.21875, 0.75] -> beta = set 2.
+# Antigen 0: P[:, 0] = [0.75, 0.5, 0.25] -> alpha = set 0, I_0 = [0, 1], P_0 = [0.75, 0.875].
+# Summed over every set i (alpha's own included):
+#   eps_i = sum_j (1 - P_ij) I_0j = 1 - P_i1 = [0.125, 0.375, 0.875]
+#   delta_i = sum_j P_0j I_ij = [0.875 (I_0 = e1), 0.75 (I_1 = e0), 0.875 (I_2 = e1)]
+HAND_EPS_ALL, HAND_DELTA_ALL = [0.125, 0.375, 0.875], [0.875, 0.75, 0.875]
+
+
+def _check_hand_worked(alpha_on_self, eps_want, delta_want, s2_want, N0_want, beta_want):
     C = concentrations(HAND_N, 6.0)
-    eps, delta = stimulation_suppression(HAND_P, HAND_I, C, 0, 1.0, 1.0)
-    np.testing.assert_allclose(eps, [0.125, 0.375, 0.875], rtol=1e-6)
-    np.testing.assert_allclose(delta, [0.875, 0.75, 0.875], rtol=1e-6)
-    alpha, beta, N_new = idiotypic_select(jax.random.key(0), HAND_P, HAND_I, HAND_N, 0, HAND_PARAMS)
-    assert (int(alpha), int(beta)) == (0, 2)
+    eps, delta = stimulation_suppression(HAND_P, HAND_I, C, 0, 1.0, 1.0, alpha_on_self)
+    np.testing.assert_allclose(eps, eps_want, rtol=1e-6)
+    np.testing.assert_allclose(delta, delta_want, rtol=1e-6)
+    alpha, beta, N_new = idiotypic_select_reading(
+        jax.random.key(0), HAND_P, HAND_I, HAND_N, 0, HAND_PARAMS, alpha_on_self
+    )
+    assert (int(alpha), int(beta)) == (0, beta_want)
     assert alpha.dtype == jnp.int32 and beta.dtype == jnp.int32
-    np.testing.assert_allclose(N_new, [[0.5, 1.0], [1.75, 1.0], [3.0, 1.0]], rtol=1e-6)
+    N_want = np.stack([N0_want, np.ones(3)], axis=1)
+    np.testing.assert_allclose(N_new, N_want, rtol=1e-6)
     n, p, N_ref, eps_ref, delta_ref, s2_ref = ref_select(
-        HAND_P, HAND_I, HAND_N, 0, 10.0, 1.0, 1.0, 0.5, 6.0
+        HAND_P, HAND_I, HAND_N, 0, 10.0, 1.0, 1.0, 0.5, 6.0, alpha_on_self
     )
     # The NumPy reference agrees with the hand arithmetic too.
-    assert (n, p) == (0, 2)
-    np.testing.assert_allclose(eps_ref, [0.125, 0.375, 0.875], atol=1e-12)
-    np.testing.assert_allclose(delta_ref, [0.875, 0.75, 0.875], atol=1e-12)
-    np.testing.assert_allclose(s2_ref, [0.0, 0.125, 0.25], atol=1e-12)
-    np.testing.assert_allclose(N_ref, [[0.5, 1.0], [1.75, 1.0], [3.0, 1.0]], atol=1e-12)
+    assert (n, p) == (0, beta_want)
+    np.testing.assert_allclose(eps_ref, eps_want, atol=1e-12)
+    np.testing.assert_allclose(delta_ref, delta_want, atol=1e-12)
+    np.testing.assert_allclose(s2_ref, s2_want, atol=1e-12)
+    np.testing.assert_allclose(N_ref, N_want, atol=1e-12)
+
+
+def test_select_hand_worked_alpha_acts_on_the_others():
+    # The default (section 4.3): alpha's own eps and delta are 0, so its S2 is its P.
+    # S2 = [0.75, 0.5 + 0.375 - 0.75, 0.25 + 0.875 - 0.875] = [0.75, 0.125, 0.25]
+    # N_i0 = 10 * S2 + 1 * (1 - 0.5) = [8.0, 1.75, 3.0]; column 1 unchanged; sum N = 15.75
+    # lambda = 6 / 15.75 * N_i0 * S2 = 6 / 15.75 * [6.0, 0.21875, 0.75] -> beta = alpha = 0.
+    eps = [0.0, *HAND_EPS_ALL[1:]]
+    delta = [0.0, *HAND_DELTA_ALL[1:]]
+    _check_hand_worked(False, eps, delta, [0.75, 0.125, 0.25], [8.0, 1.75, 3.0], 0)
+
+
+def test_select_hand_worked_alpha_on_self():
+    # The engine's earlier reading: alpha's own set summed too.
+    # S2 = [0.75 + 0.125 - 0.875, 0.125, 0.25] = [0, 0.125, 0.25]
+    # N_i0 = 10 * S2 + 0.5 = [0.5, 1.75, 3.0]; sum N = 8.25
+    # lambda = 6 / 8.25 * [0, 0.21875, 0.75] -> beta = set 2.
+    _check_hand_worked(True, HAND_EPS_ALL, HAND_DELTA_ALL, [0.0, 0.125, 0.25], [0.5, 1.75, 3.0], 2)
 
 
 def test_select_floors_clones_at_zero():
-    # k2 = 10: delta = [8.75, 7.5, 8.75], S2 = [-7.875, -6.625, -7.625], 10*S2 + 0.5 < 0 -> 0.
+    # k2 = 10: delta = [0, 7.5, 8.75], S2 = [0.75, -6.625, -7.625], 10*S2 + 0.5 < 0 -> 0 but
+    # alpha's (8.0).
     params = HAND_PARAMS.replace(k2=10.0)
     _, _, N_new = idiotypic_select(jax.random.key(0), HAND_P, HAND_I, HAND_N, 0, params)
-    np.testing.assert_array_equal(N_new, [[0.0, 1.0], [0.0, 1.0], [0.0, 1.0]])
+    np.testing.assert_array_equal(N_new, [[8.0, 1.0], [0.0, 1.0], [0.0, 1.0]])
 
 
+@hyp
+@given(
+    P=arrays(np.float32, (X, Y), elements=unit_floats),
+    N=arrays(np.float32, (X, Y), elements=clone_counts),
+    I=paratope_matrices.map(lambda a: (a > 0.5).astype(np.float32)),
+    n=st.integers(0, X - 1),
+)
+def test_alpha_own_eps_and_delta_are_zero_by_default(P, N, I, n):
+    C = concentrations(N, PARAMS.Phi)
+    eps, delta = stimulation_suppression(P, I, C, n, PARAMS.k1, PARAMS.k2)
+    eps_all, delta_all = stimulation_suppression(P, I, C, n, PARAMS.k1, PARAMS.k2, True)
+    assert float(eps[n]) == 0.0 and float(delta[n]) == 0.0
+    others = np.arange(X) != n
+    np.testing.assert_array_equal(np.asarray(eps)[others], np.asarray(eps_all)[others])
+    np.testing.assert_array_equal(np.asarray(delta)[others], np.asarray(delta_all)[others])
+
+
+@pytest.mark.parametrize("alpha_on_self", [False, True])
 @pytest.mark.parametrize("seed", range(6))
-def test_select_reference(seed):
+def test_select_reference(seed, alpha_on_self):
     rng = np.random.default_rng(seed)
     P, I, N = random_network(rng)
     m = int(rng.integers(0, Y))
     params = nw.network_params(k3=float(rng.uniform(0, 0.5)))
-    alpha, beta, N_new = idiotypic_select(jax.random.key(seed), P, I, N, m, params)
+    key = jax.random.key(seed)
+    alpha, beta, N_new = idiotypic_select_reading(key, P, I, N, m, params, alpha_on_self)
     n, p, N_ref, eps_ref, delta_ref, _ = ref_select(
-        P, I, N, m, params.b, params.k1, params.k2, params.k3, params.Phi
+        P, I, N, m, params.b, params.k1, params.k2, params.k3, params.Phi, alpha_on_self
     )
     C = concentrations(N, params.Phi)
-    eps, delta = stimulation_suppression(P, I, C, n, params.k1, params.k2)
+    eps, delta = stimulation_suppression(P, I, C, n, params.k1, params.k2, alpha_on_self)
     np.testing.assert_allclose(eps, eps_ref, rtol=1e-4, atol=1e-7)
     np.testing.assert_allclose(delta, delta_ref, rtol=1e-4, atol=1e-7)
     assert (int(alpha), int(beta)) == (n, p)

@@ -255,3 +255,27 @@ def test_write_report_sets_a_baseline_beside_sie_and_hdc(tmp_path, paper):
         tmp_path, stats.build_tables(results), results, paper, None, {}, None
     ).read_text()
     assert "Beyond the paper" not in plain
+
+
+def test_report_gives_the_calibration_point_lock_ups_and_uie_against_url(tmp_path, paper):
+    results = synthetic_results(paper)
+    for by in results.values():
+        for label, records in by.items():
+            locked = {"SIE": 3.0, "SRL": 40.0}.get(label, 0.0)
+            replaced = 7 if label.startswith("URL") else 0
+            by[label] = [r | {"locked_s": locked, "replaced": replaced} for r in records]
+    tables = stats.build_tables(results)
+    hold1 = {w: {"SIE": [trial(100, 0, 0.15)] * 2} for w in results}
+    tables["calibration"] = stats.calibration(results, hold1, {"k1": 0.85, "k2": 1.1})
+    text = report.write_report(tmp_path, tables, results, paper, None, {}, None).read_text()
+    assert "### The calibration point" in text
+    assert "| world1 | 20.0 % | 15.0 % | 20 % |" in text  # synthetic SIE rate 0.2; hold=1 0.15
+    assert "### Lock-ups" in text and "5 × 0.05 = 0.25" in text
+    # Locked of trapped (12.5 s in every synthetic trial) for SIE and SRL, in the text and table.
+    assert "SRL world1 40 of 12 s" in text and "| world1 | 3 of 12 | 40 of 12 |" in text
+    assert "SIE spends less time locked than SRL in 3 of 3 worlds (world1, world2, real)." in text
+    assert "locked (s), ours |" in text
+    assert "### Unseeded systems: UIE against URL" in text
+    f = tables["table3"]["world1"]
+    uie, url = f["UIE-R2"]["f"], f["URL-R2"]["f"]
+    assert f"| world1 | R2 | {uie:.0f} / 0.0 / 12 | {url:.0f} / 7.0 / 12 |" in text

@@ -300,9 +300,11 @@ def test_build_tables_is_plain_json():
         "ci",
         "idiotypic_difference_rate",
         "trapped_s",
+        "locked_s",
         "hypotheses",
     }
     assert tables["trapped_s"]["world1"]["SIE"] == 2.0
+    assert tables["locked_s"]["world1"]["SIE"] is None  # these records have no lock-up times
     assert tables["table4"]["world2"]["SIE vs SRL"]["tau"] == 100
     assert tables["table3_ci"] == stats.table3_ci(res)
     assert tables["table3_ci"]["world2"]["SIE"]["tau"] == [10.0, 10.0]
@@ -603,3 +605,21 @@ def test_hypotheses_with_intervals():
     assert not h4["ci_supported"] and h4["ci_contradicted"]
     untestable = stats.hypotheses({"world1": {"HDC": trials_with_f(100)}})["H1"]
     assert not untestable["ci_supported"] and untestable["ci_summary"].startswith("Not testable")
+
+
+def test_locked_times_and_the_calibration_point():
+    rec = lambda locked, rate: {"locked_s": locked, "idiotypic_difference_rate": rate}
+    default = {
+        "world1": {"SIE": [rec(0.0, 0.3), rec(10.0, 0.4)], "SRL": [rec(30.0, None)] * 2},
+        "real": {"SIE": [rec(2.0, 0.5), rec(4.0, 0.6)]},
+    }
+    hold1 = {"world1": {"SIE": [rec(0.0, 0.1), rec(0.0, 0.2)]}, "real": {"SIE": [rec(0, 0.25)]}}
+    locked = stats.locked_times(default)
+    assert locked == {"world1": {"SIE": 5.0, "SRL": 30.0}, "real": {"SIE": 3.0}}
+    cal = stats.calibration(default, hold1, {"k1": 0.85, "k2": 1.1})
+    assert (cal["system"], cal["k1"], cal["k2"], cal["paper_percent"]) == ("SIE", 0.85, 1.1, 20)
+    assert cal["worlds"]["world1"] == {
+        "default": pytest.approx(0.35),
+        "hold=1": pytest.approx(0.15),
+    }
+    assert cal["worlds"]["real"] == {"default": pytest.approx(0.55), "hold=1": 0.25}

@@ -19,7 +19,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxais.controllers import interrupts
+from jaxais.controllers import STL, interrupts
 from jaxais.immune.antibodies import _antibodies, take, within_limits
 from jaxais.immune.behaviours import wheel_speeds
 from jaxais.immune.network import idiotopes
@@ -626,3 +626,21 @@ def test_a_penalty_ends_the_bout_so_the_network_selects_again():
     calm = F.learn_fn()(jax.random.key(0), calm, F.percept(m=0, m_prev=0, t=300), sys_)
     calm, _ = act(calm, F.percept(m=0, t=300), sys_)
     assert int(calm.acting) == 0 and int(calm.bout.left) == 19
+
+
+def test_choices_record_the_set_last_selected_for_each_antigen():
+    # Non-idiotypic, literal readings: each act selects; alpha is the set with the highest P
+    # for the antigen presented, and choices() holds it in that antigen's entry only.
+    sys_ = F.system(base="UIE-R1")
+    P = np.full((F.X, F.Y), 0.5, np.float32)
+    P[3, 5], P[1, 0] = 0.9, 0.8
+    s = F.state(sys_, P)
+    np.testing.assert_array_equal(STL.choices(s), np.full(F.Y, -1))
+    s, _ = act(s, F.percept(5), sys_)
+    want = np.full(F.Y, -1)
+    want[5] = 3
+    np.testing.assert_array_equal(STL.choices(s), want)
+    s, _ = act(s, F.percept(0, m_prev=5), sys_)
+    want[0] = 1
+    np.testing.assert_array_equal(STL.choices(s), want)
+    assert int(s.acting) == 1

@@ -184,6 +184,7 @@ def test_outcome_caps_and_fitness():
         t=np.array([100, 700, 300, 0, 625]),
         collisions=np.array([3, 2, 9, 0, 6]),
         trapped=np.array([0, 400, 0, 0, 10]),
+        locked=np.array([0, 350, 0, 0, 0]),
     )
     res = outcome(runs, F.CONFIG, DT)
     np.testing.assert_allclose(res["tau"], [3.2, 20.0, 9.6, 0.0, 20.0])
@@ -193,6 +194,7 @@ def test_outcome_caps_and_fitness():
     np.testing.assert_array_equal(res["failed_collisions"], [False, False, True, False, True])
     np.testing.assert_array_equal(res["failed_time"], [False, True, False, False, True])
     np.testing.assert_allclose(res["trapped_s"], [0.0, 12.8, 0.0, 0.0, 0.32])
+    np.testing.assert_allclose(res["locked_s"], [0.0, 11.2, 0.0, 0.0, 0.0])
     np.testing.assert_array_equal(res["iterations"], [100, 700, 300, 0, 625])
     assert episode.fitness(10.0, 2) == 13.0 and episode.RHO == 8.0
 
@@ -480,7 +482,7 @@ def test_run_trials_rejects_bad_arguments():
 
 
 def test_summarise_by_hand():
-    def rec(tau, c, by, rate, trapped=0.0):
+    def rec(tau, c, by, rate, trapped=0.0, locked=0.0):
         capped = min(c, 100)
         return {
             "tau": tau,
@@ -492,13 +494,14 @@ def test_summarise_by_hand():
             "failed_time": "time" in by,
             "failed_by": by,
             "trapped_s": trapped,
+            "locked_s": locked,
             "idiotypic_difference_rate": rate,
             "iterations": int(tau / DT),
         }
 
     records = [
         rec(10.0, 2, [], 0.2),
-        rec(20.0, 150, ["collisions"], 0.1, 8.0),
+        rec(20.0, 150, ["collisions"], 0.1, 8.0, 6.0),
         rec(4000.0, 1, ["time"], 0.3),
         rec(4000.0, 300, ["collisions", "time"], 0.0, 4.0),
     ]
@@ -513,11 +516,14 @@ def test_summarise_by_hand():
             "failed_by_collisions": 0.5,
             "failed_by_time": 0.5,
             "trapped_s": 3.0,
+            "locked_s": 1.5,
             "idiotypic_difference_rate": 0.15,
         }
     )
     records[0]["idiotypic_difference_rate"] = None
+    del records[1]["locked_s"]  # a record written before lock-ups were measured
     assert summarise(records)["idiotypic_difference_rate"] is None
+    assert summarise(records)["locked_s"] is None
 
 
 def test_run_trials_rejects_seeds_outside_their_range():

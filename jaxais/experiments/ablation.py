@@ -39,7 +39,7 @@ from jaxais.episode import EpisodeConfig
 from jaxais.experiments import claims, protocol, stats
 from jaxais.immune.antibodies import Antibodies
 from jaxais.immune.network import NetworkParams
-from jaxais.immune.readings import HOLD, SIGMA0_FLOOR, Readings
+from jaxais.immune.readings import ALPHA_ON_SELF, HOLD, SIGMA0_FLOOR, Readings
 from jaxais.immune.readings import readings as make_readings
 from jaxais.seed import Seed
 from jaxais.systems import HAND_DESIGNED, N_SETS, hand_designed_sets, make_system, parse_label
@@ -64,7 +64,7 @@ __all__ = [
     "variant_systems",
 ]
 
-REPORTED = ("SIE", "HDC", "URL-R1")
+REPORTED = ("SIE", "HDC", "UIE-R1", "URL-R1")
 """The systems whose mean f and failure rate the ablation table shows."""
 
 TRACKING_HDC = [
@@ -92,6 +92,10 @@ class Variant:
         hdc_tracks: the HDC tracks the target when it sees it (the earlier HDC; ours: no).
         ir_noise: the simulator's IR noise table in every world [ours]; False: noise-free IR
             (a world's own extra noise, the ``real`` world's, stays).
+        alpha_on_self: eqs (7)-(8) also sum alpha's own set (the engine's earlier reading;
+            the paper's, the default: alpha acts on the others).
+        swap_penalties: the idiotypic and RL-only penalties swapped (1.0 and 0.5). Not a
+            reading: the paper's values are its rule; this shows what they do to UIE and URL.
     """
 
     name: str
@@ -103,6 +107,8 @@ class Variant:
     stop_at_collision_cap: bool = False
     hdc_tracks: bool = False
     ir_noise: bool = True
+    alpha_on_self: bool = ALPHA_ON_SELF
+    swap_penalties: bool = False
 
     def readings(self) -> Readings:
         """The controllers' readings of this variant."""
@@ -110,6 +116,17 @@ class Variant:
             hold=self.hold,
             count_encounters=self.count_encounters,
             sigma0_floor=self.sigma0_floor,
+            alpha_on_self=self.alpha_on_self,
+        )
+
+    def network(self, base: NetworkParams | None = None) -> NetworkParams:
+        """The network constants: ``base`` (default: the paper's), penalties swapped if set."""
+        net = NetworkParams() if base is None else base
+        if not self.swap_penalties:
+            return net
+        return net.replace(
+            penalty_idiotypic=net.penalty_non_idiotypic,
+            penalty_non_idiotypic=net.penalty_idiotypic,
         )
 
     def config(self, base: EpisodeConfig = STL_CONFIG) -> EpisodeConfig:
@@ -170,6 +187,18 @@ VARIANTS = (
         ir_noise=False,
     ),
     Variant(
+        "alpha_on_self=True",
+        "eqs (7)-(8) also sum alpha's effect on its own set (the engine's earlier reading; "
+        "section 4.3 has alpha act on the others)",
+        alpha_on_self=True,
+    ),
+    Variant(
+        "penalties=swapped",
+        "the paper's penalties swapped: 1.0 removed from an idiotypic robot's antibody, 0.5 "
+        "from an RL-only robot's (not a reading: shows what the paper's rule does to UIE, URL)",
+        swap_penalties=True,
+    ),
+    Variant(
         "literal",
         "every old reading together: hold=1, count_encounters=False, sigma0_floor=0, "
         "collision_rule=entry, stop_at_collision_cap=True, hdc_tracks=True",
@@ -227,7 +256,9 @@ def variant_systems(
     """
     out = {}
     for name in labels:
-        system = make_system(name, seed, network=network, readings=variant.readings())
+        system = make_system(
+            name, seed, network=variant.network(network), readings=variant.readings()
+        )
         if variant.hdc_tracks and parse_label(name)[0] == "HDC":
             system = system.replace(antibodies=hdc_antibodies(True, system.paratopes.shape[0]))
         out[name] = system
@@ -454,6 +485,8 @@ def _reported(records: Sequence[Mapping[str, Any]]) -> dict[str, float]:
         "f": float(stats.metric_values(records, "f").mean()),
         "failure_rate": float(np.mean([bool(r["failed"]) for r in records])),
         "trapped_s": float(np.mean([r["trapped_s"] for r in records])),
+        "locked_s": float(np.mean([r.get("locked_s", np.nan) for r in records])),
+        "replaced": float(np.mean([r.get("replaced") or 0 for r in records])),
     }
 
 
@@ -465,7 +498,8 @@ def variant_summary(results_by_world: Mapping[str, Mapping[str, Sequence[Mapping
 
     Returns:
         ``{"claims": {"reproduced", "evaluated", "total"}, "held": [claim ids held],
-        "worlds": {world: {label: {"f", "failure_rate", "trapped_s"}}}}`` for the labels of
+        "worlds": {world: {label: {"f", "failure_rate", "trapped_s", "locked_s",
+        "replaced"}}}}`` for the labels of
         :data:`REPORTED` that have trials.
     """
     ledger = claims.claims(results_by_world)
@@ -510,12 +544,14 @@ def _cell(value: float | None, fmt: str) -> str:
 
 
 def markdown(doc: Mapping[str, Any]) -> str:
-    """The ablation table: variant | claims reproduced | per world SIE f, HDC f, URL-R1 f,
-    SIE failures (%), then what each variant switches."""
+    """The ablation table: variant | claims reproduced | per world the reported systems' f
+    and SIE's failures (%), then what each variant switches, then UIE against URL (replacements
+    and trapped time) for ours and the swapped penalties."""
     worlds = list(doc["trials"])
+    reported = doc.get("reported_systems", REPORTED)
     head = ["variant", "claims reproduced"]
     for w in worlds:
-        head += [f"{w} SIE f", f"{w} HDC f", f"{w} URL-R1 f", f"{w} SIE fail %"]
+        head += [f"{w} {label} f" for label in reported] + [f"{w} SIE fail %"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for v in doc["variants"]:
         c = v["claims"]
@@ -524,7 +560,7 @@ def markdown(doc: Mapping[str, Any]) -> str:
             by = v["worlds"].get(w, {})
             get = lambda label, key, by=by: by.get(label, {}).get(key)
             fail = get("SIE", "failure_rate")
-            row += [_cell(get(label, "f"), ".0f") for label in REPORTED]
+            row += [_cell(get(label, "f"), ".0f") for label in reported]
             row.append(_cell(None if fail is None else 100 * fail, ".0f"))
         lines.append("| " + " | ".join(row) + " |")
     trials = ", ".join(f"{w} {n}" for w, n in doc["trials"].items())
@@ -536,7 +572,34 @@ def markdown(doc: Mapping[str, Any]) -> str:
         "",
     ]
     notes += [f"- `{v['name']}`: {v['description']}." for v in doc["variants"]]
-    return "\n".join(lines + notes) + "\n"
+    return "\n".join(lines + notes + _penalty_table(doc, worlds)) + "\n"
+
+
+def _penalty_table(doc: Mapping[str, Any], worlds: Sequence[str]) -> list[str]:
+    """UIE-R1 against URL-R1 under ours and the swapped penalties: f, replacements, trapped."""
+    rows = [v for v in doc["variants"] if v["name"] in ("ours", "penalties=swapped")]
+    if len(rows) < 2:
+        return []
+    lines = [
+        "",
+        "UIE-R1 against URL-R1, with the paper's penalties (`ours`) and swapped: mean f / "
+        "antibodies replaced per run / trapped time (s).",
+        "",
+        "| variant | world | UIE-R1 | URL-R1 |",
+        "|---|---|---|---|",
+    ]
+    for v in rows:
+        for w in worlds:
+            by = v["worlds"].get(w, {})
+            cells = [
+                " / ".join(
+                    _cell(by.get(label, {}).get(key), fmt)
+                    for key, fmt in (("f", ".0f"), ("replaced", ".1f"), ("trapped_s", ".0f"))
+                )
+                for label in ("UIE-R1", "URL-R1")
+            ]
+            lines.append(f"| `{v['name']}` | {w} | {cells[0]} | {cells[1]} |")
+    return lines
 
 
 def figure(doc: Mapping[str, Any]) -> Any:

@@ -189,20 +189,21 @@ def _side_by_side(
     cols: Sequence[tuple[str, str, int]],
     flagged: set[tuple[str, str, str]],
     n_trials: Mapping[str, Mapping[str, int]] | None,
-    extra: tuple[str, Mapping[str, Mapping[str, Any]]] | None = None,
+    extra: Sequence[tuple[str, Mapping[str, Mapping[str, Any]]]] = (),
     intervals: Mapping[str, Mapping[str, Mapping[str, Sequence[float]]]] | None = None,
     note: str = "",
 ) -> list[str]:
-    """Our table beside the paper's, per world; ``extra = (header, {world: {system: value}})``
-    adds a last column of ours alone (one decimal); ``intervals`` (``{world: {system: {key:
-    [lo, hi]}}}``) puts ``[lo, hi]`` after each of our values; ``note`` opens the section."""
+    """Our table beside the paper's, per world; each ``(header, {world: {system: value}})`` of
+    ``extra`` adds a last column of ours alone (one decimal); ``intervals`` (``{world: {system:
+    {key: [lo, hi]}}}``) puts ``[lo, hi]`` after each of our values; ``note`` opens the
+    section."""
     lines = [f"### {title}", ""] + ([note, ""] if note else [])
     ci = f" [{_LEVEL} CI]" if intervals else ""
     for world in _worlds(ours, paper):
         mine, theirs = ours.get(world, {}), paper.get(world, {})
         header = ["System"] + (["n"] if n_trials is not None else [])
         header += [f"{h} ours{ci} / paper" for _, h, _ in cols]
-        header += [extra[0]] if extra else []
+        header += [head for head, _ in extra]
         body = []
         for s in _rows(mine, theirs):
             row = [s] + ([str(n_trials.get(world, {}).get(s, "–"))] if n_trials is not None else [])
@@ -213,8 +214,7 @@ def _side_by_side(
                 iv = (intervals or {}).get(world, {}).get(s, {}).get(key)
                 span = f" [{_num(iv[0], dec)}, {_num(iv[1], dec)}]" if iv else ""
                 row.append(f"{_num(a, dec)}{span} / {_num(b)}{mark}")
-            if extra:
-                row.append(_num(extra[1].get(world, {}).get(s), 1))
+            row += [_num(values.get(world, {}).get(s), 1) for _, values in extra]
             body.append(row)
         lines += [f"**{world}**", ""] + _table(header, body)
     return lines
@@ -390,6 +390,110 @@ def _idiotypic_section(rates: Mapping[str, Any], paper: Mapping[str, Any]) -> li
         return lines[:2] + ["No trial reported an idiotypic difference rate.", ""]
     body = [[s] + [_num(rates[w].get(s), 3) for w in worlds] for s in systems]
     return lines + _table(["System", *worlds], body)
+
+
+def _percent(rate: float | None) -> str:
+    return "–" if rate is None else f"{100 * rate:.1f} %"
+
+
+def _calibration_section(cal: Mapping[str, Any] | None) -> list[str]:
+    """SIE's difference rate at the paper's k1, k2 under our bout and per-iteration selection
+    (:func:`stats.calibration`)."""
+    if not cal:
+        return []
+    lines = [
+        "### The calibration point",
+        "",
+        f'Section 5 chose k1 = {cal["k1"]:g} and k2 = {cal["k2"]:g} "to yield a mean '
+        f'idiotypic difference rate of approximately {cal["paper_percent"]} %". '
+        f"{cal['system']}'s rate at those constants, under our 1 s bouts (the default) and "
+        "with a selection every 32 ms iteration (`hold=1`); alpha acts on the other "
+        "antibodies only (section 4.3). "
+        "`scripts/sweep.py --grid k1=... --grid k2=...` maps where the paper's rate lies.",
+        "",
+    ]
+    body = [
+        [w, _percent(r.get("default")), _percent(r.get("hold=1")), f"{cal['paper_percent']} %"]
+        for w, r in cal["worlds"].items()
+    ]
+    return lines + _table(["World", "ours (1 s bouts)", "ours (hold=1)", "paper"], body)
+
+
+def _lockup_section(tables: Mapping[str, Any]) -> list[str]:
+    """Locked against trapped time for the seeded systems, and the lone-survivor mechanism."""
+    locked, trapped = tables.get("locked_s") or {}, tables.get("trapped_s") or {}
+    worlds = [w for w in locked if locked[w].get("SIE") is not None]
+    if not worlds or not all(locked[w].get("SRL") is not None for w in worlds):
+        return []
+
+    def cell(w: str, s: str) -> str:
+        return f"{_num(locked[w].get(s), 0)} of {_num(trapped.get(w, {}).get(s), 0)}"
+
+    srl = "; ".join(f"{w} {cell(w, 'SRL')} s" for w in worlds)
+    sie = "; ".join(f"{w} {cell(w, 'SIE')} s" for w in worlds)
+    less = [w for w in worlds if locked[w]["SIE"] < locked[w]["SRL"]]
+    body = [[w, cell(w, "SIE"), cell(w, "SRL")] for w in worlds]
+    return [
+        "### Lock-ups",
+        "",
+        "A robot is *locked* while it is trapped (within 0.1 m of one point for at least 10 s) "
+        "and every selection in that stay repeats the antibody last selected for its antigen. "
+        "One way in: when a collision column holds one antibody with a non-zero paratope, "
+        "eq (4) with the σ0 floor returns that lone survivor to 5 × 0.05 = 0.25 after every "
+        "negative score, so stage-1 selection picks it again and again while the robot pivots "
+        "against a wall; only idiotypic selection (stage 3) can pass it over. Measured here, "
+        f"mean locked of trapped time per run: SRL {srl}; SIE {sie}. SIE spends less time "
+        f"locked than SRL in {len(less)} of {len(worlds)} worlds"
+        + (f" ({', '.join(less)})." if less else ".")
+        + " Whether SRL locks up at all depends on the LTL seed's sets: the seed ledger "
+        "(`scripts/seeds.py`) gives both systems' lock-up time on each seed.",
+        "",
+        *_table(["World", "SIE locked of trapped (s)", "SRL locked of trapped (s)"], body),
+    ]
+
+
+def _unseeded_section(
+    results_by_world: stats.ResultsByWorld, tables: Mapping[str, Any]
+) -> list[str]:
+    """UIE against URL: antibody replacements and trapped time (the penalty mechanism)."""
+    pairs = [
+        (w, r)
+        for w, by in results_by_world.items()
+        for r in ("R1", "R2")
+        if f"UIE-{r}" in by and f"URL-{r}" in by
+    ]
+    if not pairs:
+        return []
+
+    def mean(w: str, label: str, key: str) -> float | None:
+        values = [t.get(key) for t in results_by_world[w][label]]
+        values = [float(v) for v in values if v is not None]
+        return float(np.mean(values)) if values else None
+
+    body = []
+    for w, r in pairs:
+        row = [w, r]
+        for label in (f"UIE-{r}", f"URL-{r}"):
+            f = tables["table3"][w][label]["f"]
+            row.append(
+                f"{_num(f)} / {_num(mean(w, label, 'replaced'), 1)} / "
+                f"{_num(mean(w, label, 'trapped_s'))}"
+            )
+        body.append(row)
+    return [
+        "### Unseeded systems: UIE against URL",
+        "",
+        "The paper's penalties remove 0.5 from an idiotypic robot's acting antibody and 1.0 "
+        "from an RL-only robot's, and an unseeded robot replaces an antibody once its P falls "
+        'below 0.1. A saturated antibody (P = 1, e.g. for "target unseen", antigen 0) of '
+        "an unseeded idiotypic robot penalised by 0.5 stays above 0.1 and is never replaced, "
+        "so UIE can keep a behaviour it circles with where URL replaces it. `scripts/ablate.py`"
+        "'s variant `penalties=swapped` shows what swapping the two penalties does; the "
+        "penalties stay the paper's rule. Each cell: mean f / antibodies replaced per run / "
+        "trapped time (s).",
+        "",
+        *_table(["World", "Set", "UIE", "URL"], body),
+    ]
 
 
 def _baseline_section(baseline: Mapping[str, Any] | None) -> list[str]:
@@ -674,8 +778,11 @@ def write_report(
 
     if claims_ledger is None:
         claims_ledger = claims.claims(results_by_world)
-    trapped = tables.get("trapped_s", {})
-    has_trapped = any(v is not None for row in trapped.values() for v in row.values())
+    extra = [
+        (head, tables[key])
+        for head, key in (("trapped (s), ours", "trapped_s"), ("locked (s), ours", "locked_s"))
+        if any(v is not None for row in tables.get(key, {}).values() for v in row.values())
+    ]
 
     lines = ["# jaxais results beside Whitbrook, Aickelin & Garibaldi (2008)", ""]
     lines += _claims_section(claims_ledger)
@@ -687,9 +794,10 @@ def write_report(
         "value that does not exist. † marks a system whose rank among the systems of that world "
         "and column differs from the paper's."
         + (
-            " *Trapped* is the mean simulated time (s) a robot spent trapped (ours; the paper "
-            "has no such column)."
-            if has_trapped
+            " *Trapped* is the mean simulated time (s) a robot spent within 0.1 m of one point "
+            "for at least 10 s, *locked* the part of it in which the same antibody kept being "
+            "selected for each antigen (ours; the paper has no such columns)."
+            if extra
             else ""
         ),
         "",
@@ -704,7 +812,7 @@ def write_report(
         _T3_COLS,
         _flagged(diffs3),
         n_trials,
-        ("trapped (s), ours", trapped) if has_trapped else None,
+        extra,
         intervals,
         _interval_note(tables.get("ci", {})) if intervals else "",
     )
@@ -725,6 +833,9 @@ def write_report(
     lines += _ordering_section(diffs3, diffs5, tables["table4"], p4)
     lines += _robustness_section(stats.comparisons(results_by_world), p4, alpha)
     lines += _idiotypic_section(tables.get("idiotypic_difference_rate", {}), paper)
+    lines += _calibration_section(tables.get("calibration"))
+    lines += _lockup_section(tables)
+    lines += _unseeded_section(results_by_world, tables)
     lines += _baseline_section(baseline)
     lines += _ltl_section(ltl_summary, ltl_fig)
     lines += ["## Figures", ""]

@@ -11,10 +11,14 @@ Readings of the paper decided here:
   column mean; a set with no such entry gets none.
 - Eq (4) is not clipped (the paper clips only the scored antibody's P, in RL), and a column whose
   current mean is 0 is left unchanged [ours: guard].
-- Eqs (7)-(8) sum over the antigens j of every set i against the stage-1 winner's set n,
-  including i = n: stimulation pairs the idiotope of alpha (I_nj) with each set's paratopes
-  (1 - P_ij); suppression pairs the paratope of alpha (P_nj) with each set's idiotopes (I_ij),
-  exactly as the text describes. Concentrations are taken before the clone update.
+- Eqs (7)-(8) sum over the antigens j of every other set i != n against the stage-1 winner's
+  set n, as section 4.3 says: "comparing the idiotope of alpha with the paratopes of the other
+  antibodies ... and comparing the paratope of alpha with the idiotopes of the others";
+  stimulation pairs the idiotope of alpha (I_nj) with each set's paratopes (1 - P_ij),
+  suppression the paratope of alpha (P_nj) with each set's idiotopes (I_ij), and alpha's own
+  eps and delta are 0, so its S2 is its P. ``alpha_on_self=True`` keeps the engine's earlier
+  reading, which summed i = n too (:data:`jaxais.immune.readings.ALPHA_ON_SELF` says what it
+  does). Concentrations are taken before the clone update.
 - The text after eq (9) says clones are updated "using (1)" and concentrations "using (2)"; these
   are read as eqs (5) and (6). Eq (5) uses S2 and touches only the antigen's column; clone counts
   are floored at 0 [ours].
@@ -276,17 +280,26 @@ def _select_alpha(u: jax.Array, P: jax.Array, antigen: jax.Array | int) -> jax.A
 
 
 def stimulation_suppression(
-    P: jax.Array, I: jax.Array, C: jax.Array, n: jax.Array | int, k1: float, k2: float
+    P: jax.Array,
+    I: jax.Array,
+    C: jax.Array,
+    n: jax.Array | int,
+    k1: float,
+    k2: float,
+    alpha_on_self: jax.Array | bool = False,
 ) -> tuple[jax.Array, jax.Array]:
-    """Eqs (7)-(8): how much alpha's set ``n`` stimulates and suppresses each set.
+    """Eqs (7)-(8): how much alpha's set ``n`` stimulates and suppresses each other set.
 
     eps_i = k1 * sum_j (1 - P_ij) I_nj C_ij C_nj   (idiotope of alpha vs paratopes of set i)
     delta_i = k2 * sum_j P_nj I_ij C_ij C_nj       (paratope of alpha vs idiotopes of set i)
+
+    for i != n; eps_n = delta_n = 0 (section 4.3: alpha acts on "the other antibodies").
 
     Args:
         P: [x, y] paratopes. I: [x, y] idiotopes. C: [x, y] concentrations before the update.
         n: set index of the stage-1 winner alpha.
         k1: stimulation magnitude. k2: suppression magnitude.
+        alpha_on_self: also sum i = n (the engine's earlier reading; traced, so a batch may mix).
 
     Returns:
         eps: [x] float32, delta: [x] float32.
@@ -294,9 +307,10 @@ def stimulation_suppression(
     P = jnp.asarray(P, jnp.float32)
     I = jnp.asarray(I, jnp.float32)
     C = jnp.asarray(C, jnp.float32)
+    acted_on = (jnp.arange(P.shape[0]) != n) | alpha_on_self
     eps = k1 * jnp.sum((1.0 - P) * I[n] * C * C[n], axis=1)
     delta = k2 * jnp.sum(P[n] * I * C * C[n], axis=1)
-    return eps, delta
+    return jnp.where(acted_on, eps, 0.0), jnp.where(acted_on, delta, 0.0)
 
 
 def idiotypic_select(
@@ -306,13 +320,15 @@ def idiotypic_select(
     N: jax.Array,
     antigen: jax.Array | int,
     params: NetworkParams,
+    alpha_on_self: jax.Array | bool = False,
 ) -> tuple[jax.Array, jax.Array, jax.Array]:
     """Three-stage idiotypic selection (eqs 5-10) for the presenting antigen.
 
     Stage 1 picks alpha (:func:`select_alpha`). Stage 2 computes S2 = P_im + eps - delta
-    (eq 9) for every set, then updates the antigen's column of clones with eq (5) using S2,
-    floored at 0 [ours]. Stage 3 re-evaluates concentrations (eq 6) and picks beta, the set with
-    the highest activation lambda = C_im * S2 (eq 10). An idiotypic difference is alpha != beta.
+    (eq 9) for every set (alpha's own S2 = P_nm, :func:`stimulation_suppression`), then updates
+    the antigen's column of clones with eq (5) using S2, floored at 0 [ours]. Stage 3
+    re-evaluates concentrations (eq 6) and picks beta, the set with the highest activation
+    lambda = C_im * S2 (eq 10). An idiotypic difference is alpha != beta.
 
     Args:
         key: PRNG key of both stages' tie-breaks: one ``uniform(key, (2 * x,))`` draw (one
@@ -322,6 +338,7 @@ def idiotypic_select(
         P: [x, y] paratopes. I: [x, y] idiotopes. N: [x, y] clone counts.
         antigen: index m of the presenting antigen.
         params: network constants (b, k1, k2, k3, Phi are used).
+        alpha_on_self: eqs (7)-(8) also sum alpha's own set (:func:`stimulation_suppression`).
 
     Returns:
         alpha: int32 set index of the stage-1 winner.
@@ -329,7 +346,8 @@ def idiotypic_select(
         N_new: [x, y] float32 clone counts; only column ``antigen`` differs from ``N``.
     """
     x = jnp.shape(P)[0]
-    return _idiotypic_select(jax.random.uniform(key, (2 * x,)), P, I, N, antigen, params)
+    u = jax.random.uniform(key, (2 * x,))
+    return _idiotypic_select(u, P, I, N, antigen, params, alpha_on_self)
 
 
 def _idiotypic_select(
@@ -339,6 +357,7 @@ def _idiotypic_select(
     N: jax.Array,
     antigen: jax.Array | int,
     params: NetworkParams,
+    alpha_on_self: jax.Array | bool = False,
 ) -> tuple[jax.Array, jax.Array, jax.Array]:
     """:func:`idiotypic_select` given its draw ``u`` [2 * x] (stage 1's tie-breaks, then stage
     3's), for a controller that slices it from a larger draw."""
@@ -347,7 +366,7 @@ def _idiotypic_select(
     x = P.shape[0]
     alpha = _select_alpha(u[:x], P, antigen)
     eps, delta = stimulation_suppression(
-        P, I, concentrations(N, params.Phi), alpha, params.k1, params.k2
+        P, I, concentrations(N, params.Phi), alpha, params.k1, params.k2, alpha_on_self
     )
     s2 = P[:, antigen] + eps - delta
     # A strongly suppressed antibody would otherwise get a negative number of clones.

@@ -1,0 +1,492 @@
+"""The paper's claims across LTL seeds: the whole protocol on N fresh seeds, resumable per seed.
+
+For each GA seed s, :func:`ltl_ledger` runs, as subprocesses of this interpreter,
+
+- the LTL: ``scripts/evolve.py --out OUT/ltl/seed_s --seed s`` (evolve.py's defaults), and then
+- the STL: ``scripts/reproduce.py --seeds OUT/ltl/seed_s/seed --out OUT/stl/seed_s --seed s
+  --no-baseline`` (the paper's protocol with that seed, trial seed s),
+
+and tabulates which claims and hypotheses hold on how many seeds: ``OUT/seeds.json`` and
+``OUT/seeds.md``, rebuilt after every seed (a partial ledger says "k of N seeds done"), and
+``OUT/run.json`` (command, settings, versions, wall times). :func:`summarise` and
+:func:`markdown` make the ledger from the runs' files alone.
+
+Running again with the same arguments goes on where a run stopped:
+
+- a seed's LTL is done when ``seed/seed.json`` and ``summary.json`` exist (evolve.py writes the
+  seed folder whole, summary.json last); a complete checkpoint without them is continued with
+  ``--resume`` (exactly the seed of an uninterrupted run); otherwise it starts afresh;
+- a seed's STL is done when the ledger's marker ``OUT/seeds/seed_s.json`` (written atomically once
+  reproduce.py exited 0) exists with the same settings, and ``report.md``, reproduce.py's last
+  file, too. Anything else in ``OUT/stl/seed_s`` is removed and the protocol runs again (it is
+  deterministic: the same bits).
+
+Wall times: the LTL's is evolve.py's own ``wall_time_total_s`` (summed over resumes), the STL's
+the reproduce.py subprocess's. Nothing here imports JAX (the subprocesses have the device).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import signal
+import statistics
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from pathlib import Path
+from typing import Any
+
+from jaxais.cli import atomic_write_json, atomic_write_text
+from jaxais.console import SCRIPTS_DIR
+
+__all__ = ["SeedRunError", "headline", "ltl_ledger", "ltl_state", "markdown", "summarise"]
+
+FORMAT = "jaxais-seeds/1"
+MAX_SEED = 2**31 - 1
+"""evolve.py's largest --seed."""
+SYSTEMS = ("SIE", "SRL")
+"""The seeded systems whose failure rates and lock-up times the ledger shows."""
+RESERVED = ("--out", "--seeds", "--seed", "--no-baseline", "--baseline", "--evolve", "--trials")
+"""reproduce.py flags the ledger sets itself (not allowed in ``extra_args``)."""
+
+Runner = Callable[[list[str], Path | None], int]
+"""Runs a command (output to the log file when one is given) and returns its exit status."""
+
+
+class SeedRunError(RuntimeError):
+    """A seed's LTL or STL subprocess failed; ``seed`` and ``stage`` ("LTL" or "STL") say which."""
+
+    def __init__(self, seed: int, stage: str, message: str):
+        super().__init__(f"seed {seed}: {message}")
+        self.seed, self.stage = seed, stage
+
+
+def _read_json(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _get(doc: Any, *keys: str) -> Any:
+    """``doc[k1][k2]...``, or None where a level is missing."""
+    for key in keys:
+        if not isinstance(doc, Mapping) or key not in doc:
+            return None
+        doc = doc[key]
+    return doc
+
+
+def ltl_state(path: str | Path) -> str:
+    """What an LTL folder needs: "done", "resume" (a complete GA checkpoint but no finished
+    seed: evolve.py ``--resume``) or "fresh"."""
+    path = Path(path)
+    seed = (path / "seed" / "seed.json").is_file()
+    if seed and (path / "summary.json").is_file():
+        return "done"
+    ck = path / "checkpoints"  # orbax names complete checkpoints by their step
+    if ck.is_dir() and any(p.is_dir() and p.name.isdigit() for p in ck.iterdir()):
+        return "resume"
+    return "done" if seed else "fresh"  # a seed without its summary is used as it is
+
+
+def _seed_row(docs: Mapping[str, Any]) -> dict[str, Any]:
+    """One seed's line of the ledger from its tables, claims and LTL documents."""
+    tables, claims = docs["tables"], docs["claims"]
+    ltl_summary, ltl_seed = docs.get("ltl_summary") or {}, docs.get("ltl_seed") or {}
+    worlds = list(tables["table5"])
+    return {
+        "claims_held": claims["summary"]["reproduced"],
+        "claims_total": claims["summary"]["total"],
+        "held": [c["id"] for c in claims["claims"] if c.get("held") is True],
+        "hypotheses": {h: bool(v["supported"]) for h, v in tables["hypotheses"].items()},
+        "failure_pct": {
+            w: {k: _get(tables, "table5", w, k, "total") for k in SYSTEMS} for w in worlds
+        },
+        "locked_s": {w: {k: _get(tables, "locked_s", w, k) for k in SYSTEMS} for w in worlds},
+        "trapped_s": {w: _get(tables, "trapped_s", w, "SIE") for w in worlds},
+        "difference_rate": {w: _get(tables, "idiotypic_difference_rate", w, "SIE") for w in worlds},
+        "ltl": {
+            "generations": ltl_seed.get("generations", ltl_summary.get("generations_run")),
+            "stopped_by": ltl_summary.get("stopped_by"),
+            "crossing_rate": _get(ltl_seed, "crossing", "rate"),
+        },
+        "wall_s": docs.get("wall_s"),
+    }
+
+
+def summarise(
+    per_seed: Mapping[int, Mapping[str, Any]], requested: Iterable[int] | None = None
+) -> dict[str, Any]:
+    """The ledger over finished seeds.
+
+    Args:
+        per_seed: seed -> its documents: "tables" (tables.json), "claims" (claims.json) and,
+            optional, "ltl_summary" (evolve.py's summary.json), "ltl_seed" (seed/seed.json),
+            "wall_s" ({"ltl": s, "stl": s}).
+        requested: the seeds asked for (default: those of ``per_seed``).
+
+    Returns:
+        The ``seeds.json`` document: per seed, per claim (fraction of seeds it holds on), per
+        hypothesis, claims held (median, min, max), and how many of the requested seeds are done.
+    """
+    seeds = sorted(per_seed)
+    wanted = sorted(set(seeds if requested is None else requested))
+    rows = {s: _seed_row(per_seed[s]) for s in seeds}
+    n = len(rows)
+    texts: dict[str, str] = {}
+    for s in seeds:
+        for claim in per_seed[s]["claims"]["claims"]:
+            texts.setdefault(claim["id"], claim.get("text", ""))
+    claims = {}
+    for cid, text in texts.items():
+        k = sum(cid in rows[s]["held"] for s in seeds)
+        claims[cid] = {"text": text, "held_on": k, "of": n, "fraction": k / n}
+    names = list(dict.fromkeys(h for s in seeds for h in rows[s]["hypotheses"]))
+    hypotheses = {}
+    for h in names:
+        on = [s for s in seeds if rows[s]["hypotheses"].get(h)]
+        hypotheses[h] = {"held_on": len(on), "of": n, "seeds": on}
+    counts = [rows[s]["claims_held"] for s in seeds]
+    held = {"median": None, "min": None, "max": None, "of": None}
+    if counts:
+        total = max(rows[s]["claims_total"] for s in seeds)
+        held = {
+            "median": statistics.median(counts),
+            "min": min(counts),
+            "max": max(counts),
+            "of": total,
+        }
+    return {
+        "format": FORMAT,
+        "seeds": {str(s): rows[s] for s in seeds},
+        "claims": claims,
+        "hypotheses": hypotheses,
+        "claims_held": held,
+        "complete": set(wanted) <= set(seeds),
+        "done": sum(s in rows for s in wanted),
+        "requested": len(wanted),
+        "requested_seeds": wanted,
+    }
+
+
+def headline(summary: Mapping[str, Any]) -> str:
+    """One line: claims held (median, range) and each hypothesis's count, over the done seeds."""
+    n, held, k = summary["done"], summary["claims_held"], len(summary["seeds"])
+    if not summary["seeds"]:
+        return f"claims held: no seed done (0 of {summary['requested']})"
+    parts = [
+        f"claims held: median {held['median']:g} (range {held['min']}-{held['max']} of "
+        f"{held['of']}) over {k} seed{'s' * (k != 1)}"
+    ]
+    parts += [f"{h} on {v['held_on']} of {v['of']}" for h, v in summary["hypotheses"].items()]
+    partial = "" if summary["complete"] else f" ({n} of {summary['requested']} seeds done)"
+    return "; ".join(parts[:2]) + "".join(f", {p}" for p in parts[2:]) + partial
+
+
+def _fmt(x: float | None, digits: int = 0, scale: float = 1.0) -> str:
+    return "–" if x is None else f"{x * scale:.{digits}f}"
+
+
+def _pair(row: Mapping[str, Any], key: str, world: str) -> str:
+    """SIE's and SRL's ``row[key][world]``, as "a / b"."""
+    return " / ".join(_fmt(_get(row, key, world, k)) for k in SYSTEMS)
+
+
+def markdown(summary: Mapping[str, Any]) -> str:
+    """``seeds.md``: per-seed table, per-claim frequencies, hypotheses, and how it was made."""
+    rows, hyps = summary["seeds"], list(summary["hypotheses"])
+    worlds = list(dict.fromkeys(w for r in rows.values() for w in r["failure_pct"]))
+    status = "complete" if summary["complete"] else "partial: run the command again to go on"
+    held = summary["claims_held"]
+    held_line = "Claims held: no seed done yet."
+    if rows:
+        held_line = f"Claims held: median {held['median']:g}, range {held['min']}-{held['max']}"
+        held_line += f" of {held['of']}."
+    lines = [
+        "# The paper's claims across LTL seeds",
+        "",
+        f"{summary['done']} of {summary['requested']} seeds done ({status}).",
+        "",
+        held_line,
+        "",
+        "## Per seed",
+        "",
+        "Failure % and lock-up time (s) as SIE / SRL; difference rate: SIE's idiotypic "
+        "difference rate, %.",
+        "",
+    ]
+    head = ["seed", "generations", "claims held", *hyps]
+    head += [f"fail % {w}" for w in worlds] + [f"lock-up s {w}" for w in worlds]
+    head += [f"SIE diff % {w}" for w in worlds]
+    lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for s, r in rows.items():
+        cells = [s, str(r["ltl"]["generations"]), f"{r['claims_held']} of {r['claims_total']}"]
+        cells += ["✓" if r["hypotheses"].get(h) else "✗" for h in hyps]
+        cells += [_pair(r, "failure_pct", w) for w in worlds]
+        cells += [_pair(r, "locked_s", w) for w in worlds]
+        cells += [_fmt(r["difference_rate"].get(w), 1, 100.0) for w in worlds]
+        lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", "## Claims, by the fraction of seeds they hold on", ""]
+    lines += ["| claim | held on | text |", "|---|---:|---|"]
+    ranked = sorted(summary["claims"].items(), key=lambda kv: -kv[1]["fraction"])  # stable
+    for cid, c in ranked:
+        lines.append(f"| {cid} | {c['held_on']} of {c['of']} | {c['text']} |")
+    lines += ["", "## Hypotheses", ""]
+    lines.append(
+        "; ".join(
+            f"{h}: {v['held_on']} of {v['of']} seeds ({', '.join(map(str, v['seeds'])) or 'none'})"
+            for h, v in summary["hypotheses"].items()
+        )
+        or "no seed done."
+    )
+    lines += ["", "## How it was made", ""]
+    if summary.get("command"):
+        lines += [f"`{summary['command']}`", ""]
+    lines.append(
+        "For each seed s: `scripts/evolve.py --out ltl/seed_s --seed s` (the LTL, evolve.py's "
+        "defaults), then `scripts/reproduce.py --seeds ltl/seed_s/seed --out stl/seed_s --seed s "
+        "--no-baseline` (the paper's protocol); each seed's files lie in those folders."
+    )
+    return "\n".join(lines) + "\n"
+
+
+class _Processes:
+    """The default runner: child processes, remembered so that an interrupted ledger stops them."""
+
+    def __init__(self) -> None:
+        self._lock, self._live, self._stopped = threading.Lock(), set(), False
+
+    def __call__(self, cmd: list[str], log: Path | None) -> int:
+        stream = None
+        if log is not None:
+            log.parent.mkdir(parents=True, exist_ok=True)
+            stream = open(log, "w")  # noqa: SIM115 (closed below)
+        try:
+            with self._lock:
+                if self._stopped:
+                    return -int(signal.SIGTERM)
+                err = None if stream is None else subprocess.STDOUT
+                proc = subprocess.Popen(cmd, stdout=stream, stderr=err)
+                self._live.add(proc)
+            try:
+                return proc.wait()
+            finally:
+                with self._lock:
+                    self._live.discard(proc)
+        finally:
+            if stream is not None:
+                stream.close()
+
+    def stop(self) -> None:
+        """SIGTERM to every child (evolve.py keeps its last checkpoint), SIGKILL after 60 s."""
+        with self._lock:
+            self._stopped, live = True, list(self._live)
+        for proc in live:
+            proc.terminate()
+        for proc in live:
+            try:
+                proc.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+
+
+def _paths(out: Path, s: int) -> tuple[Path, Path, Path]:
+    """(LTL folder, STL folder, the ledger's done-marker) of seed ``s``."""
+    return out / "ltl" / f"seed_{s}", out / "stl" / f"seed_{s}", out / "seeds" / f"seed_{s}.json"
+
+
+def _stl_done(out: Path, s: int, settings: dict[str, Any]) -> bool:
+    _, stl, marker = _paths(out, s)
+    mark = _read_json(marker)
+    if isinstance(mark, dict) and mark.get("settings") != settings:
+        raise ValueError(
+            f"{out}: seed {s} was run with {mark.get('settings')}, not {settings}; use the same "
+            "settings or another output folder"
+        )
+    return isinstance(mark, dict) and (stl / "report.md").is_file()
+
+
+def _documents(out: Path, s: int) -> dict[str, Any]:
+    ltl, stl, marker = _paths(out, s)
+    docs = {k: _read_json(stl / f"{k}.json") for k in ("tables", "claims")}
+    for k, doc in docs.items():
+        if not isinstance(doc, dict):
+            raise ValueError(f"{stl / f'{k}.json'}: missing or not JSON; remove {marker} to rerun")
+    docs["ltl_summary"] = _read_json(ltl / "summary.json")
+    docs["ltl_seed"] = _read_json(ltl / "seed" / "seed.json")
+    docs["wall_s"] = {
+        "ltl": _get(docs["ltl_summary"], "wall_time_total_s"),
+        "stl": _get(_read_json(marker), "stl_wall_s"),
+    }
+    return docs
+
+
+def _versions(out: Path, done: Iterable[int]) -> dict[str, Any]:
+    """The versions that made the runs: reproduce.py's record (``records.versions()``, JAX's
+    backend included) from the first done seed; before any, the installed packages'. JAX is not
+    started here: on a GPU it would take the memory the subprocesses need."""
+    for s in done:
+        found = _get(_read_json(_paths(out, s)[1] / "run.json"), "versions")
+        if isinstance(found, dict):
+            return found
+    import platform
+    from importlib import metadata
+
+    versions: dict[str, Any] = {"python": platform.python_version(), "backend": None}
+    for name in ("jaxais", "jax", "jaxlib", "numpy"):
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = None
+    return versions
+
+
+def _run_seed(out: Path, s: int, settings: dict, run: Runner, logs: bool, note, stop) -> bool:
+    """Seed ``s``'s LTL and STL, each unless done. Returns whether the STL ran."""
+    ltl, stl, marker = _paths(out, s)
+    if _stl_done(out, s, settings):
+        return False
+
+    def log(stage: str) -> Path | None:
+        return out / "logs" / f"seed_{s}.{stage}.log" if logs else None
+
+    def failed(stage: str, script: str, code: int) -> SeedRunError:
+        where = f"see {log(stage.lower())}" if logs else "see its messages above"
+        return SeedRunError(s, stage, f"the {stage} ({script}) failed, exit status {code}; {where}")
+
+    state = ltl_state(ltl)
+    if state != "done":
+        cmd = [sys.executable, str(SCRIPTS_DIR / "evolve.py"), "--out", str(ltl), "--seed", str(s)]
+        note(f"seed {s}: LTL {'resumed' if state == 'resume' else 'started'} ({ltl})")
+        code = run(cmd + ["--resume"] * (state == "resume"), log("ltl"))
+        if code != 0:
+            raise failed("LTL", "scripts/evolve.py", code)
+        if not (ltl / "seed" / "seed.json").is_file():
+            raise SeedRunError(s, "LTL", f"scripts/evolve.py exited 0 but wrote no {ltl}/seed")
+    if stop.is_set():
+        return False
+    marker.unlink(missing_ok=True)
+    if stl.exists():
+        shutil.rmtree(stl)  # a partial run: reproduce.py is deterministic, so run it again
+    cmd = [sys.executable, str(SCRIPTS_DIR / "reproduce.py"), "--seeds", str(ltl / "seed"),
+           "--out", str(stl), "--seed", str(s), "--no-baseline"]  # fmt: skip
+    if settings["trials"] is not None:
+        cmd += ["--trials", str(settings["trials"])]
+    note(f"seed {s}: STL started ({stl})")
+    t = time.perf_counter()
+    code = run(cmd + settings["extra_args"], log("stl"))
+    if code != 0:
+        raise failed("STL", "scripts/reproduce.py", code)
+    if not (stl / "report.md").is_file():
+        raise SeedRunError(s, "STL", f"scripts/reproduce.py exited 0 but wrote no {stl}/report.md")
+    marker.parent.mkdir(parents=True, exist_ok=True)
+    doc = {"seed": s, "settings": settings, "stl_wall_s": round(time.perf_counter() - t, 3)}
+    atomic_write_json(marker, doc)
+    return True
+
+
+def ltl_ledger(
+    out: str | Path,
+    seeds: Iterable[int] = range(10),
+    trials: int | None = None,
+    jobs: int = 1,
+    extra_args: Sequence[str] = (),
+    progress: bool = True,
+    *,
+    command: str | None = None,
+    runner: Runner | None = None,
+) -> dict[str, Any]:
+    """Run the LTL and the paper's protocol on every seed (each unless done) and tabulate them.
+
+    Args:
+        out: the output folder (created if missing); see the module docstring for its layout.
+        seeds: the GA seeds (each also the STL's trial seed).
+        trials: reproduce.py's ``--trials`` (default: the paper's counts).
+        jobs: how many seeds' pipelines run side by side; with more than one, each subprocess
+            writes to ``OUT/logs/seed_s.{ltl,stl}.log`` instead of this terminal.
+        extra_args: further reproduce.py flags (``--worlds``, ``--tau-cap``, ...).
+        progress: print a line on stderr as each stage starts and each seed ends.
+        command: how the ledger was started, for its records (default: this call).
+        runner: runs one subprocess (tests inject one); default: a child process of this one.
+
+    Returns:
+        The ledger (``seeds.json``'s document) over the requested seeds that are done.
+
+    Raises:
+        ValueError: bad arguments, missing scripts, or ``out`` made with other settings.
+        SeedRunError: a subprocess failed (after the seeds already running finished; the
+            ledger of the finished seeds is written).
+    """
+    out, seeds = Path(out), list(seeds)
+    if not seeds or len(set(seeds)) != len(seeds):
+        raise ValueError(f"seeds must be distinct and at least one, got {seeds}")
+    if any(not isinstance(s, int) or isinstance(s, bool) or not 0 <= s <= MAX_SEED for s in seeds):
+        raise ValueError(f"seeds must be integers in [0, {MAX_SEED}], got {seeds}")
+    if trials is not None and trials < 2:
+        raise ValueError(f"trials must be >= 2 (t-tests need two per group), got {trials}")
+    if jobs < 1:
+        raise ValueError(f"jobs must be >= 1, got {jobs}")
+    extra = [str(a) for a in extra_args]
+    if any(a.split("=")[0] in RESERVED for a in extra):
+        raise ValueError(f"extra_args may not set {', '.join(RESERVED)} (the ledger sets them)")
+    missing = [n for n in ("evolve.py", "reproduce.py") if not (SCRIPTS_DIR / n).is_file()]
+    if missing:
+        raise ValueError(f"{SCRIPTS_DIR}: no {' or '.join(missing)}; the ledger runs the "
+                         "scripts of a source checkout (pip install -e .)")  # fmt: skip
+    settings = {"trials": trials, "extra_args": extra}
+    if command is None:
+        command = f"ltl_ledger({str(out)!r}, seeds={seeds}, trials={trials}, extra_args={extra})"
+    out.mkdir(parents=True, exist_ok=True)
+    for s in seeds:
+        _stl_done(out, s, settings)  # other settings in out: fail before anything runs
+    lock, stop, procs = threading.Lock(), threading.Event(), _Processes()
+    run = runner or procs
+
+    def note(text: str) -> None:
+        if progress:
+            print(text, file=sys.stderr, flush=True)
+
+    def write() -> dict[str, Any]:
+        with lock:
+            done = {s: _documents(out, s) for s in seeds if _stl_done(out, s, settings)}
+            summary = summarise(done, seeds) | {"command": command}
+            atomic_write_json(out / "seeds.json", summary)
+            atomic_write_text(out / "seeds.md", markdown(summary))
+            run_doc = {"command": command, "seeds": seeds, "jobs": jobs, **settings}
+            run_doc["versions"] = _versions(out, done)
+            run_doc["wall_s"] = {str(s): d["wall_s"] for s, d in done.items()}
+            atomic_write_json(out / "run.json", run_doc)
+            return summary
+
+    def pipeline(s: int) -> None:
+        try:
+            if stop.is_set() or not _run_seed(out, s, settings, run, jobs > 1, note, stop):
+                return
+        except BaseException:
+            stop.set()  # here, before this worker takes the next seed
+            raise
+        note(f"seed {s}: done; {headline(write())}")
+
+    write()
+    pool, errors = ThreadPoolExecutor(max_workers=jobs), []
+    try:
+        futures = [pool.submit(pipeline, s) for s in seeds]
+        for future in as_completed(futures):
+            try:
+                future.result()
+            except Exception as err:  # the seeds already running finish; no new one starts
+                errors.append(err)
+    except BaseException:
+        stop.set()
+        procs.stop()
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+    if errors:
+        raise errors[0]
+    return write()

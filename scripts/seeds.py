@@ -1,0 +1,69 @@
+"""The paper's claims across LTL seeds: the whole protocol on N fresh seeds, one ledger.
+
+    python scripts/seeds.py --out DIR                          # LTL seeds 0-9, paper's trials
+    python scripts/seeds.py --out DIR --seeds 4 --first 10 --trials 10 --jobs 2
+
+For each seed s: scripts/evolve.py --out DIR/ltl/seed_s --seed s (the LTL, its defaults), then
+scripts/reproduce.py --seeds DIR/ltl/seed_s/seed --out DIR/stl/seed_s --seed s --no-baseline.
+Writes DIR/seeds.json and DIR/seeds.md (per seed: claims held, H1-H4, SIE's and SRL's failure
+rates and lock-up times, SIE's difference rate; per claim: on how many seeds it holds), rebuilt
+after every seed, and DIR/run.json. Run the same command again to go on after an interruption:
+finished seeds are kept, an interrupted LTL resumes exactly, an interrupted STL runs again
+(jaxais.experiments.seeds says how a seed is judged done).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from jaxais.cli import ArgumentParser, UserError, check_writable_dir, main_wrapper, run_script
+from jaxais.experiments.seeds import MAX_SEED, SeedRunError, headline, ltl_ledger
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    p = ArgumentParser(prog="seeds.py", description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", required=True, help="output directory (created if missing)")
+    p.add_argument("--seeds", type=int, default=10, help="how many LTL seeds (default 10)")
+    p.add_argument("--first", type=int, default=0, help="the first seed (default 0)")
+    p.add_argument(
+        "--trials", type=int, default=None, help="trials per system and world (default: paper's)"
+    )
+    p.add_argument("--jobs", type=int, default=1, help="seeds run side by side (default 1)")
+    return p.parse_args(argv)
+
+
+@main_wrapper("seeds.py", extra=(SeedRunError,))
+def main(argv: list[str] | None = None) -> dict:
+    args = parse_args(argv)
+    if args.seeds < 1:
+        raise UserError(f"--seeds must be >= 1, got {args.seeds}")
+    if not 0 <= args.first <= MAX_SEED - args.seeds + 1:
+        raise UserError(f"--first must be in [0, {MAX_SEED - args.seeds + 1}], got {args.first}")
+    if args.trials is not None and args.trials < 2:
+        raise UserError(f"--trials must be >= 2 (t-tests need two per group), got {args.trials}")
+    if args.jobs < 1:
+        raise UserError(f"--jobs must be >= 1, got {args.jobs}")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"{out}: not a directory")
+    out.mkdir(parents=True, exist_ok=True)
+    check_writable_dir(out)
+
+    from jaxais.experiments.records import portable_command
+
+    words = sys.argv[1:] if argv is None else argv
+    summary = ltl_ledger(
+        out,
+        range(args.first, args.first + args.seeds),
+        trials=args.trials,
+        jobs=args.jobs,
+        command=portable_command("seeds.py " + " ".join(words)),
+    )
+    print(f"{headline(summary)}; wrote {out / 'seeds.md'}")
+    return summary
+
+
+if __name__ == "__main__":
+    run_script(main)

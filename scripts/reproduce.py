@@ -239,7 +239,8 @@ def main(argv: list[str] | None = None) -> None:
         for label, trial_set in results.items():
             doc = results_document(label, name, args.seed, trial_set, cfg)
             atomic_write_json(out / "trials" / f"{name}_{label}.json", doc)
-        doc = results_document(calibrated, name, args.seed, calibration, cfg)
+        hold1_cfg = {**cfg, "readings": {**cfg["readings"], "hold": 1}}
+        doc = results_document(calibrated, name, args.seed, calibration, hold1_cfg)
         atomic_write_json(out / "trials" / f"{name}_SIE_hold1.json", doc)
         for label, trial_set in baseline_by_world.get(name, {}).items():
             # The run's config without the network's parts, with what made the weights.

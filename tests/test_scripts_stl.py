@@ -35,6 +35,7 @@ RECORD_KEYS = {
     "failed_time",
     "failed_by",
     "trapped_s",
+    "locked_s",
     "idiotypic_difference_rate",
     "iterations",
 }
@@ -47,6 +48,7 @@ SUMMARY_KEYS = {
     "failed_by_collisions",
     "failed_by_time",
     "trapped_s",
+    "locked_s",
     "idiotypic_difference_rate",
 }
 
@@ -240,7 +242,16 @@ def test_reproduce_end_to_end(runs):
     for name in figures:
         assert name in report  # every figure is shown in the report
     trial_files = sorted(p.name for p in (out / "trials").iterdir())
-    assert trial_files == sorted(f"world1_{label}.json" for label in (*LABELS, "NN"))
+    want = [f"world1_{label}.json" for label in (*LABELS, "NN")] + ["world1_SIE_hold1.json"]
+    assert trial_files == sorted(want)
+    # SIE with a selection every iteration: the calibration point, beside the paper's 20 %.
+    hold1 = json.loads((out / "trials" / "world1_SIE_hold1.json").read_text())
+    assert hold1["label"] == "SIE@hold=1" and hold1["config"]["readings"]["hold"] == 1
+    assert all(r["idiotypic_difference_rate"] is not None for r in hold1["trials"])
+    cal = tables["calibration"]
+    assert (cal["k1"], cal["k2"], cal["paper_percent"]) == (0.85, 1.1, 20)
+    assert set(cal["worlds"]["world1"]) == {"default", "hold=1"}
+    assert "### The calibration point" in report and "### Lock-ups" in report
     # The shipped neural baseline ran beside SIE and HDC, under the same protocol.
     nn = json.loads((out / "trials" / "world1_NN.json").read_text())
     assert len(nn["trials"]) == 2 and nn["config"]["episode"]["tau_cap"] == 10.0

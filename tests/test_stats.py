@@ -304,7 +304,7 @@ def test_build_tables_is_plain_json():
         "hypotheses",
     }
     assert tables["trapped_s"]["world1"]["SIE"] == 2.0
-    assert tables["locked_s"]["world1"]["SIE"] is None  # these records have no lock-up times
+    assert tables["locked_s"]["world1"]["SIE"] == 0.0
     assert tables["table4"]["world2"]["SIE vs SRL"]["tau"] == 100
     assert tables["table3_ci"] == stats.table3_ci(res)
     assert tables["table3_ci"]["world2"]["SIE"]["tau"] == [10.0, 10.0]

@@ -399,12 +399,14 @@ def test_the_selections_tie_breaks_are_not_the_new_bouts_numbers(idiotypic):
 
 
 def reference_select(P, I, N, m, k1=0.85, k2=1.10, b=100.0, k3=0.0, Phi=25.0):
-    """Eqs (5)-(10) for one antigen m (float64, no ties assumed)."""
+    """Eqs (5)-(10) for one antigen m (float64, no ties assumed); alpha acts on the other sets
+    only (section 4.3), so its own eps and delta are 0."""
     P, I, N = (np.asarray(a, np.float64) for a in (P, I, N))
     C = Phi * N / N.sum() if N.sum() > 0 else np.zeros_like(N)
     n = int(np.argmax(P[:, m]))
-    eps = k1 * np.sum((1 - P) * I[n] * C * C[n], axis=1)
-    delta = k2 * np.sum(P[n] * I * C * C[n], axis=1)
+    others = np.arange(P.shape[0]) != n
+    eps = others * k1 * np.sum((1 - P) * I[n] * C * C[n], axis=1)
+    delta = others * k2 * np.sum(P[n] * I * C * C[n], axis=1)
     s2 = P[:, m] + eps - delta
     N2 = N.copy()
     N2[:, m] = np.maximum(b * s2 + N[:, m] * (1 - k3), 0.0)
@@ -437,8 +439,8 @@ def test_idiotypic_selection_matches_reference_and_counts_differences(seed, m):
 
 def test_idiotypic_stimulation_can_overturn_alpha():
     """Hand-worked: alpha = set 0 (P 0.6) has its idiotope on antigen 5, where set 1's paratope
-    is 0: set 1 is stimulated (eps_1 = 0.85 * 0.625^2 = 0.332), set 0 suppressed by its own
-    idiotope (delta_0 = 1.1 * 0.625^2 = 0.430), so beta = set 1 (S2 0.83 vs 0.17)."""
+    is 0: set 1 is stimulated (eps_1 = 0.85 * 0.625^2 = 0.332) past alpha, whose own S2 stays
+    its P (alpha acts on the others only), so beta = set 1 (S2 0.83 vs 0.6)."""
     P = np.full((F.X, F.Y), 0.2)
     P[0, 2], P[1, 2] = 0.6, 0.5
     P[0, 5], P[1, 5] = 1.0, 0.0
@@ -452,7 +454,7 @@ def test_idiotypic_stimulation_can_overturn_alpha():
         F.state(F.system(idiotypic=True), P, I=I), F.percept(m=2), F.system(idiotypic=True)
     )
     np.testing.assert_allclose(float(out.N[1, 2]), 1000 + 100 * (0.5 + 0.85 * 0.625**2), rtol=1e-5)
-    np.testing.assert_allclose(float(out.N[0, 2]), 1000 + 100 * (0.6 - 1.1 * 0.625**2), rtol=1e-5)
+    np.testing.assert_allclose(float(out.N[0, 2]), 1000 + 100 * 0.6, rtol=1e-5)
 
 
 def test_clone_counts_are_floored_at_zero_under_sustained_suppression():

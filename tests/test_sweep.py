@@ -87,6 +87,8 @@ def test_parse_axis_forms():
     name, values = sweep.parse_axis("hold=1,10,31")
     assert name == "hold" and values.dtype == np.int32 and values.tolist() == [1, 10, 31]
     assert sweep.parse_axis("k2=1.1")[1].tolist() == [1.1]
+    name, values = sweep.parse_axis("alpha_on_self=0,1")  # the network's earlier reading
+    assert values.dtype == bool and values.tolist() == [False, True]
 
 
 @pytest.mark.parametrize(
@@ -101,6 +103,7 @@ def test_parse_axis_forms():
         ("kk1=0:1:2", "unknown parameter"),
         ("idiotope_period=60,120", "not traced"),
         ("hold=1.5,2", "integer parameter"),
+        ("alpha_on_self=0,2", "a switch, 0 .off. or 1 .on."),
     ],
 )
 def test_parse_axis_errors_say_what_is_wrong(spec, message):
@@ -118,10 +121,11 @@ def test_grid_points_are_the_product_with_the_last_axis_fastest():
 
 def test_point_systems_set_each_value_and_keep_dtypes():
     sie = F.systems()["SIE"]
-    points = [{"k1": 0.5, "hold": 3}, {"k1": 1.5, "hold": 7}]
+    points = [{"k1": 0.5, "hold": 3}, {"k1": 1.5, "hold": 7, "alpha_on_self": True}]
     grid = sweep.point_systems(sie, points)
     np.testing.assert_allclose(grid.network.k1, [0.5, 1.5])
     assert grid.readings.hold.tolist() == [3, 7]
+    assert grid.readings.alpha_on_self.tolist() == [False, True]
     assert grid.readings.hold.dtype == np.asarray(sie.readings.hold).dtype
     np.testing.assert_array_equal(grid.paratopes[1], np.asarray(sie.paratopes))
     with pytest.raises(ValueError, match="k1 must be >= 0"):

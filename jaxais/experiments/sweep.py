@@ -47,6 +47,7 @@ PARAMETERS: dict[str, tuple[str, type]] = {
     "hold": ("readings", int),
     "encounter_gap": ("readings", int),
     "sigma0_floor": ("readings", float),
+    "alpha_on_self": ("readings", bool),
 }
 """Sweepable parameters: name -> (the System field that holds it, its type)."""
 
@@ -68,7 +69,8 @@ PAPER_POINT = {"k1": 0.85, "k2": 1.10}
 
 
 def parse_axis(spec: str) -> tuple[str, np.ndarray]:
-    """``"k1=0:2:11"`` (11 points from 0 to 2) or ``"k1=0.5,0.85,1.1"`` -> (name, values).
+    """``"k1=0:2:11"`` (11 points from 0 to 2) or ``"k1=0.5,0.85,1.1"`` -> (name, values); a
+    switch (``alpha_on_self=0,1``) takes 0 and 1.
 
     Raises:
         ValueError: one line naming the bad part and the accepted forms.
@@ -101,6 +103,10 @@ def parse_axis(spec: str) -> tuple[str, np.ndarray]:
         if not np.all(grid == np.round(grid)):
             raise ValueError(f"--grid {name}: an integer parameter, got {values}")
         grid = grid.astype(np.int32)
+    if kind is bool:
+        if not np.all((grid == 0) | (grid == 1)):
+            raise ValueError(f"--grid {name}: a switch, 0 (off) or 1 (on), got {values}")
+        grid = grid.astype(bool)
     return name, grid
 
 

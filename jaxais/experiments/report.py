@@ -464,21 +464,14 @@ def _unseeded_section(
     ]
     if not pairs:
         return []
-
-    def mean(w: str, label: str, key: str) -> float | None:
-        values = [t.get(key) for t in results_by_world[w][label]]
-        values = [float(v) for v in values if v is not None]
-        return float(np.mean(values)) if values else None
-
+    replaced = stats.record_means(results_by_world, "replaced")
     body = []
     for w, r in pairs:
         row = [w, r]
         for label in (f"UIE-{r}", f"URL-{r}"):
             f = tables["table3"][w][label]["f"]
-            row.append(
-                f"{_num(f)} / {_num(mean(w, label, 'replaced'), 1)} / "
-                f"{_num(mean(w, label, 'trapped_s'))}"
-            )
+            trapped = tables["trapped_s"][w][label]
+            row.append(f"{_num(f)} / {_num(replaced[w][label], 1)} / {_num(trapped)}")
         body.append(row)
     return [
         "### Unseeded systems: UIE against URL",

@@ -343,3 +343,10 @@ def test_script_flag_errors_are_one_line(tmp_path):
         assert stderr.count("\n") == 1 and stderr.startswith("seeds.py: error: "), stderr
         assert cases[key] in stderr, stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_a_damaged_results_file_of_a_done_seed_is_named(tmp_path):
+    ledger(tmp_path, FakeScripts(), seeds=[0])
+    (tmp_path / "stl" / "seed_0" / "tables.json").write_bytes(b"\x00\x9f not json")
+    with pytest.raises(ValueError, match=r"seed_0/tables.json: missing or not JSON; remove .*"):
+        ledger(tmp_path, FakeScripts(), seeds=[0])

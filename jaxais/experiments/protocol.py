@@ -15,11 +15,14 @@ of JAX: the scripts check their flags against it before JAX starts.
 from __future__ import annotations
 
 import argparse
+import json
+from importlib import resources
 
 from jaxais.labels import LABELS, parse_label
 
 __all__ = [
     "add_cap_arguments",
+    "load_paper_tables",
     "ALPHA",
     "COLLISION_CAP",
     "COMPARISONS",
@@ -114,3 +117,16 @@ def add_cap_arguments(parser: argparse.ArgumentParser) -> None:
         default=COLLISION_CAP,
         help=f"collision cap [paper: {COLLISION_CAP}]",
     )
+
+
+def load_paper_tables() -> dict:
+    """The paper's Tables 3, 4, 5 (+ notes, source, hypotheses, protocol) from package data.
+
+    Returns:
+        ``{"source": str, "notes": [str], "table3": {world: {system: {"c","tau","f"}}},
+        "table4": {world: {"A vs B": {"c","tau","f"}}}, "table5": {world: {system:
+        {"c","tau","total"}}}, "table5_mean": {system: {...}}, "hypotheses": {"H1": {"supported",
+        "statement", "paper_says"}, ...}, "protocol": {...}}``.
+    """
+    text = resources.files("jaxais").joinpath("data/paper_tables.json").read_text("utf-8")
+    return json.loads(text)

@@ -3,7 +3,8 @@ tests and figures.
 
 Figures are drawn with matplotlib's object-oriented API on the Agg canvas (no pyplot, no
 display, no global backend change). The paper's tables ship as package data and are loaded with
-:func:`load_paper_tables`. Worlds, systems and Table 4's comparisons appear in the order of
+:func:`load_paper_tables` (:mod:`jaxais.experiments.protocol`'s, also importable from here).
+Worlds, systems and Table 4's comparisons appear in the order of
 :mod:`jaxais.experiments.protocol`.
 """
 
@@ -12,7 +13,6 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Mapping, Sequence
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +21,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from . import claims, protocol, stats
+from .protocol import load_paper_tables
 
 __all__ = ["load_paper_tables", "ordering_differences", "write_report"]
 
@@ -38,19 +39,6 @@ _LEVEL = f"{100 * stats.CI_LEVEL:g} %"
 """The confidence level of the report's intervals, as text."""
 _SIG_LEVEL = stats.significance_level(protocol.ALPHA)
 """Table 4's level at the paper's significance threshold (99)."""
-
-
-def load_paper_tables() -> dict:
-    """The paper's Tables 3, 4, 5 (+ notes, source, hypotheses, protocol) from package data.
-
-    Returns:
-        ``{"source": str, "notes": [str], "table3": {world: {system: {"c","tau","f"}}},
-        "table4": {world: {"A vs B": {"c","tau","f"}}}, "table5": {world: {system:
-        {"c","tau","total"}}}, "table5_mean": {system: {...}}, "hypotheses": {"H1": {"supported",
-        "statement", "paper_says"}, ...}, "protocol": {...}}``.
-    """
-    text = resources.files("jaxais").joinpath("data/paper_tables.json").read_text("utf-8")
-    return json.loads(text)
 
 
 # --------------------------------------------------------------------------- small helpers

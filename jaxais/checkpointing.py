@@ -156,7 +156,7 @@ class GACheckpointer:
     ):
         import orbax.checkpoint as ocp
 
-        from jaxais.cli import atomic_write_json
+        from jaxais.io import atomic_write_json
 
         if max_to_keep < 2:
             raise ValueError(f"max_to_keep must be >= 2, got {max_to_keep}")

@@ -52,7 +52,7 @@ from jax.flatten_util import ravel_pytree
 
 from jaxais import envs
 from jaxais.baselines.config import TrainConfig
-from jaxais.cli import atomic_write, atomic_write_json
+from jaxais.io import atomic_write, atomic_write_json
 from jaxais.controllers import Controller, Percept
 from jaxais.envs.gymnax import IR_FULL_SCALE, OBS_NAMES, PIXELS
 from jaxais.envs.struct import pytree_dataclass

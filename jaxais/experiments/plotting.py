@@ -32,7 +32,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Rectangle
 
-from jaxais.cli import atomic_write
+from jaxais.io import atomic_write
 from jaxais.envs import GOAL, MARKER, WALL, State, World
 
 __all__ = [

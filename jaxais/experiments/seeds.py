@@ -40,7 +40,7 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
-from jaxais.cli import atomic_write_json, atomic_write_text
+from jaxais.io import atomic_write_json, atomic_write_text
 from jaxais.console import SCRIPTS_DIR
 
 __all__ = ["SeedRunError", "headline", "ltl_ledger", "ltl_state", "markdown", "summarise"]

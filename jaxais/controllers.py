@@ -38,15 +38,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxais.envs.struct import pytree_dataclass
-from jaxais.immune.antibodies import N_ATTRIBUTES, Antibodies, _antibodies, take
+from jaxais.immune.antibodies import N_ATTRIBUTES, Antibodies, from_uniforms, take
 from jaxais.immune.antigens import is_collision, is_obstacle_or_collision
-from jaxais.immune.behaviours import MAX_WHEEL_SPEED, _wheel_speeds
+from jaxais.immune.behaviours import MAX_WHEEL_SPEED, wheel_speeds
 from jaxais.immune.network import (
     NetworkParams,
-    _idiotypic_select,
-    _select_alpha,
     idiotopes,
+    idiotypic_select,
     rescale_paratopes,
+    select_alpha,
 )
 from jaxais.immune.readings import DEFAULT, Readings
 from jaxais.immune.reinforcement import (
@@ -239,7 +239,7 @@ def ltl_controller(readings: Readings = DEFAULT) -> Controller:
         del antibodies
         _, bout = _next_bout(state.bout, pc, jax.random.uniform(key, (2,)), readings.hold)
         ab = take(state.antibodies, bout.antigen)
-        wheels = _wheel_speeds(bout.u, ab, pc.blue_pixels, pc.centroid)
+        wheels = wheel_speeds(bout.u, ab, pc.blue_pixels, pc.centroid)
         return state.replace(bout=bout), wheels
 
     return Controller(init=init, learn=learn, act=act)
@@ -361,7 +361,7 @@ def stl_controller(
                 # One draw: past the x * y values that the idiotope's redraw below draws from
                 # this key, the new antibody's seven values, then its paratope's.
                 u = jax.random.uniform(key, (P.size + 1 + N_ATTRIBUTES + 1,))[P.size :]
-                fresh = _antibodies(u[:-1])
+                fresh = from_uniforms(u[:-1])
                 antibodies = jax.tree.map(
                     lambda old, new: jnp.where(first, new, old), antibodies, fresh
                 )
@@ -389,7 +389,7 @@ def stl_controller(
         u = jax.random.uniform(key, (2 + 2 * x,))  # a new bout's, then the tie-breaks
         select, bout = _next_bout(s.bout, pc, u[:2], system.readings.hold)
         if idiotypic:
-            alpha, beta, N = _idiotypic_select(
+            alpha, beta, N = idiotypic_select(
                 u[2:], s.P, s.I, s.N, pc.m, system.network, system.readings.alpha_on_self
             )
             idio = system.idiotypic
@@ -400,7 +400,7 @@ def stl_controller(
                 differences=s.differences + differ.astype(jnp.int32),
             )
         else:  # no run in the batch is idiotypic: stage 1 alone, the clones never change
-            chosen = _select_alpha(u[2 : 2 + x], s.P, pc.m)  # the alpha of the stages above
+            chosen = select_alpha(u[2 : 2 + x], s.P, pc.m)  # the alpha of the stages above
         acting = jnp.where(select, chosen, s.acting).astype(jnp.int32)
         column = select & (jnp.arange(s.chosen.shape[0]) == pc.m)
         s = s.replace(
@@ -410,7 +410,7 @@ def stl_controller(
             chosen=jnp.where(column, acting, s.chosen),
         )
         ab = take(s.antibodies, (acting, bout.antigen))
-        return s, _wheel_speeds(bout.u, ab, pc.blue_pixels, pc.centroid)
+        return s, wheel_speeds(bout.u, ab, pc.blue_pixels, pc.centroid)
 
     def stats(s: STLState, system: System):
         rate = s.differences / jnp.maximum(s.selections, 1)

@@ -19,14 +19,21 @@ from jaxais.immune.antibodies import (
 from jaxais.immune.behaviours import MAX_WHEEL_SPEED, wheel_speeds
 
 N = 20000
-_speeds = jax.jit(wheel_speeds)
+
+
+def _keyed(key, ab, pixels, centroid):
+    """``wheel_speeds`` with its two uniforms drawn from ``key``."""
+    return wheel_speeds(jax.random.uniform(key, (2,)), ab, pixels, centroid)
+
+
+_speeds = jax.jit(_keyed)
 
 
 @jax.jit
 def _batch(key: jax.Array, abs_: Antibodies, pixels: jnp.ndarray, centroid: jnp.ndarray):
     """``vmap(wheel_speeds)`` over N robots with split keys; also each robot's two uniforms."""
     keys = jax.random.split(key, N)
-    speeds = jax.vmap(wheel_speeds)(keys, abs_, pixels, centroid)
+    speeds = jax.vmap(_keyed)(keys, abs_, pixels, centroid)
     return speeds, keys, jax.vmap(lambda k: jax.random.uniform(k, (2,)))(keys)
 
 

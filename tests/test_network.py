@@ -32,8 +32,17 @@ idiotopes = jax.jit(nw.idiotopes)
 idiotopes_many_keys = jax.jit(jax.vmap(nw.idiotopes, in_axes=(0, None)))
 rescale_paratopes = jax.jit(nw.rescale_paratopes)
 concentrations = jax.jit(nw.concentrations)
-tiebreak_many_keys = jax.jit(jax.vmap(nw.random_tiebreak_argmax, in_axes=(0, None)))
-select_alpha = jax.jit(nw.select_alpha)
+tiebreak_many_keys = jax.jit(
+    jax.vmap(lambda key, v: nw.argmax_ties(v, jax.random.uniform(key, v.shape)), in_axes=(0, None))
+)
+
+
+def _uniforms(key, P, stages=2):
+    """The selection's draw from ``key``: ``stages * x`` uniforms, as the controller makes."""
+    return jax.random.uniform(key, (stages * np.shape(P)[0],))
+
+
+select_alpha = jax.jit(lambda key, P, m: nw.select_alpha(_uniforms(key, P, 1), P, m))
 stimulation_suppression = jax.jit(nw.stimulation_suppression)
 
 # Traces of idiotypic_select per input shape, to prove new values never retrace it.
@@ -42,12 +51,16 @@ SELECT_TRACES: Counter[tuple[int, ...]] = Counter()
 
 def _select_counting_traces(key, P, I, N, antigen, params):
     SELECT_TRACES[np.shape(P)] += 1
-    return nw.idiotypic_select(key, P, I, N, antigen, params)
+    return nw.idiotypic_select(_uniforms(key, P), P, I, N, antigen, params)
+
+
+def _select(key, P, I, N, antigen, params, alpha_on_self=False):
+    return nw.idiotypic_select(_uniforms(key, P), P, I, N, antigen, params, alpha_on_self)
 
 
 idiotypic_select = jax.jit(_select_counting_traces)
-idiotypic_select_reading = jax.jit(nw.idiotypic_select)
-idiotypic_select_batch = jax.jit(jax.vmap(nw.idiotypic_select))
+idiotypic_select_reading = jax.jit(_select)
+idiotypic_select_batch = jax.jit(jax.vmap(_select))
 
 hyp = settings(max_examples=30, deadline=None)
 # XLA on CPU flushes subnormal floats to zero, so they are left out of generated inputs.
@@ -568,7 +581,7 @@ def test_runs_under_scan():
     def step(carry, inputs):
         P, N = carry
         m, reward, key = inputs
-        alpha, beta, N = nw.idiotypic_select(key, P, I, N, m, PARAMS)
+        alpha, beta, N = nw.idiotypic_select(_uniforms(key, P), P, I, N, m, PARAMS)
         P = P.at[beta, m].set(jnp.clip(P[beta, m] + reward, 0.0, 1.0))
         return (nw.rescale_paratopes(P, sigma0), N), alpha != beta
 

@@ -20,7 +20,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxais.controllers import STL, interrupts
-from jaxais.immune.antibodies import _antibodies, take, within_limits
+from jaxais.immune.antibodies import from_uniforms, take, within_limits
 from jaxais.immune.behaviours import wheel_speeds
 from jaxais.immune.network import idiotopes
 from jaxais.immune.readings import LITERAL, readings
@@ -296,7 +296,7 @@ def test_replacement_one_weak_antibody_per_iteration():
             assert changed.sum() == 1 and changed[i, j]
             new = take(out.antibodies, (i, j))
             assert bool(within_limits(new))
-            assert tree_close(new, _antibodies(u[:7]))
+            assert tree_close(new, from_uniforms(u[:7]))
             assert 0.25 <= P_of(out)[i, j] <= 0.75
             np.testing.assert_allclose(P_of(out)[i, j], 0.25 + 0.5 * float(u[7]), rtol=1e-6)
         assert int(out.replaced) == min(step + 1, 2)
@@ -371,7 +371,9 @@ def test_non_idiotypic_selection_acts_with_alpha(seed, m, blue, centroid):
     # the act's key.
     assert not tree_equal(out.bout.u, s.bout.u)
     ab = take(sys_.antibodies, (alpha, m))
-    expected = wheel_speeds(jax.random.key(seed % 101), ab, blue, centroid)
+    expected = wheel_speeds(
+        jax.random.uniform(jax.random.key(seed % 101), (2,)), ab, blue, centroid
+    )
     np.testing.assert_allclose(np.asarray(wheels), np.asarray(expected), rtol=1e-6)
 
 
@@ -549,7 +551,9 @@ def test_a_selected_behaviour_acts_for_its_bout_then_is_selected_again():
             bout_u = s.bout.u
         assert tree_equal(s.bout.u, bout_u) == (k <= 4)
     assert int(s.selections) == 2
-    expected = wheel_speeds(jax.random.key(1), take(sys_.antibodies, (3, 5)), 0, 7.0)
+    expected = wheel_speeds(
+        jax.random.uniform(jax.random.key(1), (2,)), take(sys_.antibodies, (3, 5)), 0, 7.0
+    )
     for w in wheels[:4]:  # the behaviour acts on the numbers of its selection's key
         np.testing.assert_allclose(w, expected, rtol=1e-6)
 

@@ -52,11 +52,11 @@ from jax.flatten_util import ravel_pytree
 
 from jaxais import envs
 from jaxais.baselines.config import TrainConfig
-from jaxais.io import atomic_write, atomic_write_json
 from jaxais.controllers import Controller, Percept
 from jaxais.envs.gymnax import IR_FULL_SCALE, OBS_NAMES, PIXELS
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.immune.behaviours import MAX_WHEEL_SPEED
+from jaxais.io import atomic_write, atomic_write_json
 
 __all__ = [
     "CONFIG_FILE",

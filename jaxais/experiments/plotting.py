@@ -32,8 +32,8 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Rectangle
 
-from jaxais.io import atomic_write
 from jaxais.envs import GOAL, MARKER, WALL, State, World
+from jaxais.io import atomic_write
 
 __all__ = [
     "MATERIAL_COLOURS",

@@ -40,8 +40,8 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
-from jaxais.io import atomic_write_json, atomic_write_text
 from jaxais.console import SCRIPTS_DIR
+from jaxais.io import atomic_write_json, atomic_write_text
 
 __all__ = ["SeedRunError", "headline", "ltl_ledger", "ltl_state", "markdown", "summarise"]
 

@@ -52,6 +52,7 @@ __all__ = [
     "canonical",
     "from_dicts",
     "from_matrix",
+    "from_uniforms",
     "mutate",
     "sample_antibodies",
     "sample_attributes",
@@ -241,12 +242,12 @@ def sample_antibodies(key: jax.Array, shape: int | tuple[int, ...] = (N_ANTIGENS
             the STL's five sets.
     """
     shape = (shape,) if isinstance(shape, int) else tuple(shape)
-    return _antibodies(_uniform(key, shape + (1 + N_ATTRIBUTES,)))
+    return from_uniforms(_uniform(key, shape + (1 + N_ATTRIBUTES,)))
 
 
-def _antibodies(u: jnp.ndarray) -> Antibodies:
-    """:func:`sample_antibodies` given its draw ``u`` [..., 7] (the type, then the six
-    attributes), for a controller that slices it from a larger draw."""
+def from_uniforms(u: jnp.ndarray) -> Antibodies:
+    """The antibodies that :func:`sample_antibodies` makes from its draw ``u`` [..., 7] (the
+    type, then the six attributes); the STL controller slices ``u`` from its own draw."""
     type_ = _to_type(u[..., 0])
     return from_matrix(type_, _to_attributes(type_, u[..., 1:]))
 

@@ -12,7 +12,6 @@ left (reverse turn: the left wheel backs up slower, so the robot's rear swings r
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
 
 from jaxais.immune.antibodies import (
@@ -43,10 +42,7 @@ __all__ = [
 
 
 def wheel_speeds(
-    key: jax.Array,
-    ab: Antibodies,
-    blue_pixels: jnp.ndarray,
-    blue_centroid: jnp.ndarray,
+    u: jnp.ndarray, ab: Antibodies, blue_pixels: jnp.ndarray, blue_centroid: jnp.ndarray
 ) -> jnp.ndarray:
     """Left and right wheel speeds of one antibody for one iteration.
 
@@ -63,8 +59,8 @@ def wheel_speeds(
       (right) of column 7; straight when centred or when there are no blue pixels.
 
     Args:
-        key: typed PRNG key; one ``uniform(key, (2,))`` draw (used by the wander types only), so
-            the same key gives the same turn decision.
+        u: [2] i.i.d. uniforms for the wander types' turn decisions (the controllers draw them
+            once a bout, so a bout keeps its decision).
         ab: one antibody (scalar fields).
         blue_pixels: [] int number of blue pixels.
         blue_centroid: [] float mean column of the blue pixels (0 = leftmost, 14 = rightmost).
@@ -72,13 +68,6 @@ def wheel_speeds(
     Returns:
         [2] float32 (left, right) speeds, clipped to +-``MAX_WHEEL_SPEED``.
     """
-    return _wheel_speeds(jax.random.uniform(key, (2,)), ab, blue_pixels, blue_centroid)
-
-
-def _wheel_speeds(
-    u: jnp.ndarray, ab: Antibodies, blue_pixels: jnp.ndarray, blue_centroid: jnp.ndarray
-) -> jnp.ndarray:
-    """:func:`wheel_speeds` given its draw ``u`` [2] (the controllers draw it once a bout)."""
     t = ab.type
     speed = jnp.asarray(ab.speed, jnp.float32)
     angle = jnp.asarray(ab.angle, jnp.float32)

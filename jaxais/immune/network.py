@@ -1,8 +1,8 @@
 """The idiotypic immune network: equations (1)-(10) of Whitbrook et al. (SPEC section 7).
 
 Every function is written for one network of ``x`` antibody sets by ``y`` antigens (5 x 8 in the
-paper, never assumed here): pure, float32, fixed shapes, explicit PRNG keys, no Python branching
-on traced values, so callers batch robots, trials and parameter grids with ``vmap``.
+paper, never assumed here): pure, float32, fixed shapes, explicit PRNG keys (the selection
+stages take the caller's uniforms), no Python branching on traced values, so callers batch robots, trials and parameter grids with ``vmap``.
 
 Readings of the paper decided here:
 
@@ -35,17 +35,20 @@ from jaxais.envs.struct import pytree_dataclass, static_field
 
 __all__ = [
     "NetworkParams",
+    "activation",
+    "argmax_ties",
     "concentrations",
     "idiotopes",
     "idiotypic_select",
     "initial_clones",
     "network_params",
-    "random_tiebreak_argmax",
     "relative_fitness",
     "rescale_paratopes",
     "seed_paratopes",
     "select_alpha",
+    "stage2_stimulus",
     "stimulation_suppression",
+    "update_clones",
 ]
 
 
@@ -130,24 +133,15 @@ def network_params(**overrides: float | int) -> NetworkParams:
     return NetworkParams(**overrides).validate()
 
 
-def _argmax_ties(values: jax.Array, u: jax.Array) -> jax.Array:
+def argmax_ties(values: jax.Array, u: jax.Array) -> jax.Array:
     """Index of the largest of ``values`` [x]; among exact ties, the one with the largest of the
-    i.i.d. uniforms ``u`` [x] (so each tied index is equally likely to win)."""
-    values = jnp.asarray(values)
-    return jnp.argmax(jnp.where(values == jnp.max(values), u, -1.0)).astype(jnp.int32)
-
-
-def random_tiebreak_argmax(key: jax.Array, values: jax.Array) -> jax.Array:
-    """Index of the largest value, chosen uniformly at random among exact ties.
-
-    Args:
-        key: PRNG key (one uniform per value).
-        values: [x] scores.
+    i.i.d. uniforms ``u`` [x], so each tied index is equally likely to win [ours: ties].
 
     Returns:
         int32 scalar index.
     """
-    return _argmax_ties(values, jax.random.uniform(key, jnp.shape(values)))
+    values = jnp.asarray(values)
+    return jnp.argmax(jnp.where(values == jnp.max(values), u, -1.0)).astype(jnp.int32)
 
 
 def relative_fitness(tau: jax.Array, collisions: jax.Array, rho: float = 8.0) -> jax.Array:
@@ -260,23 +254,18 @@ def concentrations(N: jax.Array, Phi: float) -> jax.Array:
     return jnp.where(total > 0, Phi * N / jnp.where(total > 0, total, 1.0), 0.0)
 
 
-def select_alpha(key: jax.Array, P: jax.Array, antigen: jax.Array | int) -> jax.Array:
+def select_alpha(u: jax.Array, P: jax.Array, antigen: jax.Array | int) -> jax.Array:
     """Selection stage 1: the set whose antibody for ``antigen`` has the highest paratope.
 
     Args:
-        key: PRNG key for ties [ours]: one ``uniform(key, (x,))`` draw.
+        u: [x] i.i.d. uniforms that break ties (the caller's draw, see :func:`idiotypic_select`).
         P: [x, y] paratopes.
         antigen: index m of the presenting antigen.
 
     Returns:
         n: int32 set index of alpha = A_nm.
     """
-    return _select_alpha(jax.random.uniform(key, (jnp.shape(P)[0],)), P, antigen)
-
-
-def _select_alpha(u: jax.Array, P: jax.Array, antigen: jax.Array | int) -> jax.Array:
-    """:func:`select_alpha` given its draw ``u`` [x]."""
-    return _argmax_ties(jnp.asarray(P, jnp.float32)[:, antigen], u)
+    return argmax_ties(jnp.asarray(P, jnp.float32)[:, antigen], u)
 
 
 def stimulation_suppression(
@@ -313,8 +302,48 @@ def stimulation_suppression(
     return jnp.where(acted_on, eps, 0.0), jnp.where(acted_on, delta, 0.0)
 
 
+def stage2_stimulus(
+    P: jax.Array, eps: jax.Array, delta: jax.Array, antigen: jax.Array | int
+) -> jax.Array:
+    """Eq (9): S2_i = P_im + eps_i - delta_i, each set's stimulus for antigen m.
+
+    Returns:
+        S2: [x] float32.
+    """
+    return jnp.asarray(P, jnp.float32)[:, antigen] + eps - delta
+
+
+def update_clones(
+    N: jax.Array, s2: jax.Array, antigen: jax.Array | int, b: float, k3: float
+) -> jax.Array:
+    """Eq (5) for the presenting antigen's column: N_im <- b * S2_i + N_im * (1 - k3), floored
+    at 0 [ours: a strongly suppressed antibody would otherwise get a negative clone count].
+
+    Args:
+        N: [x, y] clone counts. s2: [x] stimuli (eq 9). antigen: column m.
+        b: stimulus-to-clones scale. k3: death rate.
+
+    Returns:
+        N: [x, y] float32; only column ``antigen`` differs.
+    """
+    N = jnp.asarray(N, jnp.float32)
+    column = jnp.maximum(b * s2 + N[:, antigen] * (1.0 - k3), 0.0)
+    # A one-hot column write, not a scatter: cheaper inside a batched loop.
+    in_column = jnp.arange(N.shape[1]) == antigen
+    return jnp.where(in_column[None, :], column[:, None], N)
+
+
+def activation(N: jax.Array, s2: jax.Array, antigen: jax.Array | int, Phi: float) -> jax.Array:
+    """Eq (10): lambda_i = C_im * S2_i, with C the concentrations (eq 6) of the updated clones.
+
+    Returns:
+        lambda: [x] float32.
+    """
+    return concentrations(N, Phi)[:, antigen] * s2
+
+
 def idiotypic_select(
-    key: jax.Array,
+    u: jax.Array,
     P: jax.Array,
     I: jax.Array,
     N: jax.Array,
@@ -324,17 +353,16 @@ def idiotypic_select(
 ) -> tuple[jax.Array, jax.Array, jax.Array]:
     """Three-stage idiotypic selection (eqs 5-10) for the presenting antigen.
 
-    Stage 1 picks alpha (:func:`select_alpha`). Stage 2 computes S2 = P_im + eps - delta
-    (eq 9) for every set (alpha's own S2 = P_nm, :func:`stimulation_suppression`), then updates
-    the antigen's column of clones with eq (5) using S2, floored at 0 [ours]. Stage 3
-    re-evaluates concentrations (eq 6) and picks beta, the set with the highest activation
-    lambda = C_im * S2 (eq 10). An idiotypic difference is alpha != beta.
+    Stage 1 picks alpha (:func:`select_alpha`). Stage 2 computes every set's stimulus S2 (eq 9,
+    with eqs 7-8; alpha's own S2 = P_nm) and updates the antigen's column of clones (eq 5).
+    Stage 3 picks beta, the set with the highest activation (eq 10). An idiotypic difference is
+    alpha != beta.
 
     Args:
-        key: PRNG key of both stages' tie-breaks: one ``uniform(key, (2 * x,))`` draw (one
-            hash, not a split and two), whose first x values are :func:`select_alpha`'s draw
-            from ``key`` (JAX's threefry numbers a draw's values by their index), so alpha is
-            ``select_alpha(key, P, antigen)``.
+        u: [2 * x] i.i.d. uniforms: stage 1's tie-breaks, then stage 3's. The controller slices
+            them from the one draw it makes per iteration (a key per function would change every
+            random stream); ``u[:x]`` is :func:`select_alpha`'s, so a batch without idiotypic
+            systems, which runs stage 1 alone, picks the same alphas.
         P: [x, y] paratopes. I: [x, y] idiotopes. N: [x, y] clone counts.
         antigen: index m of the presenting antigen.
         params: network constants (b, k1, k2, k3, Phi are used).
@@ -345,35 +373,14 @@ def idiotypic_select(
         beta: int32 set index of the stage-3 winner, the antibody that acts.
         N_new: [x, y] float32 clone counts; only column ``antigen`` differs from ``N``.
     """
-    x = jnp.shape(P)[0]
-    u = jax.random.uniform(key, (2 * x,))
-    return _idiotypic_select(u, P, I, N, antigen, params, alpha_on_self)
-
-
-def _idiotypic_select(
-    u: jax.Array,
-    P: jax.Array,
-    I: jax.Array,
-    N: jax.Array,
-    antigen: jax.Array | int,
-    params: NetworkParams,
-    alpha_on_self: jax.Array | bool = False,
-) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """:func:`idiotypic_select` given its draw ``u`` [2 * x] (stage 1's tie-breaks, then stage
-    3's), for a controller that slices it from a larger draw."""
     P = jnp.asarray(P, jnp.float32)
     N = jnp.asarray(N, jnp.float32)
     x = P.shape[0]
-    alpha = _select_alpha(u[:x], P, antigen)
+    alpha = select_alpha(u[:x], P, antigen)
     eps, delta = stimulation_suppression(
         P, I, concentrations(N, params.Phi), alpha, params.k1, params.k2, alpha_on_self
     )
-    s2 = P[:, antigen] + eps - delta
-    # A strongly suppressed antibody would otherwise get a negative number of clones.
-    column = jnp.maximum(params.b * s2 + N[:, antigen] * (1.0 - params.k3), 0.0)
-    # A one-hot column write, not a scatter: cheaper inside a batched loop.
-    in_column = jnp.arange(N.shape[1]) == antigen
-    N_new = jnp.where(in_column[None, :], column[:, None], N)
-    activation = concentrations(N_new, params.Phi)[:, antigen] * s2
-    beta = _argmax_ties(activation, u[x:])
+    s2 = stage2_stimulus(P, eps, delta, antigen)
+    N_new = update_clones(N, s2, antigen, params.b, params.k3)
+    beta = argmax_ties(activation(N_new, s2, antigen, params.Phi), u[x:])
     return alpha, beta, N_new

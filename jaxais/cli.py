@@ -41,17 +41,17 @@ import _thread
 import argparse
 import contextlib
 import functools
-import json
 import os
 import signal
 import sys
-import tempfile
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NoReturn
+
+from jaxais.io import atomic_write, atomic_write_json, atomic_write_text
 
 __all__ = [
     "ArgumentParser",
@@ -477,60 +477,3 @@ def check_output_file(
         # os.replace would succeed anyway (it needs only the directory); refuse to be surprising.
         raise UserError(f"{p}: file exists and is not writable")
     return p
-
-
-# ---------------------------------------------------------------------------------- writing
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-def atomic_write(path: str | os.PathLike[str], write_fn: Callable[[Path], Any]) -> Path:
-    """Write a file atomically: ``write_fn`` fills a temporary file, which then replaces ``path``.
-
-    The temporary file lies in ``path``'s directory (so :func:`os.replace` is atomic) and keeps
-    ``path``'s suffix (so tools that pick a format from the name, such as matplotlib or Pillow,
-    see the right one). If ``write_fn`` raises, the temporary file is removed and ``path`` is
-    untouched. The new file gets the usual permissions (0666 less the umask).
-
-    Args:
-        path: the destination.
-        write_fn: called with the temporary file's path; must write the complete contents there.
-
-    Returns:
-        ``path`` as a ``Path``.
-    """
-    dest = Path(path)
-    directory = dest.parent if str(dest.parent) else Path(".")
-    fd, tmp_name = tempfile.mkstemp(dir=directory, prefix=f".{dest.name}.", suffix=dest.suffix)
-    os.close(fd)
-    tmp = Path(tmp_name)
-    try:
-        write_fn(tmp)
-        with open(tmp, "rb+") as f:  # the data is on disk before the rename makes it visible
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, dest)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise
-    return dest
-
-
-def atomic_write_text(path: str | os.PathLike[str], text: str, encoding: str = "utf-8") -> Path:
-    """Write ``text`` to ``path`` atomically (see :func:`atomic_write`)."""
-    return atomic_write(path, lambda tmp: tmp.write_text(text, encoding=encoding))
-
-
-def atomic_write_json(path: str | os.PathLike[str], obj: Any, indent: int | None = 2) -> Path:
-    """Write ``obj`` as JSON (plus a final newline) to ``path`` atomically.
-
-    The object is serialised before anything is written, so an unserialisable object leaves
-    no file behind. NaN and infinities are refused (they are not JSON): use None instead.
-    """
-    text = json.dumps(obj, indent=indent, allow_nan=False) + "\n"
-    return atomic_write_text(path, text)

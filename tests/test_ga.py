@@ -355,14 +355,14 @@ def test_tell_compiles_once_per_config():
     assert ga.tell._cache_size() - before <= 1
 
 
-def test_is_done_and_target():
+def test_stop_rules_and_target():
     state = tiny_run()
-    assert ga.is_done(state, TINY) and ga.stopped_by(state, TINY) == "generations"
+    assert ga.stopped_by(state, TINY) == "generations"
     more = ga.GAConfig(**{**TINY.to_dict(), "generations": 5})
-    assert not ga.is_done(state, more) and ga.stopped_by(state, more) is None
+    assert ga.stopped_by(state, more) is None
     best = float(np.max(np.asarray(state.best.fitness)))
     reach = ga.GAConfig(**{**more.to_dict(), "target_f": best})
-    assert ga.is_done(state, reach) and ga.reached_target(state, reach)
+    assert ga.reached_target(state, reach)
     assert ga.stopped_by(state, reach) == "target_f"
     # Nothing crosses the maze in 2 s: the success stop cannot fire.
     assert not ga.reached_success(state, more)

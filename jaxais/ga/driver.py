@@ -29,7 +29,6 @@ __all__ = [
     "crossing_key",
     "evaluate",
     "final_sets",
-    "is_done",
     "measure",
     "reached_success",
     "reached_target",
@@ -181,10 +180,8 @@ def verify(
     first on ties) runs from ``success_starts`` fresh starts, folded in by
     :func:`jaxais.ga.core.check`. A population's best so far thus comes from checks only, never
     from the noisy evaluation it was selected on (the winner's curse)."""
-    if config.success_starts < 1:
-        raise ValueError("verify needs config.success_starts >= 1")
-    if int(state.generation) < 1:
-        raise ValueError("verify: no generation has been evaluated yet")
+    if config.success_starts < 1 or int(state.generation) < 1:
+        raise ValueError("verify needs success_starts >= 1 and an evaluated generation")
     _, sets = core.generation_best(state.evaluated, state.fitness)
     record = measure(key, sets, world, config.success_starts, sim_params, config)
     return core.check(state, record, config)
@@ -200,14 +197,10 @@ def confirm(
     """The success stop's confirmation: every best so far runs from ``success_starts`` further
     fresh starts, pooled into its record. A set must pass two independent checks, so one lucky
     check (a set crossing in 70 % passes 19 of 20 once in 130 tries) does not end the run."""
-    if config.success_starts < 1:
-        raise ValueError("confirm needs config.success_starts >= 1")
-    if not np.all(np.asarray(state.best.starts) >= 1):
-        raise ValueError("confirm: every population needs a checked best")
-    sets = state.best.antibodies
-    return core.pool_check(
-        state, measure(key, sets, world, config.success_starts, sim_params, config)
-    )
+    if config.success_starts < 1 or not np.all(np.asarray(state.best.starts) >= 1):
+        raise ValueError("confirm needs success_starts >= 1 and a checked best everywhere")
+    record = measure(key, state.best.antibodies, world, config.success_starts, sim_params, config)
+    return core.pool_check(state, record)
 
 
 def step(
@@ -264,11 +257,6 @@ def stopped_by(state: GAState, config: GAConfig) -> str | None:
     return None
 
 
-def is_done(state: GAState, config: GAConfig) -> bool:
-    """Whether the run should stop (:func:`stopped_by` is not None)."""
-    return stopped_by(state, config) is not None
-
-
 def run(
     key_or_state: jax.Array | GAState,
     config: GAConfig,
@@ -277,7 +265,7 @@ def run(
     callback: Callable[[GAState, Evaluation], None] | None = None,
     progress: str | None = None,
 ) -> GAState:
-    """Evolve from a typed PRNG key (a fresh run) or a state until :func:`is_done`.
+    """Evolve from a typed PRNG key (a fresh run) or a state until :func:`stopped_by` is set.
 
     Args:
         callback: called after every generation with (new state, its evaluation), e.g. to save
@@ -291,7 +279,7 @@ def run(
     total, done = config.generations, int(state.generation)
     with tqdm(total=total, initial=done, desc=progress, unit="gen", file=sys.stderr,
               disable=progress is None) as bar:  # fmt: skip
-        while not is_done(state, config):
+        while stopped_by(state, config) is None:
             state, evaluation = step(state, config, world, sim_params)
             if callback is not None:
                 callback(state, evaluation)

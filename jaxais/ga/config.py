@@ -63,16 +63,9 @@ class GAConfig:
     tau_cap: float = _setting(500.0, "time cap of one run, simulated s [ours: 500]")
     collision_cap: int = _setting(100, "collision cap of one run; reaching it ends the run [100]")
     starts: int = _setting(1, "random starts per robot and generation (f, τ, c, L: means) [1]")
-    success_starts: int = _setting(
-        10, "fresh starts of each population's best per generation (0: no checks) [ours: 10]"
-    )
-    success_rate: float | None = _setting(
-        0.95, "stop once every best crosses in this fraction of them (None: never) [ours: 0.95]"
-    )
-    crossover: str = _setting(
-        "uniform", "each antigen's antibody from either parent, or (rl) from the one with the"
-        " higher RL score L, SPEC 10's rule [ours: uniform]"
-    )  # fmt: skip
+    success_starts: int = _setting(10, "fresh starts checking each best, per generation [10]")
+    success_rate: float | None = _setting(0.95, "stop when every best crosses this often (none)")
+    crossover: str = _setting("uniform", "antibodies from either parent, or (rl) the higher L")
 
     def __post_init__(self):
         def count(x: Any, low: int) -> bool:

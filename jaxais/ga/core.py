@@ -105,24 +105,24 @@ def init(key: jax.Array, config: GAConfig) -> GAState:
     key, k_pop = jax.random.split(key)
     population = sample_antibodies(k_pop, (P, R, N_ANTIGENS))
     inf = jnp.full((P, R), jnp.inf, jnp.float32)
+    results = {  # the last evaluation's fields, as GAState (and Best, per population) hold them
+        "fitness": inf,
+        "tau": inf,
+        "collisions": jnp.zeros((P, R), jnp.float32),
+        "L": jnp.zeros((P, R, N_ANTIGENS), jnp.float32),
+        "crossings": jnp.zeros((P, R), jnp.int32),
+    }
+    best = Best(
+        antibodies=jax.tree.map(lambda x: x[:, 0], population),
+        **{name: x[:, 0] for name, x in results.items()},
+        starts=jnp.zeros((P,), jnp.int32),
+        generation=jnp.full((P,), -1, jnp.int32),
+    )
     return GAState(
         population=population,
         evaluated=population,
-        fitness=inf,
-        tau=inf,
-        collisions=jnp.zeros((P, R), jnp.float32),
-        L=jnp.zeros((P, R, N_ANTIGENS), jnp.float32),
-        crossings=jnp.zeros((P, R), jnp.int32),
-        best=Best(
-            antibodies=jax.tree.map(lambda x: x[:, 0], population),
-            fitness=inf[:, 0],
-            tau=inf[:, 0],
-            collisions=jnp.zeros((P,), jnp.float32),
-            L=jnp.zeros((P, N_ANTIGENS), jnp.float32),
-            crossings=jnp.zeros((P,), jnp.int32),
-            starts=jnp.zeros((P,), jnp.int32),
-            generation=jnp.full((P,), -1, jnp.int32),
-        ),
+        **results,
+        best=best,
         generation=jnp.int32(0),
         key=key,
     )

@@ -55,12 +55,7 @@ def _rollout_inputs(keys: jax.Array, population: Antibodies):
         return jax.random.split(k_reset, n), jax.random.split(k_run, n)
 
     reset, run = jax.vmap(one_start)(keys)
-    flat = jax.tree.map(
-        lambda x: jnp.broadcast_to(
-            jnp.reshape(x, (1, n, *x.shape[2:])), (S, n, *x.shape[2:])
-        ).reshape(S * n, *x.shape[2:]),
-        population,
-    )
+    flat = jax.tree.map(lambda x: jnp.concatenate([x.reshape(n, *x.shape[2:])] * S), population)
     return reset.reshape(S * n), run.reshape(S * n), flat
 
 

@@ -25,7 +25,7 @@ from typing import Any
 __version__ = "0.1.0"
 
 _EXPORTS = {
-    "GAConfig": "ga",
+    "GAConfig": "ga.config",
     "NetworkParams": "immune.network",
     "Readings": "immune.readings",
     "EpisodeConfig": "episode",

@@ -1,23 +1,12 @@
 """GA checkpoints with orbax-checkpoint: save after every generation, resume exactly.
 
-A checkpoint directory holds:
-
-- ``run.json``: the run's identity (GA settings, world, seed: whatever the caller passes), written
-  when a run starts; a resume with a different identity is refused.
-- ``<generation>/``: one orbax checkpoint per saved generation (``ocp.CheckpointManager``),
-  holding ``state`` (every array of :class:`jaxais.ga.GAState`, the typed PRNG key stored as its
-  ``jax.random.key_data``) and ``meta`` (JSON: the key's implementation, the GA settings and the
-  caller's extra data, e.g. the per-generation history of a script).
-
-Orbax writes each checkpoint into a temporary directory and renames it when complete, and the
-manager only lists complete ones. Saving runs in the background while the next generation is
-evaluated (each save, read and close first waits for the one in flight, so at most one is) and
-keeps the last ``max_to_keep`` (>= 2) checkpoints, so the previous one is deleted only after the
-new one is complete. A run interrupted at any moment therefore leaves its last complete
-checkpoint valid.
-
-All failures (nothing to resume, a different run, a corrupt checkpoint) raise
-:class:`CheckpointError` with a one-line message.
+A checkpoint directory holds ``run.json`` (the run's identity, whatever the caller passes; a
+resume with another is refused) and one orbax checkpoint ``<generation>/`` per saved generation:
+``state`` (every array of :class:`jaxais.ga.core.GAState`, the PRNG key as its key data) and
+``meta`` (JSON: key implementation, GA settings, the caller's extra data). Orbax writes into a
+temporary directory renamed when complete; saves run in the background, at most one in flight,
+and the last ``max_to_keep`` (>= 2) are kept, so an interruption at any moment leaves the last
+complete checkpoint valid. Every failure is a one-line :class:`CheckpointError`.
 """
 
 from __future__ import annotations
@@ -31,19 +20,13 @@ from typing import Any
 import jax
 import numpy as np
 
-from jaxais.ga import GAConfig, GAState, abstract_state
+from jaxais.ga.config import GAConfig
+from jaxais.ga.core import GAState, abstract_state
 from jaxais.immune.antibodies import within_limits
+from jaxais.io import atomic_write_json
 from jaxais.orbax_reads import forget_abandoned_reads
 
-__all__ = [
-    "FORMAT",
-    "RUN_JSON",
-    "CheckpointError",
-    "GACheckpointer",
-    "abstract_tree",
-    "state_from_tree",
-    "state_to_tree",
-]
+__all__ = ["CheckpointError", "GACheckpointer", "abstract_tree", "state_from_tree", "state_to_tree"]
 
 RUN_JSON = "run.json"
 """The run's identity, beside the numbered checkpoints."""
@@ -64,27 +47,21 @@ def _name(path: tuple[Any, ...]) -> str:
     return _SEP.join(str(getattr(p, "name", getattr(p, "key", p))) for p in path)
 
 
-def state_to_tree(state: GAState) -> dict[str, np.ndarray]:
-    """The state as a flat dict of NumPy arrays (typed keys as their key data).
-
-    Returns:
-        name -> array, e.g. ``"population__type"`` [P, R, 8], ``"key"`` [2] uint32.
-    """
+def _flat(state: GAState) -> dict[str, Any]:
     leaves = jax.tree_util.tree_flatten_with_path(state)[0]
-    return {
-        _name(path): np.asarray(jax.random.key_data(x) if _is_key(x) else x) for path, x in leaves
-    }
+    return {_name(path): jax.random.key_data(x) if _is_key(x) else x for path, x in leaves}
+
+
+def state_to_tree(state: GAState) -> dict[str, np.ndarray]:
+    """The state as a flat dict of NumPy arrays, typed keys as their key data (e.g.
+    ``"population__type"`` [P, R, 8], ``"key"`` [2] uint32)."""
+    return {name: np.asarray(x) for name, x in _flat(state).items()}
 
 
 def abstract_tree(config: GAConfig) -> dict[str, jax.ShapeDtypeStruct]:
     """Shapes and dtypes of :func:`state_to_tree` for ``config`` (orbax's restore target)."""
-    leaves = jax.tree_util.tree_flatten_with_path(abstract_state(config))[0]
-    out = {}
-    for path, x in leaves:
-        if _is_key(x):
-            x = jax.eval_shape(jax.random.key_data, x)
-        out[_name(path)] = jax.ShapeDtypeStruct(x.shape, x.dtype)
-    return out
+    flat = jax.eval_shape(_flat, abstract_state(config))
+    return {name: jax.ShapeDtypeStruct(x.shape, x.dtype) for name, x in flat.items()}
 
 
 def state_from_tree(
@@ -127,24 +104,16 @@ def _describe_difference(stored: dict[str, Any], given: dict[str, Any], where: s
 
 
 class GACheckpointer:
-    """Saves and restores :class:`jaxais.ga.GAState` after each generation.
-
-    Use as a context manager (it closes orbax's manager)::
-
-        with GACheckpointer(out / "checkpoints", run_info, resume=args.resume) as ckpt:
-            state, meta = ckpt.restore(config) if args.resume else (init(key, config), {})
-            ... ckpt.save(state, config, extra) after every generation ...
+    """Saves and restores :class:`jaxais.ga.core.GAState` after each generation; a context
+    manager (leaving it waits for the last save and closes orbax's manager).
 
     Args:
         directory: the checkpoint directory (created if missing).
-        run_info: JSON-able identity of the run (settings that must match on resume; leave out
-            those a resume may change, such as the number of generations).
-        resume: True to continue an earlier run: it must exist and have the same ``run_info``.
-            False to start a new one: the directory must hold no complete checkpoint.
-        max_to_keep: complete checkpoints kept (at least 2, see the module notes).
-
-    Raises:
-        CheckpointError: see ``resume``.
+        run_info: JSON-able identity of the run: what must match on resume (not, e.g., the
+            generation cap, which a resume may raise).
+        resume: continue an earlier run, which must exist with the same ``run_info``; else the
+            directory must hold no complete checkpoint (CheckpointError otherwise).
+        max_to_keep: complete checkpoints kept (>= 2).
     """
 
     def __init__(
@@ -155,8 +124,6 @@ class GACheckpointer:
         max_to_keep: int = 2,
     ):
         import orbax.checkpoint as ocp
-
-        from jaxais.io import atomic_write_json
 
         if max_to_keep < 2:
             raise ValueError(f"max_to_keep must be >= 2, got {max_to_keep}")
@@ -195,12 +162,8 @@ class GACheckpointer:
         options = ocp.CheckpointManagerOptions(
             max_to_keep=max_to_keep,
             create=True,
-            # Background saves: a checkpoint is written to a temporary directory and renamed into
-            # place (complete) while the next generation runs; the next save and close() wait
-            # for it, so at most one is in flight and an interruption never leaves a half one.
-            enable_async_checkpointing=True,
-            # Remove what an interrupted save left behind (never a complete checkpoint).
-            cleanup_tmp_directories=True,
+            enable_async_checkpointing=True,  # the next save and close() wait for it
+            cleanup_tmp_directories=True,  # what an interrupted save left (never a complete one)
         )
         self._manager = ocp.CheckpointManager(self.directory, options=options)
 
@@ -243,16 +206,8 @@ class GACheckpointer:
         return self._manager.latest_step()
 
     def save(self, state: GAState, config: GAConfig, extra: dict[str, Any] | None = None) -> None:
-        """Start saving ``state`` as checkpoint ``state.generation`` (finished in the background).
-
-        The previous save is waited for first; :meth:`close` (or leaving the ``with`` block) waits
-        for the last one. Until a checkpoint is complete the newest complete one stays valid.
-
-        Args:
-            state: the state after a generation.
-            config: its settings (stored in the meta for checking).
-            extra: JSON-able data to keep with it (e.g. the history of a script).
-        """
+        """Start saving ``state`` as checkpoint ``state.generation`` in the background (after
+        waiting for the previous save), with ``config`` and the JSON-able ``extra``."""
         ocp = self._ocp
         generation = int(state.generation)
         meta = {
@@ -274,18 +229,8 @@ class GACheckpointer:
     def restore(
         self, config: GAConfig, generation: int | None = None
     ) -> tuple[GAState, dict[str, Any]]:
-        """Read a checkpoint (default: the newest complete one).
-
-        Args:
-            config: the run's settings (fix the shapes to read).
-            generation: which checkpoint, or None for the latest.
-
-        Returns:
-            (the state, the ``extra`` dict saved with it).
-
-        Raises:
-            CheckpointError: none to restore, or it is corrupt or does not fit ``config``.
-        """
+        """(state, its ``extra``) of checkpoint ``generation`` (default: the newest complete
+        one), shaped by ``config``; CheckpointError if none, corrupt or not fitting."""
         ocp = self._ocp
         self._manager.wait_until_finished()
         step = self.latest_generation() if generation is None else generation

@@ -22,6 +22,7 @@ from test_ga import TINY
 
 from jaxais import ga
 from jaxais.checkpointing import GACheckpointer
+from jaxais.ga import driver
 from jaxais.seed import load_seed
 
 SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "evolve.py"
@@ -205,7 +206,7 @@ def test_resume_equals_uninterrupted(tmp_path: Path, full_run: Path):
 
 def test_interrupted_run_resumes_exactly(tmp_path: Path, monkeypatch, capsys, full_run: Path):
     out = tmp_path / "run"
-    real_step = ga.step
+    real_step = driver.step
     calls = []
 
     def step_then_sigterm(*args, **kwargs):
@@ -214,13 +215,13 @@ def test_interrupted_run_resumes_exactly(tmp_path: Path, monkeypatch, capsys, fu
             os.kill(os.getpid(), signal.SIGTERM)
         return real_step(*args, **kwargs)
 
-    monkeypatch.setattr(ga, "step", step_then_sigterm)
+    monkeypatch.setattr(driver, "step", step_then_sigterm)
     handler = signal.getsignal(signal.SIGTERM)
     last = expect_exit(capsys, "--generations", "3", "--out", str(out), status=143)
     assert last == "evolve.py: error: terminated"
     assert signal.getsignal(signal.SIGTERM) is handler  # restored
     assert not (out / "seed").exists() and not (out / "summary.json").exists()
-    monkeypatch.setattr(ga, "step", real_step)
+    monkeypatch.setattr(driver, "step", real_step)
     run_main("--generations", "3", "--out", str(out), "--resume")
     assert_same_arrays(seed_arrays(out / "seed"), seed_arrays(full_run / "seed"))
 

@@ -25,6 +25,7 @@ from jaxais import envs, ga
 from jaxais.checkpointing import state_to_tree
 from jaxais.controllers import LTL
 from jaxais.episode import EpisodeConfig, _rollout
+from jaxais.experiments.diversity import compare_diversity, diversity
 from jaxais.immune.antibodies import (
     LIMITS_MIN,
     Antibodies,
@@ -226,6 +227,7 @@ def test_uniform_crossover_ignores_the_scores():
 _within = jax.jit(within_limits)
 MUT0 = ga.GAConfig(**{**TINY.to_dict(), "mutation": 0.0})
 MUT1 = ga.GAConfig(**{**TINY.to_dict(), "mutation": 1.0})
+NORATE = ga.GAConfig(**{**MUT0.to_dict(), "success_rate": None})
 
 
 def fresh_state(seed: int, config: ga.GAConfig = TINY) -> ga.GAState:
@@ -238,14 +240,14 @@ def test_next_generation_stays_within_table_1(seed, rate):
     config = TINY if rate == 0.05 else MUT1
     state = fresh_state(0, config)
     f = np.random.default_rng(seed).uniform(1, 300, (2, 4))
-    new = ga.tell(jax.random.key(seed), state, evaluation(f), config)
+    new = ga.tell(jax.random.key(seed), state.population, evaluation(f), state, config)
     assert bool(np.all(np.asarray(_within(new.population))))
 
 
 def test_elite_survives_unchanged_and_children_come_from_parents():
     state = fresh_state(3, MUT0)
     f = np.array([[40.0, 10.0, 30.0, 20.0], [5.0, 50.0, 5.0, 60.0]])
-    new = ga.tell(jax.random.key(4), state, evaluation(f), MUT0)
+    new = ga.tell(jax.random.key(4), state.population, evaluation(f), state, MUT0)
     pop, old = jax.tree.map(np.asarray, new.population), jax.tree.map(np.asarray, state.population)
     for p, elite in ((0, 1), (1, 0)):  # population 1: a tie, the lowest index wins
         for name in ("type", "speed", "freq", "angle", "direction", "right_freq", "right_angle"):
@@ -267,13 +269,15 @@ def test_the_checked_best_becomes_the_elite():
     """With checks, each population's checked best so far takes robot 0's place (the elite
     slot) after breeding; a population without a checked best keeps its bred elite."""
     state = fresh_state(7, MUT0)
-    state = ga.tell(jax.random.key(1), state, evaluation(np.full((2, 4), 3.0)), MUT0)
+    state = ga.tell(
+        jax.random.key(1), state.population, evaluation(np.full((2, 4), 3.0)), state, MUT0
+    )
     other = fresh_state(8, MUT0).population  # sets that are in neither population
     best = state.best.replace(
         antibodies=jax.tree.map(lambda x: x[:, 2], other),
         starts=jnp.array([10, 0], jnp.int32),
     )
-    new = ga._best_as_elite(state.replace(best=best))
+    new = ga.best_as_elite(state.replace(best=best))
     for name in ("type", "speed", "freq", "angle", "direction", "right_freq", "right_angle"):
         got, bred = getattr(new.population, name), getattr(state.population, name)
         np.testing.assert_array_equal(got[0, 0], getattr(other, name)[0, 2])
@@ -304,13 +308,21 @@ def test_best_is_kept_until_strictly_beaten():
     config = ga.GAConfig(**{**NOCHECK.to_dict(), "mutation": 0.0})
     s0 = fresh_state(5, config)
     s1 = ga.tell(
-        jax.random.key(1), s0, evaluation([[9.0, 7.0, 8.0, 9.0], [3.0, 4.0, 5.0, 6.0]]), config
+        jax.random.key(1),
+        s0.population,
+        evaluation([[9.0, 7.0, 8.0, 9.0], [3.0, 4.0, 5.0, 6.0]]),
+        s0,
+        config,
     )
     np.testing.assert_array_equal(np.asarray(s1.best.fitness), [7.0, 3.0])
     np.testing.assert_array_equal(np.asarray(s1.best.generation), [0, 0])
     np.testing.assert_array_equal(np.asarray(s1.best.tau), [14.0, 6.0])
     s2 = ga.tell(
-        jax.random.key(2), s1, evaluation([[6.0, 9.0, 9.0, 9.0], [3.0, 9.0, 9.0, 9.0]]), config
+        jax.random.key(2),
+        s1.population,
+        evaluation([[6.0, 9.0, 9.0, 9.0], [3.0, 9.0, 9.0, 9.0]]),
+        s1,
+        config,
     )
     np.testing.assert_array_equal(np.asarray(s2.best.fitness), [6.0, 3.0])
     np.testing.assert_array_equal(np.asarray(s2.best.generation), [1, 0])  # a tie keeps the old
@@ -325,7 +337,9 @@ def test_best_is_kept_until_strictly_beaten():
 
 def test_with_checks_tell_leaves_the_bests_to_verify():
     state = fresh_state(5, MUT0)
-    new = ga.tell(jax.random.key(1), state, evaluation(np.full((2, 4), 3.0)), MUT0)
+    new = ga.tell(
+        jax.random.key(1), state.population, evaluation(np.full((2, 4), 3.0)), state, MUT0
+    )
     np.testing.assert_array_equal(np.asarray(new.best.starts), [0, 0])
     assert np.all(np.isinf(np.asarray(new.best.fitness)))
     with pytest.raises(ValueError, match="no generation"):
@@ -333,21 +347,22 @@ def test_with_checks_tell_leaves_the_bests_to_verify():
 
 
 def test_tell_compiles_once_per_config():
-    before = ga._tell_jit._cache_size()
+    before = ga.tell._cache_size()
     state = fresh_state(6)
     for k in range(3):
-        state = ga.tell(jax.random.key(k), state, evaluation(np.full((2, 4), 1.0 + k)), TINY)
-    assert ga._tell_jit._cache_size() - before <= 1
+        ev = evaluation(np.full((2, 4), 1.0 + k))
+        state = ga.tell(jax.random.key(k), state.population, ev, state, TINY)
+    assert ga.tell._cache_size() - before <= 1
 
 
-def test_is_done_and_target():
+def test_stop_rules_and_target():
     state = tiny_run()
-    assert ga.is_done(state, TINY) and ga.stopped_by(state, TINY) == "generations"
+    assert ga.stopped_by(state, TINY) == "generations"
     more = ga.GAConfig(**{**TINY.to_dict(), "generations": 5})
-    assert not ga.is_done(state, more) and ga.stopped_by(state, more) is None
+    assert ga.stopped_by(state, more) is None
     best = float(np.max(np.asarray(state.best.fitness)))
     reach = ga.GAConfig(**{**more.to_dict(), "target_f": best})
-    assert ga.is_done(state, reach) and ga.reached_target(state, reach)
+    assert ga.reached_target(state, reach)
     assert ga.stopped_by(state, reach) == "target_f"
     # Nothing crosses the maze in 2 s: the success stop cannot fire.
     assert not ga.reached_success(state, more)
@@ -404,12 +419,13 @@ def test_robust_evaluation_is_the_mean_of_one_start_evaluations(easy):
 def test_crossing_rates_do_not_depend_on_batching(easy):
     sets = jax.tree.map(lambda x: x[:, 0], fresh_state(13).population)  # [2, 8]
     key, params = jax.random.key(14), envs.default_params()
-    whole = ga.crossing_rates(key, sets, easy, 8, params, TINY)
-    split = ga.crossing_rates(key, sets, easy, 8, params, TINY, batch_starts=4)
-    np.testing.assert_array_equal(whole, split)
-    assert whole.shape == (2,) and np.all((whole >= 0) & (whole <= 1))
+    whole = ga.measure(key, sets, easy, 8, params, TINY)
     ev = ga.measure(key, sets, easy, 8, params, TINY, batch_starts=4)
-    np.testing.assert_array_equal(whole, np.asarray(ev.crossings) / 8)
+    for name in ("fitness", "tau", "collisions", "L", "crossings"):
+        np.testing.assert_array_equal(getattr(whole, name), getattr(ev, name), err_msg=name)
+    rate = ev.crossing_rate
+    assert rate.shape == (2,) and np.all((rate >= 0) & (rate <= 1))
+    np.testing.assert_array_equal(rate, np.asarray(ev.crossings) / 8)
     assert ev.starts == 8 and ev.L.shape == (2, 8)
     # The measurement's keys are not the run's: fold_in, not split.
     run_keys = jax.random.split(jax.random.key(0), 4)
@@ -471,7 +487,9 @@ def _verify_state(best_same: bool) -> tuple[ga.GAState, ga.Evaluation]:
     18 crossings in 20 starts, and a check of 20 more starts with 20 crossings."""
     state = fresh_state(21, MUT0)
     for k in range(2):  # the check is of generation 1
-        state = ga.tell(jax.random.key(k), state, evaluation([[5.0, 1.0, 9.0, 9.0]] * 2), MUT0)
+        state = ga.tell(
+            jax.random.key(k), state.population, evaluation([[5.0, 1.0, 9.0, 9.0]] * 2), state, MUT0
+        )
     cand = jax.tree.map(lambda x: np.asarray(x)[:, 1], state.evaluated)
     other = cand.replace(speed=cand.speed + 1.0)  # another set (only compared, never run)
     best = state.best.replace(
@@ -497,7 +515,7 @@ def _verify_state(best_same: bool) -> tuple[ga.GAState, ga.Evaluation]:
 
 def test_a_check_of_the_best_set_is_pooled():
     state, record = _verify_state(best_same=True)
-    best = ga._verify_update(state, record, np.float32(0.95)).best
+    best = ga.check(state, record, MUT0).best
     np.testing.assert_array_equal(np.asarray(best.starts), [40, 40])
     np.testing.assert_array_equal(np.asarray(best.crossings), [38, 38])
     np.testing.assert_allclose(np.asarray(best.tau), [100.0, 130.0])
@@ -508,11 +526,11 @@ def test_a_check_of_the_best_set_is_pooled():
 def test_a_passing_check_outranks_a_failing_best():
     state, record = _verify_state(best_same=False)
     # 18 of 20 fails a rate of 0.95 and 20 of 20 passes it: the check wins even at higher f.
-    best = ga._verify_update(state, record, np.float32(0.95)).best
+    best = ga.check(state, record, MUT0).best
     np.testing.assert_array_equal(np.asarray(best.fitness), [40.0, 70.0])
     np.testing.assert_array_equal(np.asarray(best.generation), [1, 1])
     # Without a success rate (2 never passes), plain f decides.
-    best = ga._verify_update(state, record, np.float32(2.0)).best
+    best = ga.check(state, record, NORATE).best
     np.testing.assert_array_equal(np.asarray(best.fitness), [40.0, 60.0])
     np.testing.assert_array_equal(np.asarray(best.starts), [20, 20])
 
@@ -526,17 +544,17 @@ def test_best_sets_needs_an_evaluation():
 
 
 def test_diversity_of_hand_made_sets():
-    assert ga.diversity(hand_sets([[0] * 8] * 5)) == 0.0
+    assert diversity(hand_sets([[0] * 8] * 5)) == 0.0
     # Every pair differs in type at every antigen.
-    assert ga.diversity(hand_sets([[k] * 8 for k in range(5)])) == pytest.approx(1.0)
+    assert diversity(hand_sets([[k] * 8 for k in range(5)])) == pytest.approx(1.0)
     # Sets 0 and 1 equal, set 2 of other types: pairs (0,1) = 0, (0,2) = (1,2) = 1.
-    assert ga.diversity(hand_sets([[0] * 8, [0] * 8, [1] * 8])) == pytest.approx(2 / 3)
+    assert diversity(hand_sets([[0] * 8, [0] * 8, [1] * 8])) == pytest.approx(2 / 3)
     # Track markers uses S and A: S 50 vs 400 is a full-range difference, A equal -> 1/2.
     two = hand_sets([[5] * 8, [5] * 8])
     two = two.replace(speed=np.asarray([[50.0] * 8, [400.0] * 8], np.float32))
-    assert ga.diversity(two) == pytest.approx(0.5)
+    assert diversity(two) == pytest.approx(0.5)
     # Half the antigens differ in type -> 1/2.
-    assert ga.diversity(hand_sets([[0] * 8, [0] * 4 + [2] * 4])) == pytest.approx(0.5)
+    assert diversity(hand_sets([[0] * 8, [0] * 4 + [2] * 4])) == pytest.approx(0.5)
 
 
 def test_diversity_matches_a_loop_over_pairs():
@@ -551,9 +569,9 @@ def test_diversity_matches_a_loop_over_pairs():
             b = jax.tree.map(lambda x, k=k: x[k], sets)
             total += float(np.mean(np.asarray(distance(a, b))))
             n += 1
-    assert ga.diversity(sets) == pytest.approx(total / n, rel=1e-6)
+    assert diversity(sets) == pytest.approx(total / n, rel=1e-6)
     with pytest.raises(ValueError):
-        ga.diversity(jax.tree.map(lambda x: x[:1], sets))
+        diversity(jax.tree.map(lambda x: x[:1], sets))
 
 
 def test_final_sets():
@@ -570,7 +588,7 @@ def test_final_sets():
 
 
 def test_compare_diversity_reports_both_tests():
-    out = ga.compare_diversity([0, 1], TINY, maze(), done={0: tiny_run(0)})
+    out = compare_diversity([0, 1], TINY, maze(), done={0: tiny_run(0)})
     assert out["single"]["robots"] == 8 and out["multi"]["populations"] == 2
     assert len(out["multi"]["diversity"]) == 2 and len(out["single"]["diversity"]) == 2
     assert all(0.0 <= d <= 1.0 for d in out["multi"]["diversity"] + out["single"]["diversity"])
@@ -578,7 +596,7 @@ def test_compare_diversity_reports_both_tests():
         p = out[test]["p_value"]
         assert p is None or 0.0 <= p <= 1.0
     with pytest.raises(ValueError):
-        ga.compare_diversity([0], TINY, maze())
+        compare_diversity([0], TINY, maze())
 
 
 def test_rollout_programs_per_world(tmp_path):

@@ -213,7 +213,7 @@ def runs() -> ga.Evaluation:
 
 @pytest.fixture(scope="module")
 def crossings(runs) -> dict[str, float]:
-    """Crossing rates of the SETS (:func:`jaxais.ga.crossing_rates`' fraction)."""
+    """Crossing rates of the SETS (:attr:`jaxais.ga.Evaluation.crossing_rate`)."""
     rates = np.asarray(runs.crossings, np.float64) / STARTS
     return dict(zip(SETS, map(float, rates), strict=True))
 

@@ -1,0 +1,115 @@
+"""Diversity of evolved sets (SPEC 10 [ours]): P independent populations against one of P × R."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxais import envs
+from jaxais.ga import driver
+from jaxais.ga.config import GAConfig
+from jaxais.ga.core import GAState
+from jaxais.immune.antibodies import Antibodies, antibody_distance
+from jaxais.immune.antigens import N_ANTIGENS
+
+__all__ = ["compare_diversity", "diversity"]
+
+
+@jax.jit
+def _set_distances(sets: Antibodies) -> jnp.ndarray:
+    """[K, K, 8] antibody distances between every pair of sets, per antigen."""
+    a = jax.tree.map(lambda x: jnp.asarray(x)[:, None, :], sets)
+    b = jax.tree.map(lambda x: jnp.asarray(x)[None, :, :], sets)
+    return antibody_distance(a, b)
+
+
+def diversity(sets: Antibodies) -> float:
+    """Mean pairwise distance between K >= 2 sets [K, 8], in [0, 1]: the mean over all pairs
+    (i < k) and antigens j of :func:`jaxais.immune.antibodies.antibody_distance` (A_ij, A_kj)."""
+    K = sets.shape[0]
+    if len(sets.shape) != 2 or K < 2:
+        raise ValueError(f"diversity needs [K >= 2, {N_ANTIGENS}] sets, got {sets.shape}")
+    d = np.asarray(_set_distances(sets), np.float64).mean(axis=-1)  # [K, K]
+    return float(d[np.triu_indices(K, k=1)].mean())
+
+
+def compare_diversity(
+    seeds: Sequence[int],
+    config: GAConfig,
+    world: envs.World,
+    sim_params: envs.SimParams | None = None,
+    done: Mapping[int, GAState] | None = None,
+    on_run: Callable[[str, int], None] | None = None,
+) -> dict[str, Any]:
+    """Diversity of P populations of R (the best robot of each in the final generation) against
+    one population of P × R (its P best robots), one GA run of each per seed (key
+    ``jax.random.key(s)``), compared by Welch's t-test and the Mann-Whitney U test (two-sided).
+
+    Args:
+        seeds: >= 2 distinct GA seeds.
+        config: the multi-population settings (P >= 2).
+        done: finished multi-population states by seed, reused instead of re-running.
+        on_run: called after each run with ("multi" or "single", seed).
+
+    Returns:
+        A JSON-able dict: per-seed diversities of both arms, their means, and both tests'
+        statistics and p-values (None where undefined, e.g. zero variance).
+    """
+    from scipy import stats
+
+    if config.populations < 2:
+        raise ValueError("compare_diversity: the multi-population arm needs populations >= 2")
+    if len(set(seeds)) != len(seeds) or len(seeds) < 2:
+        raise ValueError("compare_diversity: give at least 2 distinct seeds")
+    sim_params = envs.default_params() if sim_params is None else sim_params
+    single = dataclasses.replace(config, populations=1, robots=config.populations * config.robots)
+    done = done or {}
+    values: dict[str, list[float]] = {"multi": [], "single": []}
+    for s in seeds:
+        for arm, cfg, k in (("multi", config, None), ("single", single, config.populations)):
+            state = done.get(s) if arm == "multi" else None
+            if state is None:
+                state = driver.run(jax.random.key(s), cfg, world, sim_params)
+                if on_run is not None:
+                    on_run(arm, s)
+            values[arm].append(diversity(driver.final_sets(state, k)))
+
+    def finite(x: float) -> float | None:
+        return float(x) if math.isfinite(float(x)) else None
+
+    with np.errstate(all="ignore"):
+        t = stats.ttest_ind(values["multi"], values["single"], equal_var=False)
+    try:
+        u = stats.mannwhitneyu(values["multi"], values["single"], alternative="two-sided")
+        u_stat, u_p = finite(u.statistic), finite(u.pvalue)
+    except ValueError:  # all values identical
+        u_stat, u_p = None, None
+    arms = {
+        "multi": (
+            config.populations,
+            config.robots,
+            "best robot of each population, final generation",
+        ),
+        "single": (1, single.robots, f"{config.populations} best robots of the final generation"),
+    }
+    return {
+        "seeds": [int(s) for s in seeds],
+        **{
+            arm: {
+                "populations": P,
+                "robots": R,
+                "sets": sets,
+                "diversity": values[arm],
+                "mean": float(np.mean(values[arm])),
+            }
+            for arm, (P, R, sets) in arms.items()
+        },
+        "welch_t": {"statistic": finite(t.statistic), "p_value": finite(t.pvalue)},
+        "mann_whitney_u": {"statistic": u_stat, "p_value": u_p},
+    }

@@ -1,8 +1,9 @@
 """The idiotypic immune network: equations (1)-(10) of Whitbrook et al. (SPEC section 7).
 
 Every function is written for one network of ``x`` antibody sets by ``y`` antigens (5 x 8 in the
-paper, never assumed here): pure, float32, fixed shapes, explicit PRNG keys (the selection
-stages take the caller's uniforms), no Python branching on traced values, so callers batch robots, trials and parameter grids with ``vmap``.
+paper, never assumed here): pure, float32, fixed shapes, explicit PRNG keys (the selection stages
+take the caller's uniforms), no Python branching on traced values, so callers batch robots,
+trials and parameter grids with ``vmap``.
 
 Readings of the paper decided here:
 

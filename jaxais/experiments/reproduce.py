@@ -184,14 +184,16 @@ def reproduce(
         t = time.perf_counter()
         seeds = run_ltl(out / "ltl", seed, generations)
         timings["ltl_s"] = time.perf_counter() - t
-    return _run(out, names, trials, seed, seeds, baseline, tau_cap, collision_cap, progress,
-                command, started, timings)  # fmt: skip
+    return _run(out, names, trials, seed, seeds, baseline, tau_cap, collision_cap,
+                progress=progress, command=command, started=started, timings=timings)  # fmt: skip
 
 
-def _run(out: Path, worlds: list[str], n_trials: int | None, seed: int, seeds, baseline,
-         tau_cap: float, collision_cap: int, progress: bool, command: str, started: float,
+def _run(out: Path, worlds: list[str], n_trials: int | None, seed: int,
+         seeds: str | os.PathLike[str] | None, baseline: str | os.PathLike[str] | bool,
+         tau_cap: float, collision_cap: int, *, progress: bool, command: str, started: float,
          timings: dict[str, float]) -> dict[str, Any] | None:  # fmt: skip
-    """:func:`reproduce` once its arguments are checked (and the LTL run): JAX starts here."""
+    """:func:`reproduce` once its arguments are checked and the LTL has run (``timings`` holds
+    its time, ``started`` the call's start): JAX starts here."""
     import jax
     import numpy as np
     from tqdm import tqdm

@@ -1,16 +1,17 @@
 """The package as a user installs it: a wheel in a fresh virtual environment, run from elsewhere.
 
-The wheel is built without build isolation (the test venv has setuptools and wheel: the ``test``
-extra) and installed with ``--no-deps`` into a new venv, which borrows this venv's dependencies
-through a ``.pth`` file naming its site-packages: a plain path line adds that folder without
-running its ``.pth`` files, so the checkout's editable jaxais there stays out of the way. The
-console scripts then run from a temporary folder outside the checkout.
+The wheel is built from a copy of the working tree without build isolation (the test venv has
+setuptools and wheel: the ``test`` extra) and installed with ``--no-deps`` into a new venv, which
+borrows this venv's dependencies through a ``.pth`` file naming its site-packages: a plain path
+line adds that folder without running its ``.pth`` files, so the checkout's editable jaxais there
+stays out of the way. The console scripts then run from a temporary folder outside the checkout.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 import sysconfig
@@ -28,9 +29,13 @@ CONSOLE = {"jaxais-evolve", "jaxais-trials", "jaxais-reproduce", "jaxais-sweep",
 def installed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A fresh venv with the wheel installed; returns its bin folder."""
     base = tmp_path_factory.mktemp("wheel")
+    # A copy of the working tree: setuptools builds in the tree's build/, whose leftovers (a
+    # module since deleted) would go into the wheel.
+    skip = shutil.ignore_patterns(".*", "build", "dist", "*.egg-info", "__pycache__")
+    shutil.copytree(ROOT, base / "src", ignore=skip)
     build = subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
-         "-w", str(base / "dist"), str(ROOT)],
+         "-w", str(base / "dist"), str(base / "src")],
         capture_output=True, text=True, timeout=300,
     )  # fmt: skip
     assert build.returncode == 0, build.stderr[-3000:]
@@ -51,12 +56,17 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return bin_dir
 
 
-def _run(bin_dir: Path, cwd: Path, *args: object) -> subprocess.CompletedProcess:
+def _start(bin_dir: Path, cwd: Path, *args: object) -> subprocess.Popen:
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "XLA_FLAGS")}
-    return subprocess.run(
-        [str(a) for a in args], cwd=cwd, capture_output=True, text=True, timeout=300,
-        env={**env, "JAXAIS_CACHE_DIR": "off", "PATH": f"{bin_dir}:{env.get('PATH', '')}"},
+    return subprocess.Popen(
+        [str(a) for a in args], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True, env={**env, "JAXAIS_CACHE_DIR": "off", "PATH": f"{bin_dir}:{env['PATH']}"},
     )  # fmt: skip
+
+
+def _finish(proc: subprocess.Popen) -> subprocess.CompletedProcess:
+    out, err = proc.communicate(timeout=300)
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
 
 
 def test_console_scripts_are_the_packages_scripts():
@@ -69,24 +79,26 @@ def test_console_scripts_are_the_packages_scripts():
 
 
 def test_the_wheels_console_scripts_run_outside_the_checkout(installed, tmp_path):
+    # All at once: the tiny run's JAX start-up and compile take the time.
+    trials = installed / "jaxais-trials"
+    run = _start(installed, tmp_path, trials, "--system", "HDC", "--trials", 2, "--tau-cap", 2,
+                 "--out", "r.json")  # fmt: skip
     code = "import jaxais, jaxais.scripts.trials as t; print(jaxais.__file__, t.__file__)"
-    where = _run(installed, tmp_path, installed / "python", "-c", code)
+    where = _start(installed, tmp_path, installed / "python", "-c", code)
+    usage = {name: _start(installed, tmp_path, installed / name, "--help") for name in CONSOLE}
+    bad = _start(installed, tmp_path, trials, "--system", "HDC", "--trials", 0, "--out", "x.json")
+    where = _finish(where)
     assert where.returncode == 0, where.stderr
     assert all(str(installed.parent) in f for f in where.stdout.split()), where.stdout
-    for name in sorted(CONSOLE):
-        usage = _run(installed, tmp_path, installed / name, "--help")
-        assert usage.returncode == 0, (name, usage.stderr)
-        assert f"usage: {name.removeprefix('jaxais-')}.py" in usage.stdout
-    bad = _run(installed, tmp_path, installed / "jaxais-trials", "--system", "HDC", "--trials", 0,
-               "--out", "r.json")  # fmt: skip
+    for name, proc in usage.items():
+        done = _finish(proc)
+        assert done.returncode == 0, (name, done.stderr)
+        assert f"usage: {name.removeprefix('jaxais-')}.py" in done.stdout
+    bad = _finish(bad)
     assert bad.returncode == 2 and bad.stderr == "trials.py: error: --trials must be >= 1, got 0\n"
-    run = _run(installed, tmp_path, installed / "jaxais-trials", "--system", "HDC", "--trials", 2,
-               "--tau-cap", 2, "--out", "r.json")  # fmt: skip
+    run = _finish(run)
     assert run.returncode == 0, run.stderr[-3000:]
     assert "HDC in world1: 2 trials" in run.stdout
     doc = json.loads((tmp_path / "r.json").read_text())
-    assert (doc["label"], len(doc["trials"]), doc["config"]["episode"]["tau_cap"]) == (
-        "HDC",
-        2,
-        2.0,
-    )
+    assert (doc["label"], len(doc["trials"])) == ("HDC", 2)
+    assert doc["config"]["episode"]["tau_cap"] == 2.0

@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from jaxais import _speed, distributed
+from jaxais import distributed
 from jaxais.cli import ArgumentParser, UserError, main_wrapper, run_script
 from jaxais.experiments import protocol
 from jaxais.experiments.reproduce import LTLRunError, headline, reproduce
@@ -58,6 +58,8 @@ def main(argv: list[str] | None = None) -> None:
         raise UserError("--evolve runs on one process; evolve first, then pass --seeds DIR")
 
     def setup() -> None:  # before JAX computes anything
+        from jaxais import _speed
+
         _speed.setup(cpu_device_per_core=True)
         distributed.initialize(args)
 

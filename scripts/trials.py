@@ -16,7 +16,7 @@ import argparse
 import sys
 import time
 
-from jaxais import _speed, distributed
+from jaxais import distributed
 from jaxais.cli import ArgumentParser, main_wrapper, run_script
 from jaxais.experiments import protocol
 from jaxais.experiments.trials import trials
@@ -51,6 +51,8 @@ def main(argv: list[str] | None = None) -> None:
     distributed.check(args)
 
     def setup() -> None:  # before JAX computes anything
+        from jaxais import _speed
+
         _speed.setup(cpu_device_per_core=True)
         distributed.initialize(args)
 

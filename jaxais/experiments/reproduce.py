@@ -22,7 +22,6 @@ rate beside the paper's 20 %. The arguments are checked before JAX starts (one-l
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import shlex
@@ -234,7 +233,7 @@ def _run(out: Path, worlds: list[str], n_trials: int | None, seed: int,
     config = EpisodeConfig(tau_cap=tau_cap, collision_cap=collision_cap)
     # The report draws each system's first trial: it runs again, alone and recorded (the same
     # keys, so the same run as in the pooled trials).
-    example = dataclasses.replace(config, record=True)
+    example = EpisodeConfig(tau_cap=tau_cap, collision_cap=collision_cap, record=True)
     results_by_world, baseline_by_world, trajectories, placements, configs = {}, {}, {}, {}, {}
     # SIE again with a selection every iteration: its difference rate beside the paper's 20 %
     # (the report's calibration point), on the plain label's worlds and random streams.

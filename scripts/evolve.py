@@ -41,16 +41,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
-def _config(args: argparse.Namespace) -> GAConfig:
-    return GAConfig(**{f.name: getattr(args, f.name) for f in dataclasses.fields(GAConfig)})
-
-
 @main_wrapper(PROG)
-def main(argv: list[str] | None = None) -> dict[str, Any]:
+def run(argv: list[str] | None = None) -> dict[str, Any]:
     args = parse_args(argv)
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
-        config = _config(args)
+        config = GAConfig(**{f.name: getattr(args, f.name) for f in dataclasses.fields(GAConfig)})
         for flag in ("out", "resume", "diversity") if args.check_seed else ():
             if getattr(args, flag):
                 raise UserError(f"--check-seed measures a seed and writes nothing: drop --{flag}")
@@ -61,7 +57,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
 
         logging.getLogger("absl").setLevel(logging.CRITICAL)  # orbax's failures: our one line
         _speed.setup(one_kernel_loops=True)
-        given = {"config": config, "world": args.world, "seed": args.seed}
+        given = dict(config=config, world=args.world, seed=args.seed)
         given["crossing_starts"] = args.crossing_starts
         if args.check_seed is not None:
             result = evolve.check_seed(args.check_seed, **given)
@@ -74,6 +70,10 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         return result
     except ConfigError as err:
         raise UserError(f"--{err.field.replace('_', '-')} {err.reason}") from None
+
+
+def main(argv: list[str] | None = None) -> None:  # a console script exits with what it returns
+    run(argv)
 
 
 if __name__ == "__main__":

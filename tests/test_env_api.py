@@ -1,4 +1,4 @@
-"""The gymnax-style environment (``jaxais.envs.make``), its brax wrapper and the console scripts.
+"""The gymnax-style environment (``jaxais.envs.make``) and its brax wrapper.
 
 Every test shares one environment per auto-reset setting, so each compiled function (reset,
 step, step without auto-reset, its vmapped batch, the brax pair) compiles once. Parameters that
@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
-import tomllib
 from pathlib import Path
 
 import jax
@@ -206,14 +205,3 @@ def test_brax_wrapper(env):
     assert dones == [0.0, 0.0, 1.0] and truncs == [0.0, 0.0, 1.0]
     assert set(state.metrics) == {"collisions", "distance", "goal_pixels"}
     assert isinstance(state.pipeline_state, genv.EnvState)
-
-
-def test_console_scripts_point_at_the_scripts():
-    from jaxais import console
-
-    table = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
-    assert set(table) == {"jaxais-evolve", "jaxais-trials", "jaxais-reproduce"}
-    for name, target in table.items():
-        module, func = target.split(":")
-        assert callable(getattr(importlib.import_module(module), func))
-        assert (console.SCRIPTS_DIR / f"{name.removeprefix('jaxais-')}.py").is_file()

@@ -54,7 +54,7 @@ pytestmark = pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptio
 
 
 def run_main(*args: str) -> dict:
-    return evolve.main([*TINY_ARGS, *args])
+    return evolve.run([*TINY_ARGS, *args])
 
 
 def expect_exit(capsys, *args: str, status: int = 2) -> str:
@@ -151,7 +151,7 @@ def test_check_seed_measures_the_recorded_rates(full_run: Path, capsys):
     writes nothing."""
     before = _digest(full_run)
     capsys.readouterr()
-    summary = evolve.main([*TINY_ARGS, "--check-seed", str(full_run / "seed")])
+    summary = evolve.run([*TINY_ARGS, "--check-seed", str(full_run / "seed")])
     _, meta = load_seed(full_run / "seed")
     assert summary["crossing"] == meta["crossing"] == summary["recorded_crossing"]
     out = capsys.readouterr().out
@@ -323,7 +323,7 @@ def test_bad_flags(tmp_path: Path, capsys, case: list[str]):
     before = _digest(keep)
     capsys.readouterr()
     with pytest.raises(SystemExit) as info:
-        evolve.main([*case, "--out", str(keep)])
+        evolve.run([*case, "--out", str(keep)])
     assert info.value.code == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
@@ -336,11 +336,11 @@ def test_check_seed_and_out_refusals(tmp_path: Path, capsys, full_run: Path):
     assert "--check-seed" in last and "--out" in last
     capsys.readouterr()
     with pytest.raises(SystemExit) as info:
-        evolve.main(["--populations", "2"])
+        evolve.run(["--populations", "2"])
     assert info.value.code == 2
     assert "--out" in capsys.readouterr().err
     with pytest.raises(SystemExit) as info:
-        evolve.main(["--check-seed", str(tmp_path / "none")])
+        evolve.run(["--check-seed", str(tmp_path / "none")])
     assert info.value.code == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "no such seed directory" in err

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import _stl_fixtures as F
 import pytest
+from _python import run_python
 
 from jaxais.systems import LABELS
 from jaxais.trials import summarise
@@ -222,6 +223,44 @@ def test_trials_script_user_errors(tmp_path: Path):
 def test_argparse_errors_are_one_line(script, args, tmp_path):
     proc = _finish(_start(script, *[tmp_path / a if a in ("r.json", "d") else a for a in args]))
     assert_user_error(proc, script)
+
+
+# ---------------------------------------------------------------------------------- the library
+
+
+def test_library_calls_check_their_arguments_before_jax_starts(tmp_path: Path):
+    """jaxais.experiments.trials and .reproduce (what the scripts call) answer a bad argument
+    with a one-line ValueError, before JAX loads and before anything is written."""
+    out = tmp_path / "out"
+    cases = [
+        ("trials", ("HDC", out / "r.json"), {"trials": 0}, "--trials must be >= 1, got 0"),
+        ("trials", ("HDC", out / "r.json"), {"seed": -1}, "--seed must be in [0, 2**32), got -1"),
+        ("trials", ("HDC", tmp_path / "r.txt"), {}, "r.txt: expected a file name ending in .json"),
+        ("trials", ("HDC", out / "r.json"), {}, "out: directory does not exist"),
+        ("trials", ("XYZ",), {}, "unknown system 'XYZ'"),
+        ("trials", ("SIE",), {"random_set": "R2"}, "--random-set applies to UIE and URL only"),
+        ("reproduce", (out,), {"worlds": ["mars"]}, "--worlds: unknown world(s) ['mars']"),
+        ("reproduce", (out,), {"trials": 1}, "--trials must be >= 2"),
+        ("reproduce", (out,), {"tau_cap": 0}, "--tau-cap must be > 0"),
+        ("reproduce", (out,), {"evolve": True, "seeds": "s"}, "exclude each other"),
+    ]
+    code = (
+        "import sys\n"
+        "import jaxais.experiments as x\n"
+        f"for name, args, kw in {[(n, tuple(map(str, a)), kw) for n, a, kw, _ in cases]!r}:\n"
+        "    try:\n"
+        "        getattr(x, name)(*args, **kw)\n"
+        "    except ValueError as err:\n"
+        "        print(err)\n"
+        "print('jax' in sys.modules)\n"
+    )
+    proc = run_python(code)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    lines = proc.stdout.splitlines()
+    assert len(lines) == len(cases) + 1 and lines[-1] == "False", proc.stdout
+    for line, (*_, message) in zip(lines, cases, strict=False):
+        assert message in line, (message, line)
+    assert not out.exists()
 
 
 # ---------------------------------------------------------------------------------- reproduce.py

@@ -163,10 +163,10 @@ class FakeScripts:
         self.fail = fail
 
     def __call__(self, cmd: list[str], log: Path | None) -> int:
-        assert cmd[0] == sys.executable
-        stage = "LTL" if cmd[1].endswith("evolve.py") else "STL"
+        assert cmd[:2] == [sys.executable, "-m"]
+        stage = {"jaxais.scripts.evolve": "LTL", "jaxais.scripts.reproduce": "STL"}[cmd[2]]
         out, s = Path(cmd[cmd.index("--out") + 1]), int(cmd[cmd.index("--seed") + 1])
-        self.calls.append((stage, s, cmd[2:]))
+        self.calls.append((stage, s, cmd[3:]))
         if (s, stage) in self.fail:
             out.mkdir(parents=True, exist_ok=True)
             (out / "half.json").write_text("{")
@@ -226,7 +226,8 @@ def test_ledger_resumes_ltl_and_reruns_partial_stl(tmp_path):
     # seed 0: finished LTL; seed 1: checkpoints only; seed 2: STL with report.md but no marker.
     for s in (0, 2):
         out = str(tmp_path / "ltl" / f"seed_{s}")
-        FakeScripts()([sys.executable, "evolve.py", "--out", out, "--seed", str(s)], None)
+        cmd = [sys.executable, "-m", "jaxais.scripts.evolve", "--out", out, "--seed", str(s)]
+        FakeScripts()(cmd, None)
     (tmp_path / "ltl" / "seed_1" / "checkpoints" / "7").mkdir(parents=True)
     stl2 = tmp_path / "stl" / "seed_2"
     stl2.mkdir(parents=True)
@@ -263,8 +264,9 @@ def test_failed_ltl_with_jobs_points_to_its_log(tmp_path):
     assert ("STL", 0) not in run.stages()
 
 
-def test_ledger_argument_errors(tmp_path, monkeypatch):
+def test_ledger_argument_errors(tmp_path):
     run = FakeScripts()
+    (tmp_path / "file").write_text("")
     for kw, match in [
         ({"seeds": []}, "at least one"),
         ({"seeds": [1, 1]}, "distinct"),
@@ -272,13 +274,20 @@ def test_ledger_argument_errors(tmp_path, monkeypatch):
         ({"trials": 1}, "trials must be >= 2"),
         ({"jobs": 0}, "jobs must be >= 1"),
         ({"extra_args": ["--seed=3"]}, "extra_args may not set"),
+        ({"out": tmp_path / "file"}, "file: not a directory"),
     ]:
         with pytest.raises(ValueError, match=match):
-            ledger(tmp_path / "x", run, **({"seeds": [0]} | kw))
-    monkeypatch.setattr(S, "SCRIPTS_DIR", tmp_path / "nowhere")
-    with pytest.raises(ValueError, match="no evolve.py or reproduce.py"):
-        ledger(tmp_path / "x", run, seeds=[0])
+            S.ltl_ledger(**({"out": tmp_path / "x", "seeds": [0]} | kw), runner=run)
     assert run.calls == [] and not (tmp_path / "x").exists()
+
+
+def test_the_ledgers_subprocesses_run_the_installed_scripts(tmp_path):
+    # python -m jaxais.scripts.NAME: the package's scripts, found wherever jaxais is installed
+    # (here from a folder outside the checkout).
+    for name in ("evolve", "reproduce"):
+        proc = subprocess.run([sys.executable, "-m", f"jaxais.scripts.{name}", "--help"],
+                              cwd=tmp_path, capture_output=True, text=True, timeout=60)  # fmt: skip
+        assert proc.returncode == 0 and f"usage: {name}.py" in proc.stdout, proc.stderr
 
 
 def test_default_runner_logs_and_stops_children(tmp_path):

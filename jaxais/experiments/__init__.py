@@ -1,6 +1,9 @@
 """The paper's experiments: its protocol, the runs' records, the statistics, the claims, the
 report, the ablation of our readings and the figures.
 
+:func:`reproduce` runs the paper end to end (``scripts/reproduce.py``), :func:`trials` n trials of
+one system in one world (``scripts/trials.py``); each checks its arguments before JAX starts.
+
 Submodules: ``protocol`` (the paper's worlds, systems, trial counts and comparisons, stated
 once), ``records`` (what a run writes: systems, configs, results documents), ``stats`` (Tables
 3-5, robustness tests, H1-H4), ``claims`` (the paper's 32 claims), ``report``, ``ablation``,
@@ -10,3 +13,8 @@ This layer sits on top of the engine (``jaxais.envs``, ``controllers``, ``episod
 ``systems``, ``trials``, ...); nothing below imports from it. Importing the package (or
 ``protocol``) does not start JAX.
 """
+
+from jaxais.experiments.reproduce import reproduce
+from jaxais.experiments.trials import trials
+
+__all__ = ["reproduce", "trials"]

@@ -2,9 +2,10 @@
 
 For each GA seed s, :func:`ltl_ledger` runs, as subprocesses of this interpreter,
 
-- the LTL: ``scripts/evolve.py --out OUT/ltl/seed_s --seed s`` (evolve.py's defaults), and then
-- the STL: ``scripts/reproduce.py --seeds OUT/ltl/seed_s/seed --out OUT/stl/seed_s --seed s
-  --no-baseline`` (the paper's protocol with that seed, trial seed s),
+- the LTL: ``python -m jaxais.scripts.evolve --out OUT/ltl/seed_s --seed s`` (evolve.py's
+  defaults), and then
+- the STL: ``python -m jaxais.scripts.reproduce --seeds OUT/ltl/seed_s/seed --out OUT/stl/seed_s
+  --seed s --no-baseline`` (the paper's protocol with that seed, trial seed s),
 
 and tabulates which claims and hypotheses hold on how many seeds: ``OUT/seeds.json`` and
 ``OUT/seeds.md``, rebuilt after every seed (a partial ledger says "k of N seeds done"), and
@@ -28,6 +29,7 @@ the reproduce.py subprocess's. Nothing here imports JAX (the subprocesses have t
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import signal
 import statistics
@@ -40,7 +42,6 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
-from jaxais.console import SCRIPTS_DIR
 from jaxais.io import atomic_write_json, atomic_write_text
 
 __all__ = ["SeedRunError", "headline", "ltl_ledger", "ltl_state", "markdown", "summarise"]
@@ -361,7 +362,7 @@ def _run_seed(out: Path, s: int, settings: dict, run: Runner, logs: bool, note, 
 
     state = ltl_state(ltl)
     if state != "done":
-        cmd = [sys.executable, str(SCRIPTS_DIR / "evolve.py"), "--out", str(ltl), "--seed", str(s)]
+        cmd = [sys.executable, "-m", "jaxais.scripts.evolve", "--out", str(ltl), "--seed", str(s)]
         note(f"seed {s}: LTL {'resumed' if state == 'resume' else 'started'} ({ltl})")
         code = run(cmd + ["--resume"] * (state == "resume"), log("ltl"))
         if code != 0:
@@ -373,7 +374,7 @@ def _run_seed(out: Path, s: int, settings: dict, run: Runner, logs: bool, note, 
     marker.unlink(missing_ok=True)
     if stl.exists():
         shutil.rmtree(stl)  # a partial run: reproduce.py is deterministic, so run it again
-    cmd = [sys.executable, str(SCRIPTS_DIR / "reproduce.py"), "--seeds", str(ltl / "seed"),
+    cmd = [sys.executable, "-m", "jaxais.scripts.reproduce", "--seeds", str(ltl / "seed"),
            "--out", str(stl), "--seed", str(s), "--no-baseline"]  # fmt: skip
     if settings["trials"] is not None:
         cmd += ["--trials", str(settings["trials"])]
@@ -418,7 +419,7 @@ def ltl_ledger(
         The ledger (``seeds.json``'s document) over the requested seeds that are done.
 
     Raises:
-        ValueError: bad arguments, missing scripts, or ``out`` made with other settings.
+        ValueError: bad arguments, or ``out`` made with other settings.
         SeedRunError: a subprocess failed (after the seeds already running finished; the
             ledger of the finished seeds is written).
     """
@@ -428,20 +429,20 @@ def ltl_ledger(
     if any(not isinstance(s, int) or isinstance(s, bool) or not 0 <= s <= MAX_SEED for s in seeds):
         raise ValueError(f"seeds must be integers in [0, {MAX_SEED}], got {seeds}")
     if trials is not None and trials < 2:
-        raise ValueError(f"trials must be >= 2 (t-tests need two per group), got {trials}")
+        raise ValueError(f"--trials must be >= 2 (t-tests need two per group), got {trials}")
     if jobs < 1:
-        raise ValueError(f"jobs must be >= 1, got {jobs}")
+        raise ValueError(f"--jobs must be >= 1, got {jobs}")
     extra = [str(a) for a in extra_args]
     if any(a.split("=")[0] in RESERVED for a in extra):
         raise ValueError(f"extra_args may not set {', '.join(RESERVED)} (the ledger sets them)")
-    missing = [n for n in ("evolve.py", "reproduce.py") if not (SCRIPTS_DIR / n).is_file()]
-    if missing:
-        raise ValueError(f"{SCRIPTS_DIR}: no {' or '.join(missing)}; the ledger runs the "
-                         "scripts of a source checkout (pip install -e .)")  # fmt: skip
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{out}: not a directory")
     settings = {"trials": trials, "extra_args": extra}
     if command is None:
         command = f"ltl_ledger({str(out)!r}, seeds={seeds}, trials={trials}, extra_args={extra})"
     out.mkdir(parents=True, exist_ok=True)
+    if not os.access(out, os.W_OK | os.X_OK):
+        raise ValueError(f"{out}: directory is not writable")
     for s in seeds:
         _stl_done(out, s, settings)  # other settings in out: fail before anything runs
     lock, stop, procs = threading.Lock(), threading.Event(), _Processes()

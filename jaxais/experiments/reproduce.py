@@ -1,0 +1,345 @@
+"""The paper end to end: every system in every world, Tables 3-5, H1-H4, the claims, a report.
+
+:func:`reproduce` runs the paper's protocol (SPEC 9): 30 trials of each system per simulated world
+and 20 in ``real``; the unseeded systems with both random sets R1 and R2 in the simulated worlds
+and R1 only in ``real``. All systems of a world run as one compiled, vmapped pool of runs, each
+slot refilled when its run ends (sharded over every device JAX sees; in a multi-process run
+every process runs its share and process 0 writes). It writes, under ``out``:
+
+- ``tables.json`` (Tables 3-5 with 95 % bootstrap intervals, H1-H4, the calibration point, the
+  neural baseline's tables), ``claims.json`` (the paper's 32 claims, each held or not, also read
+  with 95 % confidence intervals, and a summary);
+- ``report.md`` (opening with the claims ledger; figures in ``figures/``);
+- every trial in ``trials/`` and ``run.json`` (the config, seeds and timings needed to
+  regenerate it all).
+
+Only the first trial of each system is drawn (run again with its trajectory recorded); the
+records of all trials are kept. SIE also runs with a selection every iteration (``hold=1``,
+``trials/WORLD_SIE_hold1.json``) for the report's calibration point: its idiotypic difference
+rate beside the paper's 20 %. The arguments are checked before JAX starts (one-line
+``ValueError``\\ s naming the flags of ``scripts/reproduce.py``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shlex
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from jaxais.experiments import protocol
+from jaxais.experiments.trials import command_line
+from jaxais.io import atomic_write_json
+
+__all__ = ["LTLRunError", "headline", "reproduce", "run_ltl"]
+
+CALIBRATED = "SIE@hold=1"
+"""SIE with a selection every iteration, on the plain label's worlds and random streams."""
+
+
+class LTLRunError(RuntimeError):
+    """The LTL run (the GA) that ``evolve=True`` starts failed."""
+
+
+def run_ltl(out: Path, seed: int, generations: int | None = None) -> Path:
+    """Run the LTL (``scripts/evolve.py``'s defaults, GA seed ``seed``) into ``out``.
+
+    The one place :func:`reproduce` runs the GA: a child process (``python -m
+    jaxais.scripts.evolve``), which sets the GA's own XLA settings before its JAX starts.
+
+    Returns:
+        The seed folder it wrote (``out/seed``).
+
+    Raises:
+        LTLRunError: the run failed (its messages are on this process's stderr).
+    """
+    cmd = [sys.executable, "-m", "jaxais.scripts.evolve", "--out", str(out), "--seed", str(seed)]
+    if generations is not None:
+        cmd += ["--generations", str(generations)]
+    if subprocess.run(cmd).returncode != 0:
+        raise LTLRunError("the LTL run (scripts/evolve.py) failed; see its message above")
+    return out / "seed"
+
+
+def _ltl_summary(seed_dir: Path) -> dict | None:
+    """The evolve.py summary next to a seed (DIR/seed -> DIR/summary.json), if there is one."""
+    for candidate in (seed_dir / "summary.json", seed_dir.parent / "summary.json"):
+        if candidate.is_file():
+            try:
+                return json.loads(candidate.read_text())
+            except (OSError, ValueError):
+                return None
+    return None
+
+
+def _check_fresh_ltl_dir(ltl_dir: Path, seed: int, generations: int | None) -> None:
+    """Refuse to run the LTL into a folder an earlier ``evolve=True`` run left (evolve.py would
+    refuse too, with advice for its own flags), saying how to go on without losing that run."""
+    if not ltl_dir.exists() or (ltl_dir.is_dir() and not any(ltl_dir.iterdir())):
+        return
+    if not ltl_dir.is_dir():
+        raise ValueError(f"{ltl_dir} exists and is not a folder; remove it to run the LTL there")
+    if (ltl_dir / "seed").is_dir():
+        raise ValueError(
+            f"{ltl_dir} exists from an earlier --evolve run; remove it, or pass --seeds "
+            f"{ltl_dir / 'seed'} instead of --evolve to reuse its seed"
+        )
+    more = [] if generations is None else ["--generations", str(generations)]
+    resume = shlex.join(["scripts/evolve.py", "--out", str(ltl_dir), "--seed", str(seed), *more])
+    raise ValueError(
+        f"{ltl_dir} holds an unfinished LTL run; remove it, or finish it with "
+        f"'{resume} --resume' and then pass --seeds {ltl_dir / 'seed'} instead of --evolve"
+    )
+
+
+def reproduce(
+    out: str | os.PathLike[str],
+    *,
+    trials: int | None = None,
+    seed: int = 0,
+    seeds: str | os.PathLike[str] | None = None,
+    evolve: bool = False,
+    generations: int | None = None,
+    baseline: str | os.PathLike[str] | bool = True,
+    worlds: str | Sequence[str] | None = None,
+    tau_cap: float | None = None,
+    collision_cap: int | None = None,
+    progress: bool = True,
+    command: str | None = None,
+    before_jax: Callable[[], object] | None = None,
+) -> dict[str, Any] | None:
+    """Run the paper's experiments and write the tables, claims, report and every trial to ``out``.
+
+    Args:
+        out: the output folder (created if missing).
+        trials: trials per system and world (default: the paper's, 30; 20 in ``real``).
+        seed: the trials' PRNG seed, in [0, 2**32) (and the GA's with ``evolve``).
+        seeds: the LTL seed folder (default: the shipped ``checkpoints/default``).
+        evolve: run the LTL first (:func:`run_ltl`, into ``out/ltl``) and use its seed.
+        generations: the LTL's generation cap with ``evolve`` (default: evolve.py's).
+        baseline: the trained neural controller run beside SIE and HDC: True for the shipped
+            ``checkpoints/neural``, a folder for other weights, False for none.
+        worlds: a subset of the protocol's worlds (names, or one comma-separated string).
+        tau_cap, collision_cap: the caps (default: the paper's).
+        progress: show a progress bar per world on stderr.
+        command: the command recorded in ``run.json`` and the report (default: the
+            ``reproduce.py`` command line these arguments stand for).
+        before_jax: called once the arguments are checked, before JAX computes anything (the
+            scripts' XLA and multi-process settings, :mod:`jaxais._speed`).
+
+    Returns:
+        On the writing process, ``{"tables", "claims", "run", "report"}``: the documents of
+        ``tables.json``, ``claims.json`` and ``run.json``, and the report's path; None on the
+        other processes of a multi-process run.
+
+    Raises:
+        ValueError: a bad argument, or a seed or weights that cannot be read (before any trial).
+        LTLRunError: the LTL run failed.
+    """
+    if command is None:
+        flags = {"--out": out, "--trials": trials, "--seeds": seeds, "--evolve": evolve,
+                 "--seed": seed or None, "--baseline": None if isinstance(baseline, bool)
+                 else baseline, "--no-baseline": baseline is False,
+                 "--worlds": worlds if isinstance(worlds, str | None) else ",".join(worlds),
+                 "--tau-cap": tau_cap, "--collision-cap": collision_cap,
+                 "--generations": generations}  # fmt: skip
+        command = command_line("reproduce.py", flags)
+    names = protocol.WORLDS if worlds is None else worlds
+    names = [w for w in names.split(",") if w] if isinstance(names, str) else list(names)
+    tau_cap = float(protocol.TAU_CAP if tau_cap is None else tau_cap)  # 10 and 10.0: one record
+    collision_cap = int(protocol.COLLISION_CAP if collision_cap is None else collision_cap)
+    unknown = sorted(set(names) - set(protocol.WORLDS))
+    if unknown or not names:
+        raise ValueError(
+            f"--worlds: unknown world(s) {unknown} (choose from {', '.join(protocol.WORLDS)})"
+        )
+    if not 0 <= seed < 2**32:
+        raise ValueError(f"--seed must be in [0, 2**32), got {seed}")
+    if trials is not None and trials < 2:
+        raise ValueError(f"--trials must be >= 2 (t-tests need two per group), got {trials}")
+    if tau_cap <= 0 or collision_cap < 1:
+        raise ValueError("--tau-cap must be > 0 and --collision-cap >= 1")
+    if generations is not None and generations < 1:
+        raise ValueError(f"--generations must be >= 1, got {generations}")
+    if evolve and seeds is not None:
+        raise ValueError("--seeds and --evolve exclude each other: the LTL makes the seed")
+    out = Path(out)
+    if evolve:
+        _check_fresh_ltl_dir(out / "ltl", seed, generations)
+    out.mkdir(parents=True, exist_ok=True)
+    if not os.access(out, os.W_OK | os.X_OK):
+        raise ValueError(f"{out}: directory is not writable")
+    if before_jax is not None:
+        before_jax()
+
+    started = time.perf_counter()
+    timings: dict[str, float] = {}
+    if evolve:
+        t = time.perf_counter()
+        seeds = run_ltl(out / "ltl", seed, generations)
+        timings["ltl_s"] = time.perf_counter() - t
+    return _run(out, names, trials, seed, seeds, baseline, tau_cap, collision_cap,
+                progress=progress, command=command, started=started, timings=timings)  # fmt: skip
+
+
+def _run(out: Path, worlds: list[str], n_trials: int | None, seed: int,
+         seeds: str | os.PathLike[str] | None, baseline: str | os.PathLike[str] | bool,
+         tau_cap: float, collision_cap: int, *, progress: bool, command: str, started: float,
+         timings: dict[str, float]) -> dict[str, Any] | None:  # fmt: skip
+    """:func:`reproduce` once its arguments are checked and the LTL has run (``timings`` holds
+    its time, ``started`` the call's start): JAX starts here."""
+    import jax
+    import numpy as np
+    from tqdm import tqdm
+
+    from jaxais import envs
+    from jaxais.baselines.config import NN_LABEL
+    from jaxais.baselines.neural import NEURAL, load_params
+    from jaxais.episode import EpisodeConfig
+    from jaxais.experiments import claims, report, stats
+    from jaxais.experiments.plotting import draw_world
+    from jaxais.experiments.records import (
+        build_systems,
+        load_ltl_seed,
+        portable_command,
+        results_document,
+        run_config,
+        versions,
+    )
+    from jaxais.immune.network import NetworkParams
+    from jaxais.seed import default_seed_dir
+    from jaxais.trials import run_trials
+
+    # Every process runs every trial's share (and gets every number); process 0 writes.
+    lead = jax.process_index() == 0
+    seeds_dir = Path(seeds) if seeds else default_seed_dir()
+    # Read once, and early: a missing or corrupt seed (or baseline) fails before any trial runs.
+    loaded = load_ltl_seed(seeds_dir)
+    if baseline is not False:
+        try:
+            nn_params, nn_info = load_params(None if baseline is True else baseline)
+        except ValueError as err:
+            raise ValueError(f"--baseline: {err}") from None
+        # What made the weights (train_baseline.py's config.json holds the rest).
+        nn_info = {"config": nn_info.get("config"), "seed": nn_info.get("seed")}
+
+    network = NetworkParams()
+    params = envs.default_params()
+    config = EpisodeConfig(tau_cap=tau_cap, collision_cap=collision_cap)
+    # The report draws each system's first trial: it runs again, alone and recorded (the same
+    # keys, so the same run as in the pooled trials).
+    example = EpisodeConfig(tau_cap=tau_cap, collision_cap=collision_cap, record=True)
+    results_by_world, baseline_by_world, trajectories, placements, configs = {}, {}, {}, {}, {}
+    # SIE again with a selection every iteration: its difference rate beside the paper's 20 %
+    # (the report's calibration point), on the plain label's worlds and random streams.
+    calibration_by_world = {}
+    (out / "trials").mkdir(exist_ok=True)
+    for name in worlds:
+        world = envs.load_world(name)
+        labels = list(protocol.systems_for_world(name))
+        n = n_trials if n_trials is not None else protocol.trials_for_world(name)
+        systems, seed_info = build_systems(labels, seeds_dir, network, loaded)
+        sie = systems["SIE"]
+        hold1 = {CALIBRATED: sie.replace(readings=sie.readings.replace(hold=np.int32(1)))}
+        world_t: dict[str, float] = {}
+        k = len(labels) + 1 + (baseline is not False)
+        with tqdm(total=n * k, desc=f"{name}: {k} systems x {n} trials", unit="run",
+                  file=sys.stderr, disable=not (lead and progress)) as bar:  # fmt: skip
+            results = run_trials(world, systems | hold1, n, seed, config, params, bar, world_t)
+            calibration = results.pop(CALIBRATED)
+            if baseline is not False:
+                baseline_by_world[name] = run_trials(
+                    world, {NN_LABEL: nn_params}, n, seed, config, params, bar, world_t,
+                    controller=NEURAL,
+                )  # fmt: skip
+        first = run_trials(world, systems, 1, seed, example, params, None, world_t)
+        for key, value in world_t.items():
+            timings[f"{name}_{key}"] = value
+            timings[key] = timings.get(key, 0.0) + value
+        cfg = run_config(world, name, config, network, params, seed_info)
+        configs[name] = cfg
+        results_by_world[name] = {k: v.records for k, v in results.items()}
+        calibration_by_world[name] = {"SIE": calibration.records}
+        trajectories[name] = {k: v.trajectories[0][:, :2] for k, v in first.items()}
+        placements[name] = {k: v.placements[0] for k, v in first.items()}
+        if not lead:
+            continue
+        for label, trial_set in results.items():
+            doc = results_document(label, name, seed, trial_set, cfg)
+            atomic_write_json(out / "trials" / f"{name}_{label}.json", doc)
+        hold1_cfg = {**cfg, "readings": {**cfg["readings"], "hold": 1}}
+        doc = results_document(CALIBRATED, name, seed, calibration, hold1_cfg)
+        atomic_write_json(out / "trials" / f"{name}_SIE_hold1.json", doc)
+        for label, trial_set in baseline_by_world.get(name, {}).items():
+            # The run's config without the network's parts, with what made the weights.
+            nn_cfg = {k: v for k, v in cfg.items() if k not in ("network", "readings", "ltl_seed")}
+            nn_cfg["baseline"] = nn_info
+            doc = results_document(label, name, seed, trial_set, nn_cfg)
+            atomic_write_json(out / "trials" / f"{name}_{label}.json", doc)
+
+    if not lead:
+        return None
+    t = time.perf_counter()
+    cis = stats.table3_ci(results_by_world)  # once, for the tables and the claims
+    tables = stats.build_tables(results_by_world, cis=cis)
+    tables["calibration"] = stats.calibration(
+        results_by_world, calibration_by_world, {"k1": network.k1, "k2": network.k2}
+    )
+    if baseline_by_world:
+        records = {w: {k: ts.records for k, ts in d.items()} for w, d in baseline_by_world.items()}
+        tables["baseline"] = stats.baseline_tables(results_by_world, records)
+        tables["baseline"]["weights"] = nn_info
+    atomic_write_json(out / "tables.json", tables)
+    ledger = claims.claims(results_by_world, cis=cis)
+    timings["statistics_s"] = time.perf_counter() - t
+    claims_doc = claims.document(ledger)
+    atomic_write_json(out / "claims.json", claims_doc)
+    timings["total_s"] = time.perf_counter() - started
+    run = {
+        "command": portable_command(command),
+        "seed": seed,
+        "trials": n_trials,
+        "ltl_seed": loaded[1],
+        "worlds": configs,
+        "versions": versions(),
+        "timings_s": timings,
+    }
+    atomic_write_json(out / "run.json", run)
+    drawn = {name: envs.load_world(name) for name in worlds}
+    report_path = report.write_report(
+        out,
+        tables,
+        results_by_world,
+        report.load_paper_tables(),
+        _ltl_summary(seeds_dir),
+        {k: v for k, v in run.items() if k != "timings_s"},
+        timings,
+        trajectories,
+        lambda ax, world_name, placement=None: draw_world(ax, drawn[world_name], placement),
+        claims_ledger=ledger,
+        example_placements=placements,
+        baseline=tables.get("baseline"),
+    )
+    return {"tables": tables, "claims": claims_doc, "run": run, "report": report_path}
+
+
+def headline(result: Mapping[str, Any]) -> str:
+    """One line: the claims reproduced, H1-H4's verdicts, the time taken and the report's path."""
+    verdicts = ", ".join(
+        f"{h} {'supported' if v['supported'] else 'not supported'}"
+        for h, v in result["tables"]["hypotheses"].items()
+    )
+    counts, ci_counts = result["claims"]["summary"], result["claims"]["ci_summary"]
+    timings = result["run"]["timings_s"]
+    return (
+        f"{counts['reproduced']} of {counts['evaluated']} evaluated claims reproduced "
+        f"({counts['total']} in all; {ci_counts['reproduced_with_ci']} of them with separated "
+        f"95 % CIs, {ci_counts['contradicted_with_ci']} contradicted by them); {verdicts}. "
+        f"Total {timings['total_s']:.0f} s (compile {timings.get('compile_s', 0):.0f} s). "
+        f"Report: {result['report']}"
+    )

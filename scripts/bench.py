@@ -7,8 +7,8 @@
 Measures the simulator's robot-steps per second per batch size (one device and sharded), the
 NumPy reference's, the STL controller's iterations per second, flops per step against the
 matmul peak, and with --scripts N the wall time of evolve.py's default run and 30 SIE trials
-end to end (jaxais.experiments.bench, whose docstring lists the JSON's fields). --quick uses
-fewer steps, repeats and batch sizes (explicit flags still win).
+end to end (jaxais.experiments.bench.run_bench). --quick uses fewer steps, repeats and batch
+sizes (explicit flags still win).
 """
 
 from __future__ import annotations

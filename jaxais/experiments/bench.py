@@ -1,22 +1,12 @@
 """The simulator's benchmark suite (``scripts/bench.py``): every figure into one JSON document.
 
-Each benchmark in :data:`BENCHMARKS` adds its figures to ``Bench.results``:
-
-- ``jax_steps_per_s`` (+ ``_median``, ``compile_s``, ``jax_runs``): robot-steps per second of
-  ``jax.vmap(step)`` in one compiled ``lax.scan`` of ``steps`` steps per batch size (best of
-  ``repeats`` timed calls after a warm-up call), robots driven by a cheap IR policy;
-- ``jax_steps_per_s_sharded`` (+ ``sharding``): the same, batch sharded over every device;
-- ``numpy_steps_per_s``: the NumPy reference (``jaxais.envs.reference``) on the same work, and
-  ``speedup_vs_numpy`` (JAX at batch 30, or the nearest measured);
-- ``controller_iterations_per_s``: SIE's STL controller and the simulator in the trials' task
-  loop (``jaxais.episode.compile_rollout``, caps off);
-- ``flops_per_step`` (XLA's cost analysis), ``peak_flops`` (float32 matmul) and
-  ``fraction_of_peak``;
-- ``scripts`` (``scripts > 0``): the wall time of :data:`SCRIPT_RUNS`, each a fresh process;
-- ``machine``: platform, CPUs, memory, versions, backend, devices, load, date.
-
-JAX is imported by the benchmarks, not here: :func:`force_host_devices` can still set the CPU
-device count first.
+Each of :data:`BENCHMARKS` adds its figures to ``Bench.results``: robot-steps per second of
+``jax.vmap(step)`` in one compiled ``lax.scan`` per batch size (best of ``repeats`` timed calls
+after a warm-up call; on one device and sharded over all), the NumPy reference
+(``jaxais.envs.reference``) on the same work, SIE's controller and the simulator in the trials'
+task loop, XLA's flops per step against the float32 matmul peak, the end-to-end wall time of
+:data:`SCRIPT_RUNS` (``scripts > 0``) and the machine. JAX is imported by the benchmarks, not
+here, so :func:`force_host_devices` can set the CPU device count first.
 """
 
 from __future__ import annotations
@@ -497,13 +487,10 @@ def bench_peak(b: Bench) -> None:
 
 
 def bench_controller(b: Bench) -> None:
-    """``controller_iterations_per_s``: the STL controller of SIE (RL, eq 4, penalties,
-    idiotypic selection, behaviours; ``stl_for`` leaves out replacement, as ``scripts/trials.py``
-    does for SIE) plus the simulator, in robot-iterations per second, through the same compiled
-    task loop the trials use (``jaxais.episode.compile_rollout``; caps off so no run ends), at
-    ``--controller-batches``; compile time reported separately. With several devices,
-    ``controller_iterations_per_s_sharded`` is the same loop with the batch sharded over all of
-    them, as ``scripts/trials.py`` runs it."""
+    """``controller_iterations_per_s``: SIE's STL controller (``stl_for``: no replacement, as in
+    the trials) and the simulator, robot-iterations per second through the trials' compiled task
+    loop (caps off: no run ends) at each controller batch size, compile time apart; with several
+    devices also ``..._sharded``, the batch over all of them as the trials run it."""
     import jax
     import jax.numpy as jnp
 
@@ -570,12 +557,9 @@ def run_timed(command: list[str], env: dict[str, str]) -> float:
 
 
 def bench_scripts(b: Bench) -> None:
-    """``scripts``: each of ``SCRIPT_RUNS`` run ``--scripts`` times end to end (nothing with 0).
-
-    Every run is a fresh process (JAX import, tracing, compilation, the run and the writing of
-    its outputs all count) with ``JAXAIS_CACHE_DIR=off``, so no run finds programs compiled by
-    an earlier one; the commands alternate. Their outputs go to a temporary folder, deleted
-    afterwards. ``within_target`` counts the runs at or under ``target_s``."""
+    """``scripts``: each of :data:`SCRIPT_RUNS` run ``config.scripts`` times, alternating, each
+    a fresh process (import, compile, run, write) with ``JAXAIS_CACHE_DIR=off``; outputs go to a
+    temporary folder. ``within_target`` counts the runs at or under ``target_s``."""
     if not b.config.scripts:
         return
     from tqdm import tqdm

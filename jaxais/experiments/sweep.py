@@ -432,6 +432,8 @@ def sweep(
         axis_names = [name for name, _ in axes]
         if len(set(axis_names)) < len(axis_names):
             raise ValueError(f"--grid names a parameter twice: {', '.join(axis_names)}")
+    elif not all(0 <= s < math.inf for s in noise):
+        raise ValueError(f"--noise scales must be finite and >= 0, got {list(noise)}")
     elif set(noise_kinds) - set(NOISE_KINDS):
         raise ValueError(f"--noise-kinds: one or more of {', '.join(NOISE_KINDS)}")
     out = Path(out)
@@ -451,7 +453,6 @@ def sweep(
         point_systems(systems[names[0]], points)  # every value in range, before any run
         total, unit = trials * len(points), "run"
     else:
-        [noisy_world(loaded, s, noise_kinds) for s in noise]  # every scale valid, likewise
         total, unit = len(noise), "level"
     # Every process runs every step (and computes the same numbers); process 0 reports and writes.
     lead = jax.process_index() == 0

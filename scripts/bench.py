@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> None:
     _speed.setup(cache=False)  # the scripts' XLA flags; no cache, since compile time is measured
     t0 = time.perf_counter()
     b = bench.run_bench(config, args.out, environ)
-    print(bench.summary(b, args.out, time.perf_counter() - t0))
+    print("bench.py: " + bench.summary(b, args.out, time.perf_counter() - t0))
 
 
 if __name__ == "__main__":

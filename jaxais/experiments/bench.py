@@ -626,7 +626,7 @@ def summary(b: Bench, out: str | os.PathLike[str], seconds: float) -> str:
     """A few human-readable lines about the benchmark written to ``out``."""
     r, m = b.results, b.results.get("machine", {})
     lines = [
-        f"bench.py: wrote {out} in {seconds:.0f} s "
+        f"wrote {out} in {seconds:.0f} s "
         f"({m.get('backend')} {', '.join(m.get('device_kinds', []))}, "
         f"{m.get('cpu_count')} CPUs, jax {m.get('jax')}, load {r['load_average_end'][0]:.1f})",
         f"  JAX robot-steps/s (best of {b.config.repeats}, {b.config.steps}-step scan): "

@@ -207,11 +207,8 @@ def evaluate_baseline(
             )
         doc["timings_s"][name] = round(time.perf_counter() - t0, 1)
         entry: dict[str, Any] = {"systems": {}, "tests": {}}
-        for label, trial_set in results.items():
-            entry["systems"][label] = {
-                "summary": summarise(trial_set.records),
-                "trials": trial_set.records,
-            }
+        for label, ts in results.items():
+            entry["systems"][label] = {"summary": summarise(ts.records), "trials": ts.records}
         f = {label: np.asarray([r["fitness"] for r in ts.records]) for label, ts in results.items()}
         for other in REFERENCE:
             t, p = stats.welch_t(f[NN_LABEL], f[other])

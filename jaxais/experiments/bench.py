@@ -55,13 +55,9 @@ CRUISE, GAIN = 300.0, 0.3
 
 @dataclass(frozen=True)
 class ScriptRun:
-    """A command whose wall time ``--scripts`` measures.
-
-    Attributes:
-        name: key in the JSON. argv: the script (a path relative to ``scripts/``) and its flags.
-        out: name of its ``--out`` target, made in a fresh temporary folder per run.
-        target_s: the project's target for this command's wall time, s.
-    """
+    """A command whose wall time ``--scripts`` measures: its key in the JSON, the script (a path
+    relative to ``scripts/``) and its flags, its ``--out`` target's name (in a fresh temporary
+    folder per run) and the project's target for its wall time, s."""
 
     name: str
     argv: tuple[str, ...]
@@ -90,16 +86,8 @@ SCRIPT_RUNS: tuple[ScriptRun, ...] = (
 
 @dataclass(frozen=True)
 class BenchConfig:
-    """What to measure; :func:`bench_config` fills in the quick values and checks them.
-
-    Attributes:
-        world: built-in world name or .toml path. steps: scan length per timed call.
-        batches: batch sizes (sorted). repeats: timed calls per batch size. quick: the values
-            of :data:`QUICK` were the defaults. numpy_robots, numpy_steps: the NumPy reference's
-            work. matmul: matrix size of the peak benchmark. controller_batches,
-            controller_steps: the STL controller's batch sizes and iterations per timed call.
-        scripts: runs of each of :data:`SCRIPT_RUNS` (0 skips them).
-    """
+    """What to measure (as ``scripts/bench.py --help`` says); :func:`bench_config` fills in
+    the :data:`QUICK` values with ``quick`` and checks them."""
 
     world: str = "world1"
     steps: int = 200
@@ -127,12 +115,8 @@ def _sizes(value: str | Sequence[int], flag: str) -> tuple[int, ...]:
 
 
 def bench_config(quick: bool = False, **values: Any) -> BenchConfig:
-    """A checked :class:`BenchConfig`: ``values`` (None means the default, the quick one with
-    ``quick``); batch sizes may be given as ``"1,30,1000"``.
-
-    Raises:
-        ValueError: a bad value (one line).
-    """
+    """A checked :class:`BenchConfig` from ``values`` (None: the default, or the quick one);
+    batch sizes may be given as ``"1,30,1000"``. Raises ValueError (one line) on a bad value."""
     values = {k: v for k, v in values.items() if v is not None}
     values = (QUICK if quick else {}) | values
     counts = ("steps", "repeats", "numpy_robots", "numpy_steps", "matmul", "controller_steps")
@@ -165,16 +149,9 @@ def force_host_devices(n: int) -> None:
 
 @dataclass
 class Bench:
-    """What every benchmark function gets: the config, the world and the shared results.
-
-    Attributes:
-        config: what to measure. world, params: the simulator's world and constants.
-        environ: the environment the benchmark was started with (before ``--devices`` set
-            ``XLA_FLAGS``): the scripts ``--scripts`` times run in it, as a user would run them.
-        results: the JSON document being built; each benchmark adds its own keys.
-        cache: values shared between benchmarks (initial states, compiled programs).
-        notes: remarks collected for the JSON and the summary.
-    """
+    """What every benchmark gets: the config, the world and constants, the environment the
+    benchmark started with (the timed scripts run in it, before ``--devices`` set ``XLA_FLAGS``),
+    the JSON document being built, values shared between benchmarks, and notes."""
 
     config: BenchConfig
     world: Any
@@ -186,13 +163,8 @@ class Bench:
 
 
 def _timed(fn: Callable[[], Any], repeats: int) -> dict[str, Any]:
-    """Time ``repeats`` calls of ``fn`` after one warm-up call.
-
-    Returns:
-        ``best_s``, ``median_s``, ``times_s`` (every call's wall time) and ``cpu_per_wall``:
-        this process's CPU time over the wall time of the timed calls (about the number of
-        cores kept busy; 1.0 = one core).
-    """
+    """``best_s``, ``median_s`` and ``times_s`` of ``repeats`` calls of ``fn`` after a warm-up
+    call, and ``cpu_per_wall``: CPU time over wall time (about the number of cores kept busy)."""
     import jax
 
     jax.block_until_ready(fn())
@@ -229,13 +201,8 @@ def policy_numpy(obs: dict[str, Any]):
 
 
 def make_rollout(n_steps: int, sharding: Any = None) -> Callable[..., Any]:
-    """``rollout(key, state, obs, world, params) -> (state, obs)``: ``n_steps`` batched steps.
-
-    Args:
-        n_steps: scan length.
-        sharding: a ``NamedSharding`` for the batch axis of the per-step keys and wheel speeds
-            (the states carry theirs in), or None for one device.
-    """
+    """``rollout(key, state, obs, world, params) -> (state, obs)``: ``n_steps`` batched steps,
+    the per-step keys and wheel speeds constrained to ``sharding`` (None: one device)."""
     import jax
     import jax.numpy as jnp
 
@@ -541,11 +508,8 @@ def bench_controller(b: Bench) -> None:
 
 
 def run_timed(command: list[str], env: dict[str, str]) -> float:
-    """Wall time of ``command`` run to its end, s.
-
-    Raises:
-        ChildProcessError: it failed (the message ends with the last line it wrote on stderr).
-    """
+    """Wall time of ``command`` run to its end, s; ChildProcessError (ending with the last line
+    it wrote on stderr) if it failed."""
     t0 = time.perf_counter()
     proc = subprocess.run(command, env=env, capture_output=True, text=True, check=False)
     seconds = time.perf_counter() - t0
@@ -625,36 +589,29 @@ def derive(b: Bench) -> None:
 def summary(b: Bench, out: str | os.PathLike[str], seconds: float) -> str:
     """A few human-readable lines about the benchmark written to ``out``."""
     r, m = b.results, b.results.get("machine", {})
+    per_batch = lambda d, fmt: ", ".join(f"B={k}: {v:{fmt}}" for k, v in d.items())
+    cores = lambda runs: {k: v["cpu_per_wall"] for k, v in runs.items()}
     lines = [
         f"wrote {out} in {seconds:.0f} s "
         f"({m.get('backend')} {', '.join(m.get('device_kinds', []))}, "
         f"{m.get('cpu_count')} CPUs, jax {m.get('jax')}, load {r['load_average_end'][0]:.1f})",
         f"  JAX robot-steps/s (best of {b.config.repeats}, {b.config.steps}-step scan): "
-        + ", ".join(f"B={k}: {v:,.0f}" for k, v in r.get("jax_steps_per_s", {}).items()),
-        "  compile s: " + ", ".join(f"B={k}: {v:.1f}" for k, v in r.get("compile_s", {}).items()),
-        "  cores busy (CPU time / wall time): "
-        + ", ".join(f"B={k}: {v['cpu_per_wall']:.2f}" for k, v in r.get("jax_runs", {}).items()),
+        + per_batch(r.get("jax_steps_per_s", {}), ",.0f"),
+        "  compile s: " + per_batch(r.get("compile_s", {}), ".1f"),
+        "  cores busy (CPU time / wall time): " + per_batch(cores(r.get("jax_runs", {})), ".2f"),
     ]
     if r.get("jax_steps_per_s_sharded"):
-        runs = r["jax_runs_sharded"]
         lines.append(
             f"  sharded over {r['sharding']['devices']} devices: "
-            + ", ".join(
-                f"B={k}: {v['steps_per_s']:,.0f} ({v['cpu_per_wall']:.2f} cores)"
-                for k, v in runs.items()
-            )
+            f"{per_batch(r['jax_steps_per_s_sharded'], ',.0f')} (cores busy: "
+            f"{per_batch(cores(r['jax_runs_sharded']), '.2f')})"
         )
-    for suffix, where in (("", ""), ("_sharded", " sharded")):
+    for suffix in ("", "_sharded"):
         if r.get(f"controller_iterations_per_s{suffix}"):
-            rates = r[f"controller_iterations_per_s{suffix}"]
             lines.append(
-                f"  STL controller + simulator{where}, robot-iterations/s: "
-                + ", ".join(f"B={k}: {v:,.0f}" for k, v in rates.items())
-                + " (compile s: "
-                + ", ".join(
-                    f"B={k}: {v:.1f}" for k, v in r[f"controller_compile_s{suffix}"].items()
-                )
-                + ")"
+                f"  STL controller + simulator{suffix.replace('_', ' ')}, robot-iterations/s: "
+                f"{per_batch(r[f'controller_iterations_per_s{suffix}'], ',.0f')} (compile s: "
+                f"{per_batch(r[f'controller_compile_s{suffix}'], '.1f')})"
             )
     if "numpy_steps_per_s" in r:
         text = f"  NumPy reference: {r['numpy_steps_per_s']:,.1f} robot-steps/s"
@@ -680,15 +637,9 @@ def summary(b: Bench, out: str | os.PathLike[str], seconds: float) -> str:
 def run_bench(
     config: BenchConfig, out: str | os.PathLike[str], environ: dict[str, str] | None = None
 ) -> Bench:
-    """Run :data:`BENCHMARKS` and write their figures as JSON to ``out`` (atomically).
-
-    Args:
-        environ: the environment the scripts ``config.scripts`` times run in (default: this
-            process's), as a user would run them.
-
-    Returns:
-        The :class:`Bench`; its ``results`` are the JSON document.
-    """
+    """Run :data:`BENCHMARKS` and write their figures as JSON to ``out``; the scripts
+    ``config.scripts`` times run in ``environ`` (default: this process's). Returns the
+    :class:`Bench` (its ``results`` are the document)."""
     from tqdm import tqdm
 
     from jaxais import envs

@@ -102,13 +102,8 @@ def render(
 ) -> tuple[str, int | None]:
     """Draw ``robots`` demo runs of ``steps`` iterations in ``world`` (a name or a .toml path)
     into the figure ``out``, and with ``gif`` an animation of every ``every``-th iteration.
-
-    Returns:
-        (the world's name, the GIF's frame count or None).
-
-    Raises:
-        ValueError: a bad argument (one line), before anything runs.
-    """
+    Returns (the world's name, the GIF's frame count or None); ValueError (one line) on a bad
+    argument, before anything runs."""
     for name, value in (("steps", steps), ("robots", robots), ("every", every)):
         if value <= 0:
             raise ValueError(f"--{name} must be a positive integer, got {value}")

@@ -5,7 +5,7 @@
 
 Robots reset with keys split from --seed run a Braitenberg-style controller (avoid obstacles on
 the IR readings, steer towards blue pixels); the PNG shows every trajectory and --gif animates
-every --every-th iteration (jaxais.experiments.render.render).
+every --every-th iteration (jaxais.experiments.demo.render).
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ def main(argv: list[str] | None = None) -> None:
     from jaxais import _speed
 
     _speed.setup()
-    from jaxais.experiments.render import render
+    from jaxais.experiments.demo import render
 
     world, frames = render(
         args.out, world=args.world, steps=args.steps, robots=args.robots, seed=args.seed,

@@ -280,3 +280,21 @@ def test_script_collects_runs_into_one_table(tmp_path):
     assert rows[5] == "| NN | 1 | -21.0 | 2015.0 (50) |"
     assert rows[6] == "| NN, all 2 runs pooled | – | – | 1015.0 (25) |"
     assert rows[10].startswith("| world1 | higher | 25.0 | 60.0 |")
+
+
+def test_driver_writes_into_the_shipped_checkpoints_only_when_asked(tmp_path):
+    """The shipped weights are never overwritten by default (the driver refuses before any
+    work); the script's default --out is a fresh folder."""
+    from jaxais.baselines import evaluate_baseline, train_baseline
+    from jaxais.baselines.neural import default_params_dir
+
+    shipped = default_params_dir()
+    before = {p.name: p.read_bytes() for p in shipped.iterdir() if p.is_file()}
+    with pytest.raises(ValueError, match="checkpoints"):
+        train_baseline(shipped, TINY)
+    with pytest.raises(ValueError, match="checkpoints"):
+        evaluate_baseline(None, shipped / "sub")
+    assert {p.name: p.read_bytes() for p in shipped.iterdir() if p.is_file()} == before
+    assert not (shipped / "sub").exists()
+    with pytest.raises(ValueError, match="no params.npz"):
+        evaluate_baseline(tmp_path, tmp_path / "out")

@@ -2,7 +2,8 @@
 
 :mod:`jaxais.baselines.neural`: a small neural controller (an MLP from the IR and camera
 features to the wheel speeds) trained by OpenES on the gymnax-style environment, and run under
-the task loop like SIE and HDC (:data:`NEURAL`). Its training settings,
+the task loop like SIE and HDC (:data:`NEURAL`); :mod:`jaxais.baselines.driver` trains it
+(:func:`train_baseline`) and runs it beside them (:func:`evaluate_baseline`). Its settings,
 :class:`~jaxais.baselines.config.TrainConfig`, live in a module free of JAX, so a script checks
 its flags before JAX starts; the other names load on first use.
 """
@@ -14,19 +15,25 @@ from typing import Any
 
 from jaxais.baselines.config import TrainConfig
 
-_EXPORTS = (
-    "MLPParams",
-    "NEURAL",
-    "TrainResult",
-    "load_params",
-    "make_train",
-    "neural_controller",
-    "save_params",
-)
+_EXPORTS = {
+    **dict.fromkeys(("collect_baselines", "evaluate_baseline", "train_baseline"), "driver"),
+    **dict.fromkeys(
+        (
+            "MLPParams",
+            "NEURAL",
+            "TrainResult",
+            "load_params",
+            "make_train",
+            "neural_controller",
+            "save_params",
+        ),
+        "neural",
+    ),  # fmt: skip
+}
 __all__ = ["TrainConfig", *_EXPORTS]
 
 
 def __getattr__(name: str) -> Any:
     if name in _EXPORTS:
-        return getattr(importlib.import_module("jaxais.baselines.neural"), name)
+        return getattr(importlib.import_module(f"jaxais.baselines.{_EXPORTS[name]}"), name)
     raise AttributeError(f"module 'jaxais.baselines' has no attribute {name!r}")

@@ -7,7 +7,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
+BUILTIN_WORLDS = ("ga_maze", "world1", "world2", "real")
+"""The simulator's built-in worlds (``envs.BUILTIN_WORLDS``, named here without loading JAX)."""
 NN_LABEL = "NN"
 """The trained controller's label in trial sets and reports (it names its trials' random
 stream, :func:`jaxais.trials.batch_keys`)."""
@@ -49,6 +52,8 @@ class TrainConfig:
     collision_penalty: float = 1.0
 
     def __post_init__(self):
+        if self.world not in BUILTIN_WORLDS and not Path(self.world).is_file():
+            raise ValueError(f"world: no built-in world or file {self.world!r}")
         for name in ("generations", "pairs", "episodes", "steps", "hidden"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import jax
@@ -52,6 +53,7 @@ __all__ = [
     "Ablation",
     "Call",
     "Variant",
+    "ablate",
     "batch_systems",
     "document",
     "figure",
@@ -633,3 +635,103 @@ def figure(doc: Mapping[str, Any]) -> Any:
     ax_f.set_title("SIE's fitness per world")
     ax_f.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)  # clear of the bars
     return fig
+
+
+# ------------------------------------------------------------------------------ the driver
+
+
+def ablate(
+    out: str | Path,
+    *,
+    worlds: Sequence[str] = protocol.WORLDS,
+    variants: Sequence[str] | None = None,
+    trials: int | None = None,
+    seed: int = 0,
+    seeds: str | Path | None = None,
+    tau_cap: float = protocol.TAU_CAP,
+    collision_cap: int = protocol.COLLISION_CAP,
+    share: bool = True,
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Run the ablation (:func:`run_ablation`; ``variants`` by name, default all) and write
+    ablation.json, ablation.md, ablation.png and run.json (config, seeds, versions, batches,
+    timings) into ``out``. ``trials`` defaults to the paper's counts.
+
+    Returns:
+        (the ablation.json document, the run.json document).
+
+    Raises:
+        ValueError: a bad argument (one line), before anything runs.
+    """
+    import os
+    import sys
+    import tempfile
+    import time
+
+    from tqdm import tqdm
+
+    from jaxais.experiments.plotting import save_figure
+    from jaxais.experiments.records import load_ltl_seed, versions
+    from jaxais.io import atomic_write_json, atomic_write_text
+
+    worlds = list(worlds)
+    unknown = sorted(set(worlds) - set(protocol.WORLDS))
+    if unknown or not worlds:
+        raise ValueError(
+            f"--worlds: unknown world(s) {unknown} (choose from {', '.join(protocol.WORLDS)})"
+        )
+    if len(set(worlds)) != len(worlds):
+        raise ValueError(f"--worlds: a world is named twice in {','.join(worlds)!r}")
+    if not 0 <= seed < 2**32:
+        raise ValueError(f"--seed must be in [0, 2**32), got {seed}")
+    if trials is not None and trials < 2:
+        raise ValueError(f"--trials must be >= 2 (t-tests need two per group), got {trials}")
+    if not 0 < tau_cap <= 1e6 or collision_cap < 1:
+        raise ValueError("--tau-cap must be in (0, 1e6] and --collision-cap >= 1")
+    try:
+        chosen = select(variants)
+    except ValueError as err:
+        raise ValueError(f"--variants: {err}") from None
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    tempfile.TemporaryFile(dir=out).close()  # writable: fail now, not after the runs
+
+    started = time.perf_counter()
+    # Read once, and early: a missing or corrupt seed fails before any trial runs.
+    ltl_seed, seed_info = load_ltl_seed(seeds)
+    base = dataclasses.replace(STL_CONFIG, tau_cap=tau_cap, collision_cap=collision_cap)
+    n_trials = {w: protocol.trials_for_world(w) if trials is None else trials for w in worlds}
+    with tqdm(unit="run", file=sys.stderr, desc="ablation") as bar:  # run_ablation sets the total
+        result = run_ablation(
+            worlds, chosen, seed, ltl_seed, n_trials, base, share=share, progress=bar
+        )
+    wall = time.perf_counter() - started
+
+    doc = document(result, chosen, n_trials)
+    atomic_write_json(out / "ablation.json", doc)
+    atomic_write_text(out / "ablation.md", "# Ablation of our readings\n\n" + markdown(doc))
+    save_figure(figure(doc), out / "ablation.png")
+    # The command that regenerates the run, every flag explicit, without the output directory.
+    command = (
+        f"ablate.py --out DIR --worlds {','.join(worlds)} "
+        f"--variants {','.join(v.name for v in chosen)} --seed {seed} "
+        f"--tau-cap {tau_cap:g} --collision-cap {collision_cap}"
+        + ("" if trials is None else f" --trials {trials}")
+        + ("" if seeds is None else f" --seeds {seed_info['path']}")
+        + ("" if share else " --no-share")
+    )
+    run = {
+        "command": command,
+        "seed": seed,
+        "trials": n_trials,
+        "worlds": worlds,
+        "variants": [v.name for v in chosen],
+        "episode": {"tau_cap": base.tau_cap, "collision_cap": base.collision_cap},
+        "share_identical_systems": share,
+        "ltl_seed": seed_info,
+        "versions": versions(),
+        "cpu_cores": os.cpu_count(),
+        "calls": result.calls,
+        "timings_s": {"total_s": wall, "run_s": sum(c["run_s"] for c in result.calls)},
+    }
+    atomic_write_json(out / "run.json", run)
+    return doc, run

@@ -23,6 +23,7 @@ import itertools
 import math
 import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import jax
@@ -361,3 +362,127 @@ def run_noise_sweep(
         "points": points,
         "wall_s": time.perf_counter() - start,
     }
+
+
+# ------------------------------------------------------------------------------ the driver
+
+
+def sweep(
+    out: str | Path,
+    *,
+    grid: Sequence[str] | None = None,
+    noise: Sequence[float] | None = None,
+    noise_kinds: Sequence[str] = tuple(NOISE_KINDS),
+    system: str | None = None,
+    random_set: str | None = None,
+    world: str | None = None,
+    trials: int | None = None,
+    seed: int = 0,
+    seeds: str | Path | None = None,
+    tau_cap: float | None = None,
+    collision_cap: int | None = None,
+    slots: int = 1024,
+    command: str | None = None,
+) -> dict[str, Any]:
+    """A grid over the STL's parameters (``grid``: :func:`parse_axis` specs) or the reality gap
+    (``noise``: scales of the world's noise, 1 = its own levels), written into ``out``.
+
+    Writes sweep.json and (one or two axes) sweep.png, or reality_gap.json and reality_gap.png.
+    ``system``: one label (grid; default SIE) or comma-separated labels (noise; default
+    SIE,SRL,HDC). ``world`` defaults to world1 (grid) or real (noise), ``trials`` to the paper's
+    count there, the caps to the paper's. Under ``jax.distributed`` (joined by the caller) every
+    process computes the same numbers and process 0 writes. Returns the document.
+
+    Raises:
+        ValueError: a bad argument (one line), before anything runs.
+    """
+    import sys
+    import tempfile
+
+    from tqdm import tqdm
+
+    from jaxais.experiments import protocol
+    from jaxais.experiments.records import build_systems, portable_command, run_config
+    from jaxais.experiments.sweep_plots import save_noise_figure, save_sweep_figures
+    from jaxais.immune.network import NetworkParams
+    from jaxais.io import atomic_write_json
+    from jaxais.labels import SYSTEMS, label
+
+    if (grid is None) == (noise is None):
+        raise ValueError("give one of grid (parameter axes) and noise (noise scales)")
+    world = world or (protocol.REAL_WORLD if noise is not None else protocol.WORLDS[0])
+    trials = protocol.trials_for_world(world) if trials is None else trials
+    if not 0 <= seed < 2**32:
+        raise ValueError(f"--seed must be in [0, 2**32), got {seed}")
+    if trials < 1:
+        raise ValueError(f"--trials must be >= 1, got {trials}")
+    if slots < 1:
+        raise ValueError(f"--slots must be >= 1, got {slots}")
+    names = (system or ("SIE" if grid is not None else "SIE,SRL,HDC")).split(",")
+    for name in names:
+        if name not in SYSTEMS:
+            raise ValueError(f"--system: unknown system {name!r} (one of {', '.join(SYSTEMS)})")
+    if grid is not None and len(names) != 1:
+        raise ValueError("--grid sweeps one system: give --system NAME")
+    if random_set and not {"UIE", "URL"} & set(names):
+        raise ValueError("--random-set applies to UIE and URL only")
+    names = [label(n, random_set or "R1") for n in names]
+    if grid is not None:
+        axes = [parse_axis(spec) for spec in grid]
+        axis_names = [name for name, _ in axes]
+        if len(set(axis_names)) < len(axis_names):
+            raise ValueError(f"--grid names a parameter twice: {', '.join(axis_names)}")
+    elif not all(0 <= s < math.inf for s in noise):
+        raise ValueError(f"--noise scales must be finite and >= 0, got {list(noise)}")
+    elif set(noise_kinds) - set(NOISE_KINDS):
+        raise ValueError(f"--noise-kinds: one or more of {', '.join(NOISE_KINDS)}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    tempfile.TemporaryFile(dir=out).close()  # writable: fail now, not after the runs
+
+    loaded = envs.load_world(world)
+    config = EpisodeConfig(
+        tau_cap=protocol.TAU_CAP if tau_cap is None else tau_cap,
+        collision_cap=protocol.COLLISION_CAP if collision_cap is None else collision_cap,
+    )
+    network = NetworkParams()
+    systems, seed_info = build_systems(names, seeds, network)
+    params = envs.default_params()
+    if grid is not None:
+        points = grid_points(axes)
+        point_systems(systems[names[0]], points)  # every value in range, before any run
+        total, unit = trials * len(points), "run"
+    else:
+        total, unit = len(noise), "level"
+    # Every process runs every step (and computes the same numbers); process 0 reports and writes.
+    lead = jax.process_index() == 0
+    start = time.perf_counter()
+    desc = f"{','.join(names)} in {loaded.name}"
+    with tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, disable=not lead) as bar:
+        if grid is not None:
+            doc = run_sweep(
+                loaded, systems[names[0]], names[0], axes, trials, seed, config, params, slots,
+                bar.update,
+            )  # fmt: skip
+        else:
+            doc = run_noise_sweep(
+                loaded, systems, noise, trials, seed, config, params, noise_kinds, bar.update
+            )
+    doc["wall_s_total"] = time.perf_counter() - start
+    doc |= {"system": ",".join(names), "world": loaded.name, "seed": seed, "trials": trials}
+    if grid is not None:
+        rate = interpolate(doc, "idiotypic_difference_rate", PAPER_POINT)
+        doc["paper_point"] = {"values": PAPER_POINT, "idiotypic_difference_rate": rate}
+    cfg = run_config(loaded, world, config, network, params, seed_info)
+    cfg["command"] = None if command is None else portable_command(command)
+    cfg["processes"] = jax.process_count()
+    cfg["devices"] = jax.device_count()
+    doc["config"] = cfg
+    if lead:
+        name = "sweep" if grid is not None else "reality_gap"
+        atomic_write_json(out / f"{name}.json", doc)
+        if grid is not None:
+            save_sweep_figures(doc, out)
+        else:
+            save_noise_figure(doc, out)
+    return doc

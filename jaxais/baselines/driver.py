@@ -1,0 +1,332 @@
+"""Train the neural baseline and run it beside SIE and HDC in the paper's worlds [ours].
+
+Free of JAX at import (it loads on the first call). Never writes into the shipped
+``checkpoints/`` unless asked to (``into_checkpoints=True``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+import tempfile
+import time
+from collections.abc import Sequence
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from jaxais.baselines.config import NN_LABEL, TrainConfig
+from jaxais.experiments import protocol
+from jaxais.io import atomic_write_json, atomic_write_text
+
+REFERENCE = ("SIE", "HDC")
+"""The paper's systems it runs beside."""
+
+
+def _output_dir(out: str | Path, into_checkpoints: bool) -> Path:
+    """``out``, created and writable; refused inside the shipped checkpoints/ unless asked."""
+    out = Path(out)
+    shipped = Path(str(resources.files("jaxais.checkpoints"))).resolve()
+    if not into_checkpoints and shipped in (out.resolve(), *out.resolve().parents):
+        raise ValueError(f"{out}: in the shipped checkpoints/ (--into-checkpoints to write there)")
+    out.mkdir(parents=True, exist_ok=True)
+    tempfile.TemporaryFile(dir=out).close()  # writable: fail now, not after the work
+    return out
+
+
+def _versions() -> dict[str, str]:
+    """The run's versions (:func:`jaxais.experiments.records.versions`) and optax's."""
+    import optax
+
+    from jaxais.experiments.records import versions
+
+    return versions() | {"optax": optax.__version__}
+
+
+def train_baseline(
+    out: str | Path,
+    config: TrainConfig | None = None,
+    *,
+    seed: int = 0,
+    log_every: int = 10,
+    command: str | None = None,
+    into_checkpoints: bool = False,
+) -> dict[str, Any]:
+    """Train the MLP by OpenES (:func:`~jaxais.baselines.neural.make_train`), logging a line to
+    stderr every ``log_every`` generations; write params.npz, config.json (returned: config,
+    seed, versions, wall time, final fitness, the curve) and training_curve.png into ``out``.
+    ``config`` defaults to ``TrainConfig()``.
+
+    Raises:
+        ValueError: a bad argument (one line), before anything runs.
+    """
+    if not 0 <= seed < 2**32:
+        raise ValueError(f"--seed must be in [0, 2**32), got {seed}")
+    if log_every < 1:
+        raise ValueError(f"--log-every must be >= 1, got {log_every}")
+    config = TrainConfig() if config is None else config
+    out = _output_dir(out, into_checkpoints)
+    import jax
+    import numpy as np
+
+    from jaxais.baselines.neural import make_train, save_params
+
+    start = time.perf_counter()
+    first: list[float] = []
+
+    def log(gen, metrics) -> None:
+        gen = int(gen)
+        if not first:
+            first.append(time.perf_counter() - start)  # compile + first generation
+        if gen % log_every == 0 or gen == config.generations - 1:
+            m = {k: float(v) for k, v in metrics.items()}
+            print(
+                f"[{time.perf_counter() - start:7.1f} s] gen {gen + 1:4d}/{config.generations}: "
+                f"centre fitness {m['center_fitness']:7.2f} (finished "
+                f"{100 * m['center_finished']:3.0f} %, c {m['center_collisions']:.2f}), "
+                f"population mean {m['fitness_mean']:7.2f}, best {m['fitness_best']:7.2f}",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    result = make_train(config, log)(jax.random.key(seed))
+    metrics = {k: np.asarray(v) for k, v in jax.device_get(result.metrics).items()}
+    wall = time.perf_counter() - start
+    tail = max(1, config.generations // 10)
+    info = {
+        "format": "jaxais-neural/1",
+        "command": command,
+        "seed": seed,
+        "config": dataclasses.asdict(config),
+        "population": config.population,
+        "parameters": int(sum(np.size(x) for x in jax.tree.leaves(result.params))),
+        "fitness_sign": "lower is better: minus the mean episode return",
+        "wall_s": round(wall, 1),
+        "first_generation_s": round(first[0], 1) if first else None,
+        "devices": len(jax.local_devices()),
+        "final": {
+            "center_fitness": float(metrics["center_fitness"][-1]),
+            f"center_fitness_last_{tail}": float(metrics["center_fitness"][-tail:].mean()),
+            f"center_finished_last_{tail}": float(metrics["center_finished"][-tail:].mean()),
+            f"center_collisions_last_{tail}": float(metrics["center_collisions"][-tail:].mean()),
+        },
+        "curve": {k: [round(float(x), 4) for x in v] for k, v in metrics.items()},
+        "versions": _versions(),
+    }
+    save_params(out, result.params, info)
+    _plot_curve(metrics, config, out / "training_curve.png")
+    return info
+
+
+def _plot_curve(metrics: dict[str, Any], config: TrainConfig, path: Path) -> None:
+    import numpy as np
+    from matplotlib.figure import Figure
+
+    from jaxais.experiments.plotting import save_figure
+
+    gens = np.arange(1, len(metrics["center_fitness"]) + 1)
+    fig = Figure(figsize=(8, 5.5), layout="constrained")
+    top, bottom = fig.subplots(2, 1, sharex=True)
+    top.plot(gens, metrics["fitness_mean"], lw=1, color="0.6", label="population mean")
+    top.plot(gens, metrics["fitness_best"], lw=1, color="tab:green", label="population best")
+    top.plot(gens, metrics["center_fitness"], lw=1.5, color="tab:blue", label="search mean")
+    top.set_ylabel("fitness (- return; lower is better)")
+    top.legend(loc="upper right", fontsize=8)
+    top.set_title(
+        f"OpenES in {config.world}: {config.population} members x {config.episodes} episodes "
+        f"x {config.steps} steps"
+    )
+    bottom.plot(gens, 100 * metrics["center_finished"], color="tab:blue", label="found target, %")
+    twin = bottom.twinx()
+    twin.plot(gens, metrics["center_collisions"], color="tab:red", lw=1, label="collisions")
+    bottom.set_ylabel("search mean: found target (%)", color="tab:blue")
+    twin.set_ylabel("collisions per episode", color="tab:red")
+    bottom.set_xlabel("generation")
+    save_figure(fig, path)
+
+
+def evaluate_baseline(
+    weights: str | Path | None,
+    out: str | Path,
+    *,
+    seed: int = 0,
+    seeds: str | Path | None = None,
+    worlds: Sequence[str] = protocol.WORLDS,
+    trials: int | None = None,
+    episode: Any = None,
+    command: str | None = None,
+    into_checkpoints: bool = False,
+) -> dict[str, Any]:
+    """Run the trained controller in ``weights`` (None: the shipped one), SIE (the LTL seed in
+    ``seeds``, default the shipped one) and HDC in ``worlds`` with the trials' seed ``seed``;
+    write evaluation.json (returned: every trial, the summaries, NN-vs-SIE and NN-vs-HDC tests
+    of f) and evaluation.md into ``out``. ``trials`` and ``episode`` default to the paper's.
+
+    Raises:
+        ValueError: a bad argument (one line), before anything runs.
+    """
+    if not 0 <= seed < 2**32:
+        raise ValueError(f"--eval-seed must be in [0, 2**32), got {seed}")
+    if weights is not None and not (Path(weights) / "params.npz").is_file():
+        raise ValueError(f"{weights}: no params.npz to evaluate (train first)")
+    out = _output_dir(out, into_checkpoints)
+    import numpy as np
+    from tqdm import tqdm
+
+    from jaxais import envs
+    from jaxais.baselines.neural import NEURAL, load_params
+    from jaxais.experiments import stats
+    from jaxais.experiments.records import build_systems
+    from jaxais.immune.network import NetworkParams
+    from jaxais.trials import STL_CONFIG, run_trials, summarise
+
+    episode = STL_CONFIG if episode is None else episode
+    params, info = load_params(weights)
+    systems, seed_info = build_systems(list(REFERENCE), seeds, NetworkParams())
+    sim = envs.default_params()
+    doc: dict[str, Any] = {
+        "command": command,
+        "seed": seed,
+        "weights": {"config": info.get("config"), "seed": info.get("seed")},
+        "ltl_seed": seed_info,
+        "episode": dataclasses.asdict(episode),
+        "versions": _versions(),
+        "worlds": {},
+        "timings_s": {},
+    }
+    for name in worlds:
+        world = envs.load_world(name)
+        n = protocol.trials_for_world(name) if trials is None else trials
+        t0 = time.perf_counter()
+        total = n * (len(systems) + 1)  # runs (the trials go through a refilling pool)
+        with tqdm(total=total, desc=f"{name}", unit="run", file=sys.stderr) as bar:
+            results = run_trials(world, systems, n, seed, episode, sim, bar)
+            results |= run_trials(
+                world, {NN_LABEL: params}, n, seed, episode, sim, bar, controller=NEURAL
+            )
+        doc["timings_s"][name] = round(time.perf_counter() - t0, 1)
+        entry: dict[str, Any] = {"systems": {}, "tests": {}}
+        for label, ts in results.items():
+            entry["systems"][label] = {"summary": summarise(ts.records), "trials": ts.records}
+        f = {label: np.asarray([r["fitness"] for r in ts.records]) for label, ts in results.items()}
+        for other in REFERENCE:
+            t, p = stats.welch_t(f[NN_LABEL], f[other])
+            u, p_u = stats.mann_whitney_u(f[NN_LABEL], f[other])
+            entry["tests"][f"{NN_LABEL} vs {other}"] = {
+                "metric": "f",
+                "welch_t": t,
+                "welch_p": p,
+                "mann_whitney_u": u,
+                "mann_whitney_p": p_u,
+                "significant_99": bool(p < protocol.ALPHA),
+            }
+        doc["worlds"][name] = entry
+    atomic_write_json(out / "evaluation.json", stats.jsonable(doc))
+    atomic_write_text(out / "evaluation.md", _table(doc, info))
+    return doc
+
+
+def _p(p: float) -> str:
+    return f"{p:.2g}" if p >= 1e-4 else f"{p:.1e}"
+
+
+def _table(doc: dict[str, Any], info: dict[str, Any]) -> str:
+    """The evaluation as markdown: Table 3/5-style rows and the tests of f."""
+    lines = [
+        "| World | System | n | c | τ (s) | f | failed (%) | trapped (s) |",
+        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |",
+    ]
+    for world, entry in doc["worlds"].items():
+        for label in (*REFERENCE, NN_LABEL):
+            s = entry["systems"][label]["summary"]
+            lines.append(
+                f"| {world} | {label} | {s['n']} | {s['collisions']:.2f} | {s['tau']:.1f} | "
+                f"{s['fitness']:.1f} | {100 * s['failure_rate']:.0f} | {s['trapped_s']:.1f} |"
+            )
+    lines += [
+        "",
+        "| World | Comparison of f | Welch t | p | Mann-Whitney U | p | p < 0.01 |",
+        "| --- | --- | ---: | ---: | ---: | ---: | :---: |",
+    ]
+    for world, entry in doc["worlds"].items():
+        for name, t in entry["tests"].items():
+            tv = "inf" if t["welch_t"] is None else f"{t['welch_t']:.2f}"
+            lines.append(
+                f"| {world} | {name} | {tv} | {_p(t['welch_p'])} | {t['mann_whitney_u']:.0f} | "
+                f"{_p(t['mann_whitney_p'])} | {'yes' if t['significant_99'] else 'no'} |"
+            )
+    cfg = info.get("config", {})
+    lines += [
+        "",
+        f"Lower is better (c collisions capped at {protocol.COLLISION_CAP}, τ capped at "
+        f"{protocol.TAU_CAP:g} s, f = (8c + τ)/2). Trials' seed {doc['seed']}; NN trained in "
+        f"{cfg.get('world')} (seed {info.get('seed')}, {info.get('wall_s')} s wall).",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def collect_baselines(dirs: Sequence[str | Path]) -> str:
+    """One markdown table of several evaluated runs (``evaluation.json`` and ``config.json`` in
+    each directory): mean f and failure rate per world, SIE and HDC from the first run, and
+    (several runs) every run's NN trials pooled and tested against SIE's."""
+    import numpy as np
+
+    from jaxais.experiments import stats
+
+    runs = []
+    for d in dirs:
+        try:
+            ev = json.loads((Path(d) / "evaluation.json").read_text())
+            info = json.loads((Path(d) / "config.json").read_text())
+        except (OSError, ValueError) as err:
+            raise ValueError(f"{d}: no evaluated run ({err})") from err
+        runs.append((ev, info))
+    worlds = list(runs[0][0]["worlds"])
+    head = "| System | training seed | maze fitness | " + " | ".join(
+        f"{w} f (failed %)" for w in worlds
+    )
+    lines = [head + " |", "| --- | ---: | ---: |" + " ---: |" * len(worlds)]
+
+    def cell(trials: list[dict]) -> str:
+        f = np.mean([t["fitness"] for t in trials])
+        return f"{f:.1f} ({100 * np.mean([t['failed'] for t in trials]):.0f})"
+
+    for label in REFERENCE:
+        row = [cell(runs[0][0]["worlds"][w]["systems"][label]["trials"]) for w in worlds]
+        lines.append(f"| {label} | – | – | " + " | ".join(row) + " |")
+    pooled: dict[str, list[dict]] = {w: [] for w in worlds}
+    for ev, info in runs:
+        final = info.get("final", {})
+        maze = next((v for k, v in final.items() if k.startswith("center_fitness_last")), None)
+        row = []
+        for w in worlds:
+            trials = ev["worlds"][w]["systems"][NN_LABEL]["trials"]
+            pooled[w] += trials
+            row.append(cell(trials))
+        m = "–" if maze is None else f"{maze:.1f}"
+        lines.append(f"| {NN_LABEL} | {info.get('seed')} | {m} | " + " | ".join(row) + " |")
+    if len(runs) > 1:
+        row = [cell(pooled[w]) for w in worlds]
+        lines.append(
+            f"| {NN_LABEL}, all {len(runs)} runs pooled | – | – | " + " | ".join(row) + " |"
+        )
+        lines += [
+            "",
+            f"| World | pooled {NN_LABEL} vs SIE, mean f | median {NN_LABEL} | median SIE | "
+            "Welch p | Mann-Whitney p |",
+            "| --- | :---: | ---: | ---: | ---: | ---: |",
+        ]
+        for w in worlds:
+            nn = np.asarray([t["fitness"] for t in pooled[w]])
+            sie = runs[0][0]["worlds"][w]["systems"]["SIE"]["trials"]
+            sie = np.asarray([t["fitness"] for t in sie])
+            _, p_t = stats.welch_t(nn, sie)
+            _, p_u = stats.mann_whitney_u(nn, sie)
+            lower = "lower" if nn.mean() < sie.mean() else "higher"
+            lines.append(
+                f"| {w} | {lower} | {np.median(nn):.1f} | {np.median(sie):.1f} | {_p(p_t)} | "
+                f"{_p(p_u)} |"
+            )
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,681 @@
+"""The simulator's benchmark suite (``scripts/bench.py``): every figure into one JSON document.
+
+Each of :data:`BENCHMARKS` adds its figures to ``Bench.results``: robot-steps per second of
+``jax.vmap(step)`` in one compiled ``lax.scan`` per batch size (best of ``repeats`` timed calls
+after a warm-up call; on one device and sharded over all), the NumPy reference
+(``jaxais.envs.reference``) on the same work, SIE's controller and the simulator in the trials'
+task loop, XLA's flops per step against the float32 matmul peak, the end-to-end wall time of
+:data:`SCRIPT_RUNS` (``scripts > 0``) and the machine. JAX is imported by the benchmarks, not
+here, so :func:`force_host_devices` can set the CPU device count first.
+"""
+
+from __future__ import annotations
+
+import datetime
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from jaxais.console import SCRIPTS_DIR
+from jaxais.io import atomic_write_json
+
+SCHEMA = "jaxais-bench/1"
+DEVICE_FLAG = "--xla_force_host_platform_device_count"
+
+QUICK = dict(
+    steps=50,
+    repeats=2,
+    batches=(1, 30, 1000),
+    numpy_robots=4,
+    numpy_steps=5,
+    matmul=512,
+    controller_batches=(30,),
+    controller_steps=50,
+)
+"""``BenchConfig``'s values with ``quick`` (fewer steps, repeats and batch sizes)."""
+SPEEDUP_BATCH = 30
+"""The batch size whose JAX rate is compared with NumPy's (a population of 30, as in the GA)."""
+RESET_CHUNK = 1000
+"""Robots reset in one compiled call; larger batches repeat these states (same work per step)."""
+SHARDING_HELPS = 1.1
+"""Sharding "helps" when it is this much faster at the largest batch (timings are noisy)."""
+FLOPS_BATCH = 1000
+"""Largest batch whose single-step program is cost-analysed."""
+CRUISE, GAIN = 300.0, 0.3
+"""The benchmark policy: wheels = CRUISE -/+ GAIN x (right IR - left IR)."""
+
+
+@dataclass(frozen=True)
+class ScriptRun:
+    """A command whose wall time ``--scripts`` measures: its key in the JSON, the script (a path
+    relative to ``scripts/``) and its flags, its ``--out`` target's name (in a fresh temporary
+    folder per run) and the project's target for its wall time, s."""
+
+    name: str
+    argv: tuple[str, ...]
+    out: str
+    target_s: float
+
+
+SCRIPT_RUNS: tuple[ScriptRun, ...] = (
+    # The default LTL run (5 x 10 robots in ga_maze, one start each and 10 checks of every
+    # population's best, until every best crosses the maze; at most 200 generations),
+    # compilation included: under 2 minutes.
+    ScriptRun("evolve", ("evolve.py",), "ltl", 120.0),
+    # 30 SIE trials in world1 with the shipped LTL seed, compilation included.
+    ScriptRun(
+        "trials",
+        ("trials.py", "--system", "SIE", "--world", "world1", "--trials", "30"),
+        "results.json",
+        15.0,
+    ),
+)
+"""The commands ``--scripts`` times, with their targets."""
+
+
+# ---------------------------------------------------------------------------------- config
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    """What to measure (as ``scripts/bench.py --help`` says); :func:`bench_config` fills in
+    the :data:`QUICK` values with ``quick`` and checks them."""
+
+    world: str = "world1"
+    steps: int = 200
+    batches: tuple[int, ...] = (1, 30, 1000, 10000)
+    repeats: int = 5
+    quick: bool = False
+    numpy_robots: int = 30
+    numpy_steps: int = 20
+    matmul: int = 2048
+    controller_batches: tuple[int, ...] = (30, 1000)
+    controller_steps: int = 500
+    scripts: int = 0
+
+
+def _sizes(value: str | Sequence[int], flag: str) -> tuple[int, ...]:
+    """Sorted distinct batch sizes from ``"1,30"`` or a sequence (one-line ValueErrors)."""
+    items = value.split(",") if isinstance(value, str) else value
+    try:
+        sizes = sorted({int(b) for b in items if str(b).strip()})
+    except ValueError:
+        raise ValueError(f"{flag} must be comma-separated integers, got {value!r}") from None
+    if not sizes or sizes[0] <= 0:
+        raise ValueError(f"{flag} must be positive integers, got {value!r}")
+    return tuple(sizes)
+
+
+def bench_config(quick: bool = False, **values: Any) -> BenchConfig:
+    """A checked :class:`BenchConfig` from ``values`` (None: the default, or the quick one);
+    batch sizes may be given as ``"1,30,1000"``. Raises ValueError (one line) on a bad value."""
+    values = {k: v for k, v in values.items() if v is not None}
+    values = (QUICK if quick else {}) | values
+    counts = ("steps", "repeats", "numpy_robots", "numpy_steps", "matmul", "controller_steps")
+    for name in counts:
+        if values.get(name, 1) <= 0:
+            flag = "--" + name.replace("_", "-")
+            raise ValueError(f"{flag} must be a positive integer, got {values[name]}")
+    if values.get("scripts", 0) < 0:
+        raise ValueError(
+            f"--scripts must be a count of runs (0 skips them), got {values['scripts']}"
+        )
+    for name in ("batches", "controller_batches"):
+        if name in values:
+            values[name] = _sizes(values[name], "--" + name.replace("_", "-"))
+    return BenchConfig(quick=quick, **values)
+
+
+def force_host_devices(n: int) -> None:
+    """Make XLA's CPU backend expose ``n`` devices (must run before JAX is imported)."""
+    if n <= 0:
+        raise ValueError(f"--devices must be a positive integer, got {n}")
+    if "jax" in sys.modules:
+        raise ValueError("--devices must be applied before JAX is imported")
+    flags = [f for f in os.environ.get("XLA_FLAGS", "").split() if not f.startswith(DEVICE_FLAG)]
+    os.environ["XLA_FLAGS"] = " ".join([*flags, f"{DEVICE_FLAG}={n}"])
+
+
+# ---------------------------------------------------------------------------------- context
+
+
+@dataclass
+class Bench:
+    """What every benchmark gets: the config, the world and constants, the environment the
+    benchmark started with (the timed scripts run in it, before ``--devices`` set ``XLA_FLAGS``),
+    the JSON document being built, values shared between benchmarks, and notes."""
+
+    config: BenchConfig
+    world: Any
+    params: Any
+    environ: dict[str, str] = field(default_factory=dict)
+    results: dict[str, Any] = field(default_factory=dict)
+    cache: dict[str, Any] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
+def _timed(fn: Callable[[], Any], repeats: int) -> dict[str, Any]:
+    """``best_s``, ``median_s`` and ``times_s`` of ``repeats`` calls of ``fn`` after a warm-up
+    call, and ``cpu_per_wall``: CPU time over wall time (about the number of cores kept busy)."""
+    import jax
+
+    jax.block_until_ready(fn())
+    times = []
+    cpu0 = time.process_time()
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        jax.block_until_ready(fn())
+        times.append(time.perf_counter() - t0)
+    cpu = time.process_time() - cpu0
+    return {
+        "best_s": min(times),
+        "median_s": statistics.median(times),
+        "times_s": times,
+        "cpu_per_wall": cpu / sum(times),
+    }
+
+
+def policy(obs):
+    """One robot's wheel speeds [2] from its ``Observation``: steer away from the nearer side."""
+    import jax.numpy as jnp
+
+    turn = GAIN * (obs.ir[0] + obs.ir[1] - obs.ir[6] - obs.ir[7])
+    return jnp.stack([CRUISE - turn, CRUISE + turn])
+
+
+def policy_numpy(obs: dict[str, Any]):
+    """:func:`policy` for the NumPy reference's observation dict."""
+    import numpy as np
+
+    ir = obs["ir"]
+    turn = GAIN * (ir[0] + ir[1] - ir[6] - ir[7])
+    return np.array([CRUISE - turn, CRUISE + turn])
+
+
+def make_rollout(n_steps: int, sharding: Any = None) -> Callable[..., Any]:
+    """``rollout(key, state, obs, world, params) -> (state, obs)``: ``n_steps`` batched steps,
+    the per-step keys and wheel speeds constrained to ``sharding`` (None: one device)."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxais import envs
+
+    v_step = jax.vmap(envs.step, in_axes=(0, 0, 0, None, None))
+    v_policy = jax.vmap(policy)
+
+    def rollout(key, state, obs, world, params):
+        n = state.t.shape[0]
+
+        def body(carry, k):
+            state, obs = carry
+            keys = jax.random.split(k, n)
+            wheels = v_policy(obs).astype(jnp.float32)
+            if sharding is not None:
+                keys = jax.lax.with_sharding_constraint(keys, sharding)
+                wheels = jax.lax.with_sharding_constraint(wheels, sharding)
+            return v_step(keys, state, wheels, world, params), None
+
+        carry, _ = jax.lax.scan(body, (state, obs), jax.random.split(key, n_steps))
+        return carry  # the final observation keeps every step's sensing alive
+
+    return jax.jit(rollout)
+
+
+def initial(b: Bench, n: int) -> tuple[Any, Any]:
+    """(states, observations) of ``n`` robots after reset (NumPy-tiled from one compiled call)."""
+    import jax
+    import numpy as np
+
+    from jaxais import envs
+
+    if "reset" not in b.cache:
+        chunk = min(max(*b.config.batches, b.config.numpy_robots), RESET_CHUNK)
+
+        def reset_observe(key):
+            k_reset, k_obs = jax.random.split(key)
+            s = jax.vmap(envs.reset, in_axes=(0, None, None))(
+                jax.random.split(k_reset, chunk), b.world, b.params
+            )
+            o = jax.vmap(envs.observe, in_axes=(0, 0, None, None))(
+                jax.random.split(k_obs, chunk), s, b.world, b.params
+            )
+            return s, o
+
+        b.cache["reset"] = jax.device_get(jax.jit(reset_observe)(jax.random.key(0)))
+    state, obs = b.cache["reset"]
+    chunk = state.t.shape[0]
+    idx = np.arange(n) % chunk
+    return jax.tree.map(lambda x: np.asarray(x)[idx], (state, obs))
+
+
+# ---------------------------------------------------------------------------------- benchmarks
+
+
+def bench_machine(b: Bench) -> None:
+    """``machine``: what the figures were measured on."""
+    import jax
+    import jaxlib
+    import numpy as np
+
+    def cpu_model() -> str:
+        try:
+            for line in Path("/proc/cpuinfo").read_text().splitlines():
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+        except OSError:
+            pass
+        return platform.processor() or platform.machine()
+
+    def memory_bytes() -> int | None:
+        try:
+            return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+        except (ValueError, OSError, AttributeError):
+            return None
+
+    affinity = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
+    b.results["machine"] = {
+        "platform": platform.platform(),
+        "machine": platform.machine(),
+        "processor": cpu_model(),
+        "cpu_count": os.cpu_count(),
+        "cpus_available": affinity,
+        "memory_bytes": memory_bytes(),
+        "python": sys.version.split()[0],
+        "numpy": np.__version__,
+        "jax": jax.__version__,
+        "jaxlib": getattr(jaxlib, "__version__", None) or jaxlib.version.__version__,
+        "backend": jax.default_backend(),
+        "device_count": jax.device_count(),
+        "device_kinds": sorted({d.device_kind for d in jax.devices()}),
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),
+        "load_average_start": list(os.getloadavg()),
+        "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+    }
+
+
+def _bench_batches(b: Bench, batches: list[int], sharding_for=None) -> dict[str, dict]:
+    """Compile and time the rollout at each batch size; {batch: {compile_s, best, median}}."""
+    import jax
+
+    out: dict[str, dict] = {}
+    key = jax.random.key(1)
+    steps = b.config.steps
+    for n in batches:
+        state, obs = initial(b, n)
+        sharding = sharding_for(n) if sharding_for is not None else None
+        # On the device(s) before timing: no host-to-device copy inside the timed calls.
+        state, obs = jax.device_put((state, obs), sharding)
+        rollout = make_rollout(steps, sharding)
+        t0 = time.perf_counter()
+        compiled = rollout.lower(key, state, obs, b.world, b.params).compile()
+        compile_s = time.perf_counter() - t0
+        t = _timed(
+            lambda c=compiled, s=state, o=obs: c(key, s, o, b.world, b.params), b.config.repeats
+        )
+        out[str(n)] = {
+            "compile_s": compile_s,
+            "steps_per_s": n * steps / t["best_s"],
+            "steps_per_s_median": n * steps / t["median_s"],
+            **t,
+        }
+    return out
+
+
+def bench_jax(b: Bench) -> None:
+    """``jax_steps_per_s``, ``jax_steps_per_s_median``, ``compile_s`` per batch size."""
+    runs = _bench_batches(b, b.config.batches)
+    b.results["jax_steps_per_s"] = {k: v["steps_per_s"] for k, v in runs.items()}
+    b.results["jax_steps_per_s_median"] = {k: v["steps_per_s_median"] for k, v in runs.items()}
+    b.results["compile_s"] = {k: v["compile_s"] for k, v in runs.items()}
+    b.results["jax_runs"] = runs
+
+
+def bench_sharded(b: Bench) -> None:
+    """``jax_steps_per_s_sharded``: the batch axis sharded over all devices (when > 1)."""
+    import jax
+
+    from jaxais.episode import batch_sharding
+
+    n_dev = jax.device_count()
+    usable = [n for n in b.config.batches if n % n_dev == 0]
+    b.results["sharding"] = {"devices": n_dev, "batches": usable}
+    b.results["jax_steps_per_s_sharded"] = None
+    if n_dev == 1:
+        b.notes.append("one JAX device: sharded benchmark skipped (try --devices 2)")
+        return
+    if not usable:
+        b.notes.append(f"no batch size divisible by {n_dev} devices: sharded benchmark skipped")
+        return
+    # The task loop's own batch sharding (jaxais.episode.rollout shards the same way).
+    runs = _bench_batches(b, usable, sharding_for=batch_sharding)
+    sharded = {k: v["steps_per_s"] for k, v in runs.items()}
+    b.results["jax_steps_per_s_sharded"] = sharded
+    b.results["compile_s_sharded"] = {k: v["compile_s"] for k, v in runs.items()}
+    b.results["jax_runs_sharded"] = runs
+    single = b.results.get("jax_steps_per_s", {})
+    gain = {k: sharded[k] / single[k] for k in sharded if k in single}
+    b.results["sharding"]["speedup_vs_one_device"] = gain
+    if gain:
+        # Judged at the largest batch, where there is most work to split; a busy machine that
+        # gives this process less than the devices' worth of cores cannot show a gain.
+        largest = max(gain, key=int)
+        cores = runs[largest]["cpu_per_wall"]
+        helps = gain[largest] > SHARDING_HELPS
+        b.results["sharding"]["helps"] = helps
+        b.notes.append(
+            f"sharding over {n_dev} devices: x{gain[largest]:.2f} at batch {largest} "
+            f"({'helps' if helps else 'does not help'} here; the sharded run kept "
+            f"{cores:.2f} cores busy)"
+        )
+
+
+def bench_numpy(b: Bench) -> None:
+    """``numpy_steps_per_s``: ``reference.ref_step`` robot by robot, on the same work."""
+    import jax
+
+    from jaxais import envs
+    from jaxais.envs import reference as ref
+
+    n_r, n_t = b.config.numpy_robots, b.config.numpy_steps
+    state, obs = initial(b, n_r)
+    # The same draws a JAX step makes, made up front so that only ref_step is timed.
+    keys = jax.random.split(jax.random.key(2), (n_t, n_r))
+    sample = jax.jit(jax.vmap(jax.vmap(envs.sample_step_noise, in_axes=(0, None)), (0, None)))
+    noise = ref.noise_to_numpy(sample(keys, b.world))
+    world_np, params_np = ref.world_to_numpy(b.world), ref.params_to_numpy(b.params)
+    states = ref.state_to_numpy(state)
+    observations = ref.obs_to_numpy(obs)
+
+    t0 = time.perf_counter()
+    for i in range(n_r):
+        s, o = ref.unbatch(states, i), ref.unbatch(observations, i)
+        for t in range(n_t):
+            step_noise = {k: v[t, i] for k, v in noise.items()}
+            s, o = ref.ref_step(s, policy_numpy(o), step_noise, world_np, params_np)
+    seconds = time.perf_counter() - t0
+    b.results["numpy_steps_per_s"] = n_r * n_t / seconds
+    b.results["numpy"] = {"robots": n_r, "steps": n_t, "seconds": seconds}
+
+
+def _cost(compiled: Any) -> dict[str, float]:
+    ca = compiled.cost_analysis()
+    if isinstance(ca, list | tuple):  # older jax: one dict per computation
+        ca = ca[0] if ca else {}
+    return {k: float(v) for k, v in (ca or {}).items()}
+
+
+def bench_flops(b: Bench) -> None:
+    """``flops_per_step``: XLA's cost analysis of the compiled batched single-step program."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxais import envs
+
+    v_step = jax.jit(jax.vmap(envs.step, in_axes=(0, 0, 0, None, None)))
+    per_batch = {}
+    # One batch size (each costs a compilation): the per-robot figure hardly depends on it.
+    for n in [max([x for x in b.config.batches if x <= FLOPS_BATCH] or [1])]:
+        state, _ = initial(b, n)
+        keys = jax.random.split(jax.random.key(3), n)
+        wheels = jnp.full((n, 2), CRUISE, jnp.float32)
+        cost = _cost(v_step.lower(keys, state, wheels, b.world, b.params).compile())
+        per_batch[str(n)] = {
+            k: cost[k] / n for k in ("flops", "transcendentals", "bytes accessed") if k in cost
+        }
+    largest = max(per_batch, key=int)
+    flops = per_batch[largest].get("flops")
+    b.results["flops_per_step"] = flops
+    b.results["cost_analysis_per_step"] = per_batch
+    if not flops:
+        b.notes.append("XLA's cost analysis reported no flops for the step")
+
+
+def bench_peak(b: Bench) -> None:
+    """``peak_flops``: best float32 matmul rate (``jnp.dot``, jitted) on this machine."""
+    import jax
+    import jax.numpy as jnp
+
+    n = b.config.matmul
+    ka, kb = jax.random.split(jax.random.key(4))
+    x = jax.random.normal(ka, (n, n), jnp.float32)
+    y = jax.random.normal(kb, (n, n), jnp.float32)
+    dot = jax.jit(jnp.dot)
+    t = _timed(lambda: dot(x, y), max(b.config.repeats, 3))
+    b.results["peak_flops"] = 2.0 * n**3 / t["best_s"]
+    b.results["peak"] = {"matmul_size": n, "dtype": "float32", **t}
+
+
+def bench_controller(b: Bench) -> None:
+    """``controller_iterations_per_s``: SIE's STL controller (``stl_for``: no replacement, as in
+    the trials) and the simulator, robot-iterations per second through the trials' compiled task
+    loop (caps off: no run ends) at each controller batch size, compile time apart; with several
+    devices also ``..._sharded``, the batch over all of them as the trials run it."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxais.controllers import stl_for
+    from jaxais.episode import EpisodeConfig, batch_sharding, compile_rollout
+    from jaxais.seed import load_seed
+    from jaxais.systems import make_system
+    from jaxais.trials import trial_keys
+
+    steps = b.config.controller_steps
+    config = EpisodeConfig(tau_cap=1e6, collision_cap=10**9, segment=steps, chunk=25)
+    system = make_system("SIE", load_seed()[0])
+    layouts = [("", jax.local_devices()[:1])]
+    if jax.local_device_count() > 1:
+        layouts.append(("_sharded", jax.local_devices()))
+    for suffix, devices in layouts:
+        rates, compile_s = {}, {}
+        for n in b.config.controller_batches:
+            if n % len(devices):
+                continue
+            params = jax.tree.map(lambda a, n=n: jnp.broadcast_to(a, (n, *jnp.shape(a))), system)
+            reset_keys, run_keys = trial_keys(0, "SIE", n)
+            sharding = batch_sharding(n, devices)
+            if sharding is not None:
+                reset_keys, run_keys, params = jax.device_put(
+                    (reset_keys, run_keys, params), sharding
+                )
+            t0 = time.perf_counter()
+            programs = compile_rollout(
+                reset_keys,
+                run_keys,
+                b.world,
+                b.params,
+                stl_for(params),
+                params,
+                config,
+                sharding=sharding,
+            )
+            compile_s[str(n)] = time.perf_counter() - t0
+            batch = programs.start(reset_keys, run_keys, b.world, b.params, params)
+            t = _timed(
+                lambda pr=programs, bt=batch, p=params: pr.advance(bt, b.world, b.params, p),
+                b.config.repeats,
+            )
+            rates[str(n)] = n * steps / t["best_s"]
+        b.results[f"controller_iterations_per_s{suffix}"] = rates
+        b.results[f"controller_compile_s{suffix}"] = compile_s
+
+
+def run_timed(command: list[str], env: dict[str, str]) -> float:
+    """Wall time of ``command`` run to its end, s; ChildProcessError (ending with the last line
+    it wrote on stderr) if it failed."""
+    t0 = time.perf_counter()
+    proc = subprocess.run(command, env=env, capture_output=True, text=True, check=False)
+    seconds = time.perf_counter() - t0
+    if proc.returncode:
+        last = (proc.stderr.strip().splitlines() or ["(nothing on stderr)"])[-1]
+        name = Path(command[1]).name
+        raise ChildProcessError(f"--scripts: {name} exited with status {proc.returncode}: {last}")
+    return seconds
+
+
+def bench_scripts(b: Bench) -> None:
+    """``scripts``: each of :data:`SCRIPT_RUNS` run ``config.scripts`` times, alternating, each
+    a fresh process (import, compile, run, write) with ``JAXAIS_CACHE_DIR=off``; outputs go to a
+    temporary folder. ``within_target`` counts the runs at or under ``target_s``."""
+    if not b.config.scripts:
+        return
+    from tqdm import tqdm
+
+    env = {**b.environ, "JAXAIS_CACHE_DIR": "off"}
+    times: dict[str, list[float]] = {run.name: [] for run in SCRIPT_RUNS}
+    with (
+        tempfile.TemporaryDirectory(prefix="jaxais-bench-") as tmp,
+        tqdm(
+            total=b.config.scripts * len(SCRIPT_RUNS), desc="scripts", file=sys.stderr, leave=False
+        ) as bar,
+    ):
+        for i in range(b.config.scripts):
+            for run in SCRIPT_RUNS:
+                bar.set_postfix_str(Path(run.argv[0]).name)
+                out = Path(tmp, f"{run.name}-{i}", run.out)
+                out.parent.mkdir()
+                command = [sys.executable, str(SCRIPTS_DIR / run.argv[0]), *run.argv[1:]]
+                times[run.name].append(run_timed([*command, "--out", str(out)], env))
+                bar.update()
+    b.results["scripts"] = {
+        run.name: {
+            "command": " ".join([*run.argv, "--out", run.out]),
+            "target_s": run.target_s,
+            "times_s": times[run.name],
+            "min_s": min(times[run.name]),
+            "median_s": statistics.median(times[run.name]),
+            "max_s": max(times[run.name]),
+            "within_target": sum(t <= run.target_s for t in times[run.name]),
+        }
+        for run in SCRIPT_RUNS
+    }
+
+
+BENCHMARKS: list[tuple[str, Callable[[Bench], None]]] = [
+    ("machine", bench_machine),
+    ("jax simulator", bench_jax),
+    ("sharded simulator", bench_sharded),
+    ("numpy reference", bench_numpy),
+    ("STL controller + simulator", bench_controller),
+    ("flops per step", bench_flops),
+    ("matmul peak", bench_peak),
+    ("scripts end to end", bench_scripts),
+]
+"""The benchmarks, run in this order; each adds its figures to ``Bench.results``."""
+
+
+def derive(b: Bench) -> None:
+    """Figures computed from the others: speedup over NumPy and the fraction of peak."""
+    r = b.results
+    jax_rates = {int(k): v for k, v in r.get("jax_steps_per_s", {}).items()}
+    if jax_rates and r.get("numpy_steps_per_s"):
+        batch = min(jax_rates, key=lambda n: (abs(n - SPEEDUP_BATCH), n))
+        r["speedup_vs_numpy"] = jax_rates[batch] / r["numpy_steps_per_s"]
+        r["speedup_batch"] = batch
+    if jax_rates and r.get("flops_per_step") and r.get("peak_flops"):
+        largest = max(jax_rates)
+        r["achieved_flops"] = r["flops_per_step"] * jax_rates[largest]
+        r["achieved_flops_batch"] = largest
+        r["fraction_of_peak"] = r["achieved_flops"] / r["peak_flops"]
+
+
+def summary(b: Bench, out: str | os.PathLike[str], seconds: float) -> str:
+    """A few human-readable lines about the benchmark written to ``out``."""
+    r, m = b.results, b.results.get("machine", {})
+    per_batch = lambda d, fmt: ", ".join(f"B={k}: {v:{fmt}}" for k, v in d.items())
+    cores = lambda runs: {k: v["cpu_per_wall"] for k, v in runs.items()}
+    lines = [
+        f"wrote {out} in {seconds:.0f} s "
+        f"({m.get('backend')} {', '.join(m.get('device_kinds', []))}, "
+        f"{m.get('cpu_count')} CPUs, jax {m.get('jax')}, load {r['load_average_end'][0]:.1f})",
+        f"  JAX robot-steps/s (best of {b.config.repeats}, {b.config.steps}-step scan): "
+        + per_batch(r.get("jax_steps_per_s", {}), ",.0f"),
+        "  compile s: " + per_batch(r.get("compile_s", {}), ".1f"),
+        "  cores busy (CPU time / wall time): " + per_batch(cores(r.get("jax_runs", {})), ".2f"),
+    ]
+    if r.get("jax_steps_per_s_sharded"):
+        lines.append(
+            f"  sharded over {r['sharding']['devices']} devices: "
+            f"{per_batch(r['jax_steps_per_s_sharded'], ',.0f')} (cores busy: "
+            f"{per_batch(cores(r['jax_runs_sharded']), '.2f')})"
+        )
+    for suffix in ("", "_sharded"):
+        if r.get(f"controller_iterations_per_s{suffix}"):
+            lines.append(
+                f"  STL controller + simulator{suffix.replace('_', ' ')}, robot-iterations/s: "
+                f"{per_batch(r[f'controller_iterations_per_s{suffix}'], ',.0f')} (compile s: "
+                f"{per_batch(r[f'controller_compile_s{suffix}'], '.1f')})"
+            )
+    if "numpy_steps_per_s" in r:
+        text = f"  NumPy reference: {r['numpy_steps_per_s']:,.1f} robot-steps/s"
+        if "speedup_vs_numpy" in r:
+            text += f"; JAX at B={r['speedup_batch']} is x{r['speedup_vs_numpy']:,.0f} faster"
+        lines.append(text)
+    if "fraction_of_peak" in r:
+        lines.append(
+            f"  {r['flops_per_step']:,.0f} flops/step x steps/s at B={r['achieved_flops_batch']}"
+            f" = {r['achieved_flops'] / 1e9:.2f} GFLOP/s = {100 * r['fraction_of_peak']:.1f}% of "
+            f"the {r['peak_flops'] / 1e9:.1f} GFLOP/s matmul peak"
+        )
+    for v in r.get("scripts", {}).values():
+        lines.append(
+            f"  {v['command']}: {len(v['times_s'])} runs, wall s min {v['min_s']:.1f} / median "
+            f"{v['median_s']:.1f} / max {v['max_s']:.1f} (target {v['target_s']:g} s: "
+            f"{v['within_target']} of {len(v['times_s'])} within)"
+        )
+    lines += [f"  note: {n}" for n in b.notes]
+    return "\n".join(lines)
+
+
+def run_bench(
+    config: BenchConfig, out: str | os.PathLike[str], environ: dict[str, str] | None = None
+) -> Bench:
+    """Run :data:`BENCHMARKS` and write their figures as JSON to ``out``; the scripts
+    ``config.scripts`` times run in ``environ`` (default: this process's). Returns the
+    :class:`Bench` (its ``results`` are the document)."""
+    from tqdm import tqdm
+
+    from jaxais import envs
+
+    b = Bench(
+        config=config,
+        world=envs.load_world(config.world),
+        params=envs.default_params(),
+        environ=dict(os.environ if environ is None else environ),
+    )
+    b.results.update(
+        schema=SCHEMA,
+        config={
+            "world": b.world.name,
+            "steps": config.steps,
+            "batches": list(config.batches),
+            "repeats": config.repeats,
+            "quick": config.quick,
+            "numpy_robots": config.numpy_robots,
+            "numpy_steps": config.numpy_steps,
+            "scripts": config.scripts,
+            "timing": "best of `repeats` timed calls after one warm-up call (median also given)",
+            "policy": f"wheels = {CRUISE:g} -/+ {GAIN:g} * (ir0 + ir1 - ir6 - ir7)",
+        },
+    )
+    bar = tqdm(BENCHMARKS, desc="bench", unit="bench", file=sys.stderr, leave=False)
+    wall: dict[str, float] = {}
+    for name, fn in bar:
+        bar.set_postfix_str(name)
+        t = time.perf_counter()
+        fn(b)
+        wall[name] = time.perf_counter() - t
+    bar.close()
+    derive(b)
+    b.results["bench_wall_s"] = wall
+    b.results["load_average_end"] = list(os.getloadavg())
+    b.results["notes"] = b.notes
+    atomic_write_json(out, b.results)
+    return b

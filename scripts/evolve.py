@@ -4,8 +4,6 @@ python scripts/evolve.py --out DIR [--resume] [--diversity]  # DIR/seed, summary
 python scripts/evolve.py --check-seed DIR/seed  # measure an existing seed, evolve nothing
 """
 
-from __future__ import annotations
-
 import argparse
 import dataclasses
 import logging
@@ -38,38 +36,40 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     add("--diversity", action="store_true", help="compare 5 x 10 with 1 x 50")
     add("--diversity-seeds", type=int, default=3, help="GA seeds per arm (>= 2)")
     add("--check-seed", metavar="DIR", help="measure the seed in DIR and exit (no GA, no --out)")
-    return p.parse_args(argv)
+    args = p.parse_args(argv)
+    fields = dataclasses.fields(GAConfig)
+    args.config = GAConfig(**{f.name: getattr(args, f.name) for f in fields})  # validates
+    return args
 
 
 @main_wrapper(PROG)
 def run(argv: list[str] | None = None) -> dict[str, Any]:
-    args = parse_args(argv)
-    argv = sys.argv[1:] if argv is None else list(argv)
     try:
-        config = GAConfig(**{f.name: getattr(args, f.name) for f in dataclasses.fields(GAConfig)})
-        for flag in ("out", "resume", "diversity") if args.check_seed else ():
-            if getattr(args, flag):
-                raise UserError(f"--check-seed measures a seed and writes nothing: drop --{flag}")
-        if args.out is None and args.check_seed is None:
-            raise UserError("--out DIR is required (or --check-seed DIR to measure a seed)")
-        from jaxais import _speed
-        from jaxais.experiments import evolve
-
-        logging.getLogger("absl").setLevel(logging.CRITICAL)  # orbax's failures: our one line
-        _speed.setup(one_kernel_loops=True)
-        given = dict(config=config, world=args.world, seed=args.seed)
-        given["crossing_starts"] = args.crossing_starts
-        if args.check_seed is not None:
-            result = evolve.check_seed(args.check_seed, **given)
-        else:
-            seeds = args.diversity_seeds if args.diversity else None
-            result = evolve.evolve(
-                args.out, **given, resume=args.resume, diversity_seeds=seeds, argv=argv
-            )
-        print(evolve.report(result, args.check_seed or args.out))
-        return result
+        args = parse_args(argv)
     except ConfigError as err:
         raise UserError(f"--{err.field.replace('_', '-')} {err.reason}") from None
+    for flag in ("out", "resume", "diversity") if args.check_seed else ():
+        if getattr(args, flag):
+            raise UserError(f"--check-seed measures a seed and writes nothing: drop --{flag}")
+    if args.out is None and args.check_seed is None:
+        raise UserError("--out DIR is required (or --check-seed DIR to measure a seed)")
+    from jaxais import _speed
+    from jaxais.experiments import evolution
+
+    logging.getLogger("absl").setLevel(logging.CRITICAL)  # orbax's failures: our one line
+    _speed.setup(one_kernel_loops=True)
+    given = dict(config=args.config, world=args.world, seed=args.seed)
+    given["crossing_starts"] = args.crossing_starts
+    if args.check_seed is not None:
+        result = evolution.check_seed(args.check_seed, **given)
+    else:
+        seeds = args.diversity_seeds if args.diversity else None
+        argv = sys.argv[1:] if argv is None else list(argv)
+        result = evolution.evolve(
+            args.out, **given, resume=args.resume, diversity_seeds=seeds, argv=argv
+        )
+    print(evolution.report(result, args.check_seed or args.out))
+    return result
 
 
 def main(argv: list[str] | None = None) -> None:  # a console script exits with what it returns

@@ -18,7 +18,7 @@ import sys
 from jaxais import distributed
 from jaxais.cli import ArgumentParser, UserError, main_wrapper, run_script
 from jaxais.experiments import protocol
-from jaxais.experiments.reproduce import LTLRunError, headline, reproduce
+from jaxais.experiments.reproduction import LTLRunError, headline, reproduce
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:

@@ -4,7 +4,7 @@
     python scripts/sweep.py --noise 0,0.5,1,2,4 --system SIE,SRL,HDC --world real --out gap/
 
 Writes DIR/sweep.json and sweep.png, or DIR/reality_gap.json and reality_gap.png
-(jaxais.experiments.sweep.sweep): the same numbers on one process or several (--coordinator).
+(jaxais.experiments.sweep): the same numbers on one process or several (--coordinator).
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ def main(argv: list[str] | None = None) -> None:
     distributed.initialize(args)  # before JAX computes anything
     import jax
 
-    from jaxais.experiments.sweep import sweep
+    from jaxais.experiments.sweeps import sweep
 
     command = "sweep.py " + " ".join(sys.argv[1:] if argv is None else argv)
     doc = sweep(

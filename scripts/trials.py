@@ -19,7 +19,7 @@ import time
 from jaxais import distributed
 from jaxais.cli import ArgumentParser, main_wrapper, run_script
 from jaxais.experiments import protocol
-from jaxais.experiments.trials import trials
+from jaxais.experiments.one_system import trials
 from jaxais.labels import RANDOM_SETS, SYSTEMS
 
 

@@ -142,7 +142,7 @@ def test_outputs(full_run: Path):
 
 def test_flag_defaults_are_the_ga_defaults():
     args = evolve.parse_args(["--out", "x"])
-    assert evolve._config(args) == ga.GAConfig()
+    assert args.config == ga.GAConfig()
     assert args.crossing_starts == ga.CROSSING_STARTS
 
 

@@ -27,7 +27,7 @@ def test_importing_jaxais_leaves_the_backends_idle():
         "import jaxais\n"
         "from jaxais import envs, ga, trials, checkpointing, seed, systems, episode\n"
         "from jaxais.experiments import protocol, records, stats, claims, report, ablation\n"
-        "from jaxais.experiments import plotting, evolve, diversity\n"
+        "from jaxais.experiments import plotting, evolution, diversity\n"
         "from jaxais.ga import config, core, driver\n"
         "import orbax.checkpoint, matplotlib.figure, matplotlib.backends.backend_agg\n"
         "from jax._src import xla_bridge\n"

@@ -1,4 +1,4 @@
-"""Figures of a parameter sweep (:mod:`jaxais.experiments.sweep`): lines for one axis, heatmaps
+"""Figures of a parameter sweep (:mod:`jaxais.experiments.sweeps`): lines for one axis, heatmaps
 for two, the operating point of the swept system marked."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from jaxais.experiments.plotting import save_figure
-from jaxais.experiments.sweep import surface
+from jaxais.experiments.sweeps import surface
 
 PANELS = (
     ("f", "mean f = (8c + τ)/2"),

@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from jaxais.experiments import protocol
-from jaxais.experiments.trials import command_line
+from jaxais.experiments.one_system import command_line
 from jaxais.io import atomic_write_json
 
 __all__ = ["LTLRunError", "headline", "reproduce", "run_ltl"]

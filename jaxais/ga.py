@@ -84,9 +84,10 @@ import numpy as np
 from jaxais import envs
 from jaxais.controllers import LTL
 from jaxais.envs.struct import pytree_dataclass, static_field
-from jaxais.episode import FINISHED, RHO, EpisodeConfig, _rollout, fitness, outcome
 from jaxais.immune.antibodies import Antibodies, antibody_distance, mutate, sample_antibodies
 from jaxais.immune.antigens import N_ANTIGENS
+from jaxais.loop import FINISHED, RHO, EpisodeConfig, fitness, outcome
+from jaxais.runner import rollout
 from jaxais.seed import Seed
 
 __all__ = [
@@ -415,9 +416,6 @@ def abstract_state(config: GAConfig) -> GAState:
 
 # ------------------------------------------------------------------------------- evaluation
 
-_COMPILED: dict = {}
-"""Compiled rollout programs shared by every call (one per batch size, world and caps)."""
-
 
 def start_keys(key: jax.Array, starts: int) -> jax.Array:
     """The [starts] start keys of an evaluation with ``key``: ``jax.random.split(key, starts)``.
@@ -464,18 +462,8 @@ def _run_starts(
     # ga_maze the loop runs several times faster (docs/performance.md). A world with other values
     # compiles programs of its own, and its numbers differ in the last bits from a run with the
     # world an argument (the STL trials' way), so the GA always runs this way.
-    batch = _rollout(
-        reset_keys,
-        run_keys,
-        world,
-        sim_params,
-        LTL,
-        flat,
-        episode,
-        progress,
-        _COMPILED,
-        None,
-        fixed_world=True,
+    batch = rollout(
+        reset_keys, run_keys, world, sim_params, LTL, flat, episode, progress, constant_world=True
     )
     out = outcome(batch.runs, episode, float(sim_params.dt))
     return {

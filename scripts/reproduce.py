@@ -150,7 +150,6 @@ def main(argv: list[str] | None = None) -> None:
     from jaxais import _speed, envs
     from jaxais.baselines.config import NN_LABEL
     from jaxais.baselines.neural import NEURAL, load_params
-    from jaxais.episode import EpisodeConfig
     from jaxais.experiments import claims, report, stats
     from jaxais.experiments.plotting import draw_world
     from jaxais.experiments.records import (
@@ -162,6 +161,7 @@ def main(argv: list[str] | None = None) -> None:
         versions,
     )
     from jaxais.immune.network import NetworkParams
+    from jaxais.loop import EpisodeConfig
     from jaxais.seed import default_seed_dir
     from jaxais.trials import run_trials
 

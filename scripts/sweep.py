@@ -4,7 +4,7 @@
         --trials 30 --out sweep/
     python scripts/sweep.py --noise 0,0.5,1,2,4 --system SIE,SRL,HDC --world real --out gap/
 
---grid: every point's trials run as one compiled pool of runs (jaxais.pool). Writes
+--grid: every point's trials run as one compiled pool of runs (jaxais.runner.run_pool). Writes
 DIR/sweep.json (per point: mean and 95 % CI of tau, c, f, the failure rate, the idiotypic
 difference rate and trapped time; the run's config, wall time and throughput) and, for one or
 two axes, DIR/sweep.png (lines or heatmaps, the operating point marked, the idiotypic difference
@@ -142,10 +142,10 @@ def main(argv: list[str] | None = None) -> None:
     import jax
 
     from jaxais import envs
-    from jaxais.episode import EpisodeConfig
     from jaxais.experiments.records import build_systems, portable_command, run_config
     from jaxais.experiments.sweep_plots import save_noise_figure, save_sweep_figures
     from jaxais.immune.network import NetworkParams
+    from jaxais.loop import EpisodeConfig
 
     world = envs.load_world(args.world)
     config = EpisodeConfig(tau_cap=args.tau_cap, collision_cap=args.collision_cap)

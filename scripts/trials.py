@@ -81,9 +81,9 @@ def main(argv: list[str] | None = None) -> None:
     from tqdm import tqdm
 
     from jaxais import _speed, envs
-    from jaxais.episode import EpisodeConfig
     from jaxais.experiments.records import build_systems, results_document, run_config
     from jaxais.immune.network import NetworkParams
+    from jaxais.loop import EpisodeConfig
     from jaxais.trials import run_trials
 
     _speed.setup(cpu_device_per_core=True)

@@ -102,7 +102,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     cache = {"JAXAIS_CACHE_DIR": str(base / "jax_cache")}
     out = base / "trials"
     out.mkdir()
-    # 3 trials on 2 CPU devices: the batch is padded to 4 and sharded (jaxais.episode.rollout).
+    # 3 trials on 2 CPU devices: the batch is padded to 4 and sharded (jaxais.runner.rollout).
     trials_args = (
         "--system", "HDC", "--world", "world1", "--trials", 3, "--tau-cap", 10,
         "--out", out / "results.json", "--plot", out / "plot.png",

@@ -183,7 +183,7 @@ def test_trials_script_same_results_on_one_and_two_devices(runs):
 def test_trials_script_fills_its_compilation_cache(runs):
     # JAXAIS_CACHE_DIR: the first run stored its task-loop programs, which the second one loaded
     # (and, above, gave the same bytes with).
-    assert {"jit_task_start", "jit_task_advance"} <= set(runs["cached"])
+    assert {"jit__start", "jit__advance"} <= set(runs["cached"])
 
 
 def test_trials_script_plot_is_a_png(runs):

@@ -10,8 +10,8 @@ stays free of JAX and a script can still set ``XLA_FLAGS`` before JAX starts)::
 Submodules: ``envs`` (the simulator); ``immune``, the paper's immune network: ``immune.antigens``,
 ``immune.antibodies``, ``immune.behaviours``, ``immune.reinforcement``, ``immune.network`` (eqs
 1-10), ``immune.readings`` (our readings of the paper's open points); ``controllers`` (the
-controller protocol and the controllers), ``episode`` (the task loop), ``ga`` (LTL),
-``checkpointing``, ``seed``, ``labels`` (the systems' names), ``systems``, ``trials``; and
+controller protocol and the controllers), ``loop`` (the task loop), ``runner`` (its driver), ``ga``
+(LTL), ``checkpointing``, ``seed``, ``labels`` (the systems' names), ``systems``, ``trials``; and
 ``experiments``, the paper's experiments on top of them: ``experiments.protocol`` (its worlds,
 systems, trial counts and comparisons), ``experiments.records``, ``experiments.stats``,
 ``experiments.claims`` (the paper's 32 claims), ``experiments.report``, ``experiments.ablation``,
@@ -28,7 +28,7 @@ _EXPORTS = {
     "GAConfig": "ga.config",
     "NetworkParams": "immune.network",
     "Readings": "immune.readings",
-    "EpisodeConfig": "episode",
+    "EpisodeConfig": "loop",
     "System": "controllers",
     "LTL": "controllers",
     "STL": "controllers",

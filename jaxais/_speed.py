@@ -11,15 +11,12 @@ and how to repeat them):
   faster. They are set only for the jaxlib they were checked with (:data:`CHECKED_JAXLIB`):
   XLA stops a process whose ``XLA_FLAGS`` names a flag it does not know;
 - one JAX CPU device per core (``cpu_device_per_core``), over which
-  :func:`jaxais.episode.rollout` shards its batch: XLA runs a batch of 30-50 robots' small
+  :mod:`jaxais.runner` shards its batches: XLA runs a batch of 30-50 robots' small
   kernels on about one core per device. The STL scripts use it; the GA does not (slower there);
 - for the GA (``one_kernel_loops``), XLA compiles a while loop whose iteration touches under
   512 KiB into one function instead of dispatching its ~50 small kernels one by one on every
   iteration. The GA's numbers are the same bit for bit; in the STL's loop the one-function
   form rounds some rare step differently in the last bit, so the trials do without;
-- the task loop's start (:func:`jaxais.episode.compile_rollout`), which runs once per batch, is
-  compiled with LLVM's cheaper pipeline (-O1, :func:`start_options`): it compiles faster, to the
-  same numbers. This one the library applies itself, since the program is built there;
 - JAX's persistent compilation cache, so a second run with the same shapes loads its compiled
   programs instead of compiling them: ``JAXAIS_CACHE_DIR`` names the directory (default
   ``~/.cache/jaxais/xla``), ``JAXAIS_CACHE_DIR=off`` turns it off.
@@ -45,15 +42,6 @@ CHECKED_JAXLIB = ((0, 10), (0, 11))
 """The jaxlib releases, from (inclusive) and to (exclusive), that know the flags above."""
 CACHE_ENV = "JAXAIS_CACHE_DIR"
 """Environment variable: the compilation cache's directory, or ``off``."""
-START_OPTIONS = {"xla_backend_optimization_level": 1}
-"""XLA options of the task loop's start program on the CPU."""
-
-
-def start_options() -> dict[str, int] | None:
-    """:data:`START_OPTIONS` on the CPU, None elsewhere (``jax.jit``'s ``compiler_options``)."""
-    import jax
-
-    return START_OPTIONS if jax.default_backend() == "cpu" else None
 
 
 def setup(

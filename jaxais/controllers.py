@@ -1,4 +1,4 @@
-"""Controllers: the protocol the task loop (:mod:`jaxais.episode`) runs, and the controllers.
+"""Controllers: the protocol the task loop (:mod:`jaxais.loop`) runs, and the controllers.
 
 A controller is a :class:`Controller`, a tuple of pure functions of one robot, key first, like
 optax's ``(init, update)`` pairs: ``init`` makes its state, ``learn`` scores what acted last,
@@ -99,7 +99,7 @@ class Controller(NamedTuple):
       does not apply).
     - ``choices(state) -> [k] int32`` (optional): what the controller has chosen for each
       situation it tells apart, -1 where it has not chosen yet (the STL: the set last selected
-      for each antigen). The loop measures lock-ups with it (:class:`jaxais.episode.Run`'s
+      for each antigen). The loop measures lock-ups with it (:class:`jaxais.loop.Run`'s
       ``locked``): a controller without it never counts as locked.
 
     ``params`` is the controller's own pytree; every key is a typed PRNG key of its own (the
@@ -372,7 +372,7 @@ def stl_controller(
         # The idiotope is redrawn every idiotope_period iterations of a run (not at t = 0). The
         # test is on the batch's tick (unbatched), so under vmap this stays a branch taken once
         # per period; a run that joins a batch at a tick that is a multiple of the period
-        # (jaxais.pool's refills) keeps the same schedule.
+        # (jaxais.runner.run_pool's refills) keeps the same schedule.
         due = pc.tick % system.network.idiotope_period == 0
         I = jax.lax.cond(due, lambda: jnp.where(pc.t > 0, idiotopes(key, P), s.I), lambda: s.I)
         return s.replace(

@@ -98,13 +98,13 @@ def initialize(args: argparse.Namespace) -> bool:
     return True
 
 
-def batch_sharding():
-    """The sharding of a batch of runs along its first axis over every process's devices, or
-    None with a single device."""
+def batch_sharding(devices=None):
+    """The sharding of a batch of runs along its first axis over ``devices`` (default: every
+    process's), a ``NamedSharding`` over a 1-D ``("batch",)`` mesh; None with a single device."""
     import jax
     import numpy as np
 
-    devices = jax.devices()
+    devices = jax.devices() if devices is None else list(devices)
     if len(devices) < 2:
         return None
     mesh = jax.sharding.Mesh(np.array(devices), ("batch",))

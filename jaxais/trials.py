@@ -13,10 +13,10 @@ Two ways to run them:
 - :func:`make_trials` builds an experiment as one pure function, ``run(key, params)`` ->
   per-trial arrays, jitted, which ``vmap`` batches over seeds (keys) and parameter grids (a
   params pytree with a leading axis): what sweeps are made of.
-- :func:`run_trials` runs several systems' trials from the host, with a progress bar, through a
-  refilling pool of slots (or as one batch, to keep every trajectory), and returns trial records
-  (what the scripts and the paper's tables use). Its trials are those of ``make_trials``: the
-  same keys, the same numbers.
+- :func:`run_trials` runs several systems' trials from the host, with a progress bar, through
+  :mod:`jaxais.runner`'s refilling pool (or as one rollout, to keep every trajectory), and
+  returns trial records (what the scripts and the paper's tables use). Its trials are those of
+  ``make_trials``: the same keys, the same numbers.
 
 Both run any :class:`~jaxais.controllers.Controller` (default: the STL network).
 """
@@ -36,15 +36,13 @@ import numpy as np
 
 from jaxais import envs
 from jaxais.controllers import STL, Controller, stl_for
-from jaxais.episode import EpisodeConfig, advance, outcome, rollout, start_batch
-from jaxais.pool import run_pool, segment_length
+from jaxais.loop import EpisodeConfig, outcome
+from jaxais.runner import advance, rollout, run_pool, segment_length, start_batch
 from jaxais.systems import LABELS
 
 STL_CONFIG = EpisodeConfig(tau_cap=4000.0, collision_cap=100, stop_at_collision_cap=False)
 """The paper's STL protocol (SPEC 9): a run ends on the finish rule or at 4000 s, nothing else;
 more than 100 collisions fails it, and Table 3 uses c capped at 100."""
-
-_COMPILED: dict = {}
 
 
 @dataclass(frozen=True)
@@ -70,7 +68,7 @@ class TrialSet:
             (at 100, what Table 3 averages), fitness (with the capped c), failed,
             failed_collisions (c > 100), failed_time (4000 s reached), failed_by (a list of
             "collisions", "time"; both can hold), trapped_s, locked_s (trapped with the same
-            antibody selected for each antigen, :class:`~jaxais.episode.EpisodeConfig`),
+            antibody selected for each antigen, :class:`~jaxais.loop.EpisodeConfig`),
             idiotypic_difference_rate,
             iterations, replaced.
         trajectories: [n] arrays [T_i, 3] of poses sampled every ``chunk`` iterations, or None.
@@ -161,7 +159,7 @@ def make_trials(config: TrialsConfig):
 
     ``run`` plays ``config.n_trials`` trials of ``config.controller`` with ``params`` (one
     controller's params, e.g. a :class:`System`; every trial gets them) in ``config.world``,
-    each to its end, and returns a dict of arrays [n_trials]: :func:`jaxais.episode.outcome`'s
+    each to its end, and returns a dict of arrays [n_trials]: :func:`jaxais.loop.outcome`'s
     (tau, collisions, collisions_capped, fitness, failed_collisions, failed_time, trapped_s,
     locked_s, status, iterations) and the controller's ``stats`` (for the STL:
     idiotypic_difference_rate, NaN where not idiotypic, and replaced). It is jitted, and
@@ -222,8 +220,9 @@ def run_trials(
     slots: int = 1024,
 ) -> dict[str, TrialSet]:
     """Run every system's trials: with ``config.record``, as one batch to its slowest run's end
-    (every trajectory kept); otherwise through a refilling pool (:func:`jaxais.pool.run_pool`),
-    where a run that ended frees its slot for the next. The records are the same either way.
+    (every trajectory kept, :func:`jaxais.runner.rollout`); otherwise through a refilling pool
+    (:func:`jaxais.runner.run_pool`), where a run that ended frees its slot for the next. The
+    records are the same either way.
 
     Args:
         world: the world.
@@ -236,8 +235,7 @@ def run_trials(
         config: caps and recording (``config.record`` keeps every trial's trajectory).
         progress: optional tqdm-like object with ``update(n)``, advanced in simulated
             iterations of the batch with ``config.record``, else in trials ended.
-        timings: optional dict collecting ``run_s`` (and ``compile_s`` with ``config.record``;
-            the pool's compiles are part of its ``run_s``).
+        timings: optional dict collecting ``run_s`` (compiles included).
         controller: the controller every system runs (default: the STL network, the smallest
             variant that runs these systems, :func:`~jaxais.controllers.stl_for`).
         slots: runs live at once in the pool (without ``config.record``).
@@ -273,43 +271,29 @@ def run_trials(
         # learning) are left out of the program: same trials, a smaller and faster loop.
         controller = stl_for(params)
     update = None if progress is None else progress.update
+    t = time.perf_counter()
     if config.record:
         # One batch to its slowest run's end: every trial's trajectory is kept.
-        batch = rollout(
-            reset_keys,
-            run_keys,
-            world,
-            sim_params,
-            controller,
-            params,
-            config,
-            update,
-            _COMPILED,
-            timings,
-        )
+        batch = rollout(reset_keys, run_keys, world, sim_params, controller, params, config, update)
         res = outcome(batch.runs, config, float(sim_params.dt))
         if controller.stats is not None:
             res |= jax.device_get(jax.vmap(controller.stats)(batch.runs.ctrl, params))
+        # Boxes and the goal stay where reset put them: the final state holds the placement.
+        res |= {"boxes": batch.runs.sim.boxes, "goal": batch.runs.sim.goal}
         chunks = np.asarray(batch.runs.t) // config.chunk
         poses = np.asarray(batch.poses)
-        # Boxes and the goal stay where reset put them: the final state holds the placement.
-        placed = batch.runs.sim
     else:
-        # The runs go through a refilling pool: a slot whose run ended starts the next one, so
-        # ended runs stop costing (the same numbers: :mod:`jaxais.pool`).
         # Refills keep the phase of the STL's idiotope schedule (a static field, one per batch).
         period = getattr(getattr(params, "network", None), "idiotope_period", 1)
         align = segment_length(config.chunk, period)
-        t = time.perf_counter()
         res = run_pool(
             reset_keys, run_keys, params, world, sim_params, controller, config, slots, align,
             update,
         )  # fmt: skip
-        if timings is not None:
-            timings["run_s"] = timings.get("run_s", 0.0) + time.perf_counter() - t
-        placed = _reset(reset_keys, world, sim_params)
-    placed_boxes, placed_goal = np.asarray(placed.boxes), np.asarray(placed.goal)
-    extra = sorted(set(res) - set(_OUTCOME_KEYS))
+    if timings is not None:
+        timings["run_s"] = timings.get("run_s", 0.0) + time.perf_counter() - t
+    placed_boxes, placed_goal = np.asarray(res.pop("boxes")), np.asarray(res.pop("goal"))
+    del res["status"]  # the records say it by failed_time and the iterations
 
     out, start = {}, 0
     for name in systems:
@@ -329,7 +313,8 @@ def run_trials(
                 "locked_s": float(res["locked_s"][i]),
                 "iterations": int(res["iterations"][i]),
             }
-            for key in extra:  # the controller's stats; NaN (does not apply) is None
+            # The rest are the controller's stats; NaN (does not apply) is None.
+            for key in sorted(set(res) - set(record)):
                 value = res[key][i].item()
                 record[key] = None if isinstance(value, float) and np.isnan(value) else value
             records.append(record)
@@ -339,26 +324,6 @@ def run_trials(
         out[name] = TrialSet(records, trajectories if config.record else None, placements)
         start += counts[name]
     return out
-
-
-@jax.jit
-def _reset(reset_keys: jax.Array, world: envs.World, sim_params: envs.SimParams) -> envs.State:
-    """The worlds of runs with these reset keys [n] at t = 0 (where their objects stay)."""
-    return jax.vmap(envs.reset, in_axes=(0, None, None))(reset_keys, world, sim_params)
-
-
-_OUTCOME_KEYS = (
-    "tau",
-    "collisions",
-    "collisions_capped",
-    "fitness",
-    "failed_collisions",
-    "failed_time",
-    "trapped_s",
-    "locked_s",
-    "status",
-    "iterations",
-)
 
 
 def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:

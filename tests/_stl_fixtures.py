@@ -16,11 +16,11 @@ import numpy as np
 
 from jaxais import envs
 from jaxais.controllers import STL, Bout, Percept, STLState, System
-from jaxais.episode import EpisodeConfig, iterate, start
 from jaxais.immune.antibodies import sample_antibodies
 from jaxais.immune.network import NetworkParams
 from jaxais.immune.readings import LITERAL, Readings
 from jaxais.immune.reinforcement import PenaltyCounters
+from jaxais.loop import EpisodeConfig, iterate, start
 from jaxais.seed import Seed, save_seed
 from jaxais.systems import make_system
 

@@ -13,7 +13,7 @@ behaviour facts measured with margins, not tuning targets: the figures in each d
 the ranges over the file's seeds and 24 other batches of seeds.
 
 Each arena's robots run as one batch of ``BATCH``, in one compiled program for the whole file: the
-task loop's own iteration (:func:`jaxais.episode.iterate`, with the LTL controller) in a
+task loop's own iteration (:func:`jaxais.loop.iterate`, with the LTL controller) in a
 ``fori_loop`` that records every iteration's pose, Vm and antigen. The readings are part of each
 robot's controller params, so robots with hold = 31 and hold = 1 share a batch. The last test
 drives the penalty counters of SPEC 6 with the antigens the simulator shows a parked robot.
@@ -30,13 +30,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxais import envs, episode
+from jaxais import envs, loop
 from jaxais.controllers import Controller, ltl_controller
-from jaxais.episode import EpisodeConfig, outcome
 from jaxais.immune.antibodies import Antibodies, from_dicts
 from jaxais.immune.antigens import COLLISION_THRESHOLD, OBSTACLE_THRESHOLD, antigen
 from jaxais.immune.readings import DEFAULT, HOLD, LITERAL, Readings, readings
 from jaxais.immune.reinforcement import init_counters, update_penalty
+from jaxais.loop import EpisodeConfig, outcome
 from jaxais.systems import HAND_DESIGNED
 
 WORLDS = Path(__file__).parent / "worlds"
@@ -96,8 +96,8 @@ CONTROLLER = Controller(
 
 
 def _start(reset_key, run_key, pose, world, sim_params, robot):
-    """:func:`episode.start`; a finite ``pose`` [3] replaces the start pose drawn by the reset."""
-    run = episode.start(reset_key, run_key, world, sim_params, CONTROLLER, robot)
+    """:func:`loop.start`; a finite ``pose`` [3] replaces the start pose drawn by the reset."""
+    run = loop.start(reset_key, run_key, world, sim_params, CONTROLLER, robot)
     placed = jnp.all(jnp.isfinite(pose))
     sim = run.sim.replace(pose=jnp.where(placed, pose, run.sim.pose))
     obs = envs.observe(jax.random.fold_in(run_key, 1), sim, world, sim_params)
@@ -116,11 +116,11 @@ def _start_batch(reset_keys, run_keys, poses, world, sim_params, robots):
 def _loop(runs, n_steps, world, sim_params, robots):
     """``n_steps`` iterations of every run; the trace holds, per iteration t, the pose, Vm and
     antigen the controller met at t (row 0: the start)."""
-    step_all = jax.vmap(episode.iterate, in_axes=(0, 0, None, None, None, None, 0, None))
+    step_all = jax.vmap(loop.iterate, in_axes=(0, 0, None, None, None, None, 0, None))
 
     def body(t, carry):
         runs, trace = carry
-        keys = jax.vmap(jax.random.fold_in)(runs.key, runs.t)  # as episode.advance
+        keys = jax.vmap(jax.random.fold_in)(runs.key, runs.t)  # as runner.advance
         row = (runs.sim.pose, runs.obs.vm, antigen(runs.obs.ir, runs.obs.blue_pixels))
         trace = jax.tree.map(
             lambda a, x: jax.lax.dynamic_update_index_in_dim(a, x, t, 0), trace, row

@@ -21,10 +21,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxais import envs, ga
+from jaxais import envs, ga, runner
 from jaxais.checkpointing import state_to_tree
 from jaxais.controllers import LTL
-from jaxais.episode import EpisodeConfig, _rollout
 from jaxais.experiments.diversity import compare_diversity, diversity
 from jaxais.immune.antibodies import (
     LIMITS_MIN,
@@ -33,6 +32,7 @@ from jaxais.immune.antibodies import (
     sample_antibodies,
     within_limits,
 )
+from jaxais.loop import EpisodeConfig
 
 TINY = ga.GAConfig(populations=2, robots=4, generations=2, tau_cap=2.0, starts=1, success_starts=4)
 """The tests' GA: every test that evaluates robots uses this config (batches of 8 runs)."""
@@ -600,9 +600,10 @@ def test_compare_diversity_reports_both_tests():
 
 
 def test_rollout_programs_per_world(tmp_path):
-    # With a fixed world (the GA's way), the task loop bakes the world into its programs: a world
-    # with the same shapes but other values must get programs of its own, and the same world must
-    # reuse its programs. Otherwise both worlds share one program, the world an argument.
+    # With a constant world (the GA's way), the task loop bakes the world into its programs: a
+    # world with the same shapes but other values must get programs of its own, and the same
+    # world's values must reuse them. Otherwise both worlds share one program, the world an
+    # argument.
     source = (Path(envs.__file__).parent / "worlds" / "ga_maze.toml").read_text()
     assert "start_region = [0.1, 0.08, 0.28, 0.3]" in source
     moved = tmp_path / "moved.toml"
@@ -615,18 +616,19 @@ def test_rollout_programs_per_world(tmp_path):
     reset_keys = jax.random.split(jax.random.key(1), 2)
     run_keys = jax.random.split(jax.random.key(2), 2)
 
-    def final_x(world, cache, fixed_world):
-        batch = _rollout(
-            reset_keys, run_keys, world, params, LTL, sets, config, None, cache, None, fixed_world
+    def final_x(world, constant_world):
+        batch = runner.rollout(
+            reset_keys, run_keys, world, params, LTL, sets, config, None, constant_world
         )
         return np.asarray(batch.runs.sim.pose[:, 0])
 
-    special, shared = {}, {}
-    x_a, x_b = final_x(a, special, True), final_x(b, special, True)
-    assert len(special) == 2
+    programs = runner._advance._cache_size
+    before = programs()
+    x_a, x_b = final_x(a, True), final_x(b, True)
+    assert programs() == before + 2
     assert np.all(x_a < 0.5) and np.all(x_b > 1.5)  # each ran in its own world
-    np.testing.assert_array_equal(final_x(a, special, True), x_a)
-    assert len(special) == 2
-    np.testing.assert_array_equal(final_x(a, shared, False), x_a)
-    np.testing.assert_array_equal(final_x(b, shared, False), x_b)
-    assert len(shared) == 1
+    np.testing.assert_array_equal(final_x(maze(), True), x_a)  # the same values: no new program
+    assert programs() == before + 2
+    np.testing.assert_array_equal(final_x(a, False), x_a)
+    np.testing.assert_array_equal(final_x(b, False), x_b)
+    assert programs() == before + 3

@@ -1,4 +1,4 @@
-"""Lock-ups (jaxais.episode): a robot is locked while it is trapped and its controller's choices
+"""Lock-ups (jaxais.loop): a robot is locked while it is trapped and its controller's choices
 have not changed over the whole stay.
 
 A tiny controller drives forward until it touches an obstacle and then parks against it; its
@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from jaxais.controllers import Controller
-from jaxais.episode import EpisodeConfig
 from jaxais.immune.antigens import COLLISION_THRESHOLD
+from jaxais.loop import EpisodeConfig
 from jaxais.trials import TrialsConfig, make_trials
 
 CONFIG = EpisodeConfig(tau_cap=60.0, collision_cap=1000, finish_pixels=10_000)

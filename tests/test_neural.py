@@ -37,14 +37,14 @@ from jaxais.baselines.neural import (
     save_params,
 )
 from jaxais.controllers import Percept
-from jaxais.episode import EpisodeConfig
+from jaxais.loop import EpisodeConfig
 from jaxais.trials import STL_CONFIG, TrialsConfig, make_trials, run_trials
 
 TINY = TrainConfig(world="real", generations=3, pairs=4, episodes=2, steps=60, hidden=8)
 
 
 def percept_of(ob: envs.Observation) -> Percept:
-    """The task loop's percept of an observation (as ``jaxais.episode._iterate`` builds it)."""
+    """The task loop's percept of an observation (as ``jaxais.loop._iterate`` builds it)."""
     zero = jnp.int32(0)
     return Percept(
         m=zero,

@@ -103,7 +103,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     cache = {"JAXAIS_CACHE_DIR": str(base / "jax_cache")}
     out = base / "trials"
     out.mkdir()
-    # 3 trials on 2 CPU devices: the batch is padded to 4 and sharded (jaxais.episode.rollout).
+    # 3 trials on 2 CPU devices: the batch is padded to 4 and sharded (jaxais.runner.rollout).
     trials_args = (
         "--system", "HDC", "--world", "world1", "--trials", 3, "--tau-cap", 10,
         "--out", out / "results.json", "--plot", out / "plot.png",
@@ -184,7 +184,7 @@ def test_trials_script_same_results_on_one_and_two_devices(runs):
 def test_trials_script_fills_its_compilation_cache(runs):
     # JAXAIS_CACHE_DIR: the first run stored its task-loop programs, which the second one loaded
     # (and, above, gave the same bytes with).
-    assert {"jit_task_start", "jit_task_advance"} <= set(runs["cached"])
+    assert {"jit__start", "jit__advance"} <= set(runs["cached"])
 
 
 def test_trials_script_plot_is_a_png(runs):

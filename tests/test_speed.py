@@ -25,7 +25,7 @@ def test_importing_jaxais_leaves_the_backends_idle():
     # time (a module-level jit call, an array constant, ...), or XLA would never read them.
     code = (
         "import jaxais\n"
-        "from jaxais import envs, ga, trials, checkpointing, seed, systems, episode\n"
+        "from jaxais import envs, ga, trials, checkpointing, seed, systems, loop, runner\n"
         "from jaxais.experiments import protocol, records, stats, claims, report, ablation\n"
         "from jaxais.experiments import plotting, evolution, diversity\n"
         "from jaxais.ga import config, core, driver\n"

@@ -1,4 +1,5 @@
-"""Parameter sweeps: the pool of runs (``jaxais.pool``) and the grid (``experiments.sweeps``).
+"""Parameter sweeps: the pool of runs (``jaxais.runner.run_pool``) and the grid
+(``experiments.sweeps``).
 
 The pool's runs must be those of ``make_trials`` bit for bit, whatever slot they ran in and
 whenever they started; the sweep's points those of plain trials with the point's constants. All
@@ -22,7 +23,7 @@ from scipy import stats as sps
 
 from jaxais.controllers import stl_for
 from jaxais.experiments import sweeps as sweep
-from jaxais.pool import run_pool, segment_length
+from jaxais.runner import run_pool, segment_length
 from jaxais.trials import _keys, stream_id
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -50,7 +50,7 @@ import numpy as np
 import optax
 from jax.flatten_util import ravel_pytree
 
-from jaxais import envs
+from jaxais import distributed, envs
 from jaxais.baselines.config import TrainConfig
 from jaxais.controllers import Controller, Percept
 from jaxais.envs.gymnax import IR_FULL_SCALE, OBS_NAMES, PIXELS
@@ -346,16 +346,6 @@ class TrainResult(NamedTuple):
     metrics: dict[str, jnp.ndarray]
 
 
-def _population_sharding(n: int) -> jax.sharding.NamedSharding | None:
-    """Rollouts split over the local devices (one CPU device per core in the scripts), or None
-    with one device or a batch that does not split evenly."""
-    devices = jax.local_devices()
-    if len(devices) < 2 or n % len(devices):
-        return None
-    mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
-    return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
-
-
 def make_train(
     config: TrainConfig, progress: Callable[[int, dict[str, Any]], None] | None = None
 ) -> Callable[[jax.Array], TrainResult]:
@@ -382,7 +372,11 @@ def make_train(
     )
     es = openes(config.pairs, config.sigma, optimizer)
     members = config.population + 1  # the population and the mean
-    sharding = _population_sharding(members * config.episodes)
+    # Rollouts split over the local devices (one CPU device per core in the scripts), unless
+    # they do not split evenly.
+    sharding = distributed.batch_sharding(jax.local_devices())
+    if sharding is not None and members * config.episodes % sharding.mesh.size:
+        sharding = None
 
     def evaluate(flat: jnp.ndarray, key: jax.Array):
         """Every member [m, d] on the generation's episodes -> (fitness [m], Episode [m, e])."""

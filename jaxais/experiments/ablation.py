@@ -13,7 +13,7 @@ traced data of a :class:`~jaxais.controllers.System`, so the variants that diffe
 one batch, in one compiled program per world: the systems of all of them side by side, labelled
 ``"SIE@hold=1"`` and so on (:func:`jaxais.trials.run_trials` gives a tagged label the random streams
 of its plain label, so every variant meets the same worlds and draws: common random numbers). A
-variant with another :class:`~jaxais.episode.EpisodeConfig` (collision rule, stopping at the
+variant with another :class:`~jaxais.loop.EpisodeConfig` (collision rule, stopping at the
 collision cap: static, compile-time) is its own call, and so is one with other simulator parameters
 (noise-free IR; traced but shared by a whole batch). :func:`plan_calls` groups them.
 
@@ -36,12 +36,12 @@ from jaxais import envs
 from jaxais import trials as trials_module
 from jaxais.controllers import System
 from jaxais.envs.struct import device_array
-from jaxais.episode import EpisodeConfig
 from jaxais.experiments import claims, protocol, stats
 from jaxais.immune.antibodies import Antibodies
 from jaxais.immune.network import NetworkParams
 from jaxais.immune.readings import ALPHA_ON_SELF, HOLD, SIGMA0_FLOOR, Readings
 from jaxais.immune.readings import readings as make_readings
+from jaxais.loop import EpisodeConfig
 from jaxais.seed import Seed
 from jaxais.systems import HAND_DESIGNED, N_SETS, hand_designed_sets, make_system, parse_label
 from jaxais.trials import STL_CONFIG, TrialSet

@@ -342,7 +342,7 @@ def bench_sharded(b: Bench) -> None:
     """``jax_steps_per_s_sharded``: the batch axis sharded over all devices (when > 1)."""
     import jax
 
-    from jaxais.episode import batch_sharding
+    from jaxais.distributed import batch_sharding
 
     n_dev = jax.device_count()
     usable = [n for n in b.config.batches if n % n_dev == 0]
@@ -354,8 +354,8 @@ def bench_sharded(b: Bench) -> None:
     if not usable:
         b.notes.append(f"no batch size divisible by {n_dev} devices: sharded benchmark skipped")
         return
-    # The task loop's own batch sharding (jaxais.episode.rollout shards the same way).
-    runs = _bench_batches(b, usable, sharding_for=batch_sharding)
+    # The task loop's own batch sharding (jaxais.runner shards the same way).
+    runs = _bench_batches(b, usable, sharding_for=lambda n: batch_sharding())
     sharded = {k: v["steps_per_s"] for k, v in runs.items()}
     b.results["jax_steps_per_s_sharded"] = sharded
     b.results["compile_s_sharded"] = {k: v["compile_s"] for k, v in runs.items()}
@@ -462,7 +462,9 @@ def bench_controller(b: Bench) -> None:
     import jax.numpy as jnp
 
     from jaxais.controllers import stl_for
-    from jaxais.episode import EpisodeConfig, batch_sharding, compile_rollout
+    from jaxais.distributed import batch_sharding
+    from jaxais.loop import EpisodeConfig
+    from jaxais.runner import advance, start_batch
     from jaxais.seed import load_seed
     from jaxais.systems import make_system
     from jaxais.trials import trial_keys
@@ -480,27 +482,21 @@ def bench_controller(b: Bench) -> None:
                 continue
             params = jax.tree.map(lambda a, n=n: jnp.broadcast_to(a, (n, *jnp.shape(a))), system)
             reset_keys, run_keys = trial_keys(0, "SIE", n)
-            sharding = batch_sharding(n, devices)
+            sharding = batch_sharding(devices)
             if sharding is not None:
                 reset_keys, run_keys, params = jax.device_put(
                     (reset_keys, run_keys, params), sharding
                 )
+            controller = stl_for(params)
+            args = (b.world, b.params, controller, params, config)
             t0 = time.perf_counter()
-            programs = compile_rollout(
-                reset_keys,
-                run_keys,
-                b.world,
-                b.params,
-                stl_for(params),
-                params,
-                config,
-                sharding=sharding,
-            )
+            start = jax.jit(start_batch, static_argnums=(4, 6))
+            start = start.lower(reset_keys, run_keys, *args).compile()
+            loop = jax.jit(advance, static_argnums=(3, 5)).lower(start.out_info, *args).compile()
             compile_s[str(n)] = time.perf_counter() - t0
-            batch = programs.start(reset_keys, run_keys, b.world, b.params, params)
+            batch = start(reset_keys, run_keys, b.world, b.params, params)
             t = _timed(
-                lambda pr=programs, bt=batch, p=params: pr.advance(bt, b.world, b.params, p),
-                b.config.repeats,
+                lambda lp=loop, bt=batch, p=params: lp(bt, b.world, b.params, p), b.config.repeats
             )
             rates[str(n)] = n * steps / t["best_s"]
         b.results[f"controller_iterations_per_s{suffix}"] = rates

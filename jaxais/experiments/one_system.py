@@ -124,9 +124,9 @@ def trials(
     from tqdm import tqdm
 
     from jaxais import envs
-    from jaxais.episode import EpisodeConfig
     from jaxais.experiments.records import build_systems, results_document, run_config
     from jaxais.immune.network import NetworkParams
+    from jaxais.loop import EpisodeConfig
     from jaxais.trials import run_trials
 
     lead = jax.process_index() == 0  # every process runs its share; process 0 writes

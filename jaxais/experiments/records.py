@@ -18,9 +18,9 @@ import numpy as np
 import jaxais
 from jaxais import envs
 from jaxais.controllers import System
-from jaxais.episode import EpisodeConfig
 from jaxais.immune.network import NetworkParams
 from jaxais.immune.readings import DEFAULT, Readings
+from jaxais.loop import EpisodeConfig
 from jaxais.seed import Seed, default_seed_dir, load_seed
 from jaxais.systems import make_system, parse_label
 from jaxais.trials import TrialSet, summarise

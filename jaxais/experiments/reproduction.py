@@ -200,7 +200,6 @@ def _run(out: Path, worlds: list[str], n_trials: int | None, seed: int,
     from jaxais import envs
     from jaxais.baselines.config import NN_LABEL
     from jaxais.baselines.neural import NEURAL, load_params
-    from jaxais.episode import EpisodeConfig
     from jaxais.experiments import claims, report, stats
     from jaxais.experiments.plotting import draw_world
     from jaxais.experiments.records import (
@@ -212,6 +211,7 @@ def _run(out: Path, worlds: list[str], n_trials: int | None, seed: int,
         versions,
     )
     from jaxais.immune.network import NetworkParams
+    from jaxais.loop import EpisodeConfig
     from jaxais.seed import default_seed_dir
     from jaxais.trials import run_trials
 
@@ -340,6 +340,6 @@ def headline(result: Mapping[str, Any]) -> str:
         f"{counts['reproduced']} of {counts['evaluated']} evaluated claims reproduced "
         f"({counts['total']} in all; {ci_counts['reproduced_with_ci']} of them with separated "
         f"95 % CIs, {ci_counts['contradicted_with_ci']} contradicted by them); {verdicts}. "
-        f"Total {timings['total_s']:.0f} s (compile {timings.get('compile_s', 0):.0f} s). "
+        f"Total {timings['total_s']:.0f} s. "
         f"Report: {result['report']}"
     )

@@ -581,7 +581,7 @@ def trapped_times(results_by_world: ResultsByWorld) -> dict[str, dict[str, float
 
 def locked_times(results_by_world: ResultsByWorld) -> dict[str, dict[str, float | None]]:
     """Mean simulated time spent locked (``locked_s``, seconds: trapped while the same antibody
-    kept being selected for each antigen, :class:`jaxais.episode.EpisodeConfig`) per world and
+    kept being selected for each antigen, :class:`jaxais.loop.EpisodeConfig`) per world and
     system."""
     return record_means(results_by_world, "locked_s")
 

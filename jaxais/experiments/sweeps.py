@@ -4,7 +4,7 @@ The network's constants (:class:`~jaxais.immune.network.NetworkParams`: k1, k2, 
 the penalties) and our readings (:class:`~jaxais.immune.readings.Readings`: hold, ...) are
 traced data of a :class:`~jaxais.controllers.System`, so every grid point is the same compiled
 program with other numbers. :func:`run_sweep` stacks one system per point, repeats it for its
-trials and runs all points x trials through :func:`jaxais.pool.run_pool` (one compiled loop,
+trials and runs all points x trials through :func:`jaxais.runner.run_pool` (one compiled loop,
 finished runs' slots refilled).
 
 Trial i of every point meets the same world placement and the same random streams as trial i of
@@ -32,8 +32,8 @@ from scipy import stats as sps
 
 from jaxais import envs
 from jaxais.controllers import System, stl_for
-from jaxais.episode import EpisodeConfig
-from jaxais.pool import run_pool, segment_length
+from jaxais.loop import EpisodeConfig
+from jaxais.runner import run_pool, segment_length
 from jaxais.trials import _keys, stream_id
 
 PARAMETERS: dict[str, tuple[str, type]] = {
@@ -210,7 +210,7 @@ def run_sweep(
         world: the world. base: the system at the paper's constants. label: its label (it
             names the random streams, as in :func:`jaxais.trials.run_trials`).
         axes: (parameter name, values) per axis (:func:`parse_axis`).
-        slots: runs live at once (:func:`jaxais.pool.run_pool`).
+        slots: runs live at once (:func:`jaxais.runner.run_pool`).
         progress: called with the number of runs that ended, after every segment.
 
     Returns:

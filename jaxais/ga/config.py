@@ -100,8 +100,8 @@ class GAConfig:
                 raise ConfigError(name, f"must be {what}, got {getattr(self, name)!r}")
 
     def episode_config(self):
-        """The task loop's :class:`jaxais.episode.EpisodeConfig` of one run (the LTL caps)."""
-        from jaxais.episode import EpisodeConfig
+        """The task loop's :class:`jaxais.loop.EpisodeConfig` of one run (the LTL caps)."""
+        from jaxais.loop import EpisodeConfig
 
         return EpisodeConfig(
             tau_cap=float(self.tau_cap),

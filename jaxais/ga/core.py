@@ -14,10 +14,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxais.envs.struct import pytree_dataclass, static_field
-from jaxais.episode import RHO, fitness
 from jaxais.ga.config import GAConfig
 from jaxais.immune.antibodies import Antibodies, mutate, sample_antibodies
 from jaxais.immune.antigens import N_ANTIGENS
+from jaxais.loop import RHO, fitness
 
 __all__ = [
     "LOWER_IS_BETTER",

@@ -15,12 +15,13 @@ import numpy as np
 
 from jaxais import envs
 from jaxais.controllers import LTL
-from jaxais.episode import FINISHED, _rollout, fitness, outcome
 from jaxais.ga import core
 from jaxais.ga.config import GAConfig
 from jaxais.ga.core import Evaluation, GAState
 from jaxais.immune.antibodies import Antibodies
 from jaxais.immune.antigens import N_ANTIGENS
+from jaxais.loop import FINISHED, fitness, outcome
+from jaxais.runner import rollout as run_batch
 from jaxais.seed import Seed
 
 __all__ = [
@@ -41,7 +42,6 @@ __all__ = [
 ]
 
 _CROSSING_STREAM = 0x63726F73  # "cros", folded into a run's key by crossing_key
-_PROGRAMS: dict = {}  # the task loop's compiled programs, one per batch size, world and caps
 
 
 @jax.jit
@@ -73,11 +73,11 @@ def rollout(
     S, (P, R) = keys.shape[0], population.shape[:2]
     episode = config.episode_config()
     reset_keys, run_keys, flat = _rollout_inputs(keys, population)
-    # The world's walls are compiled in as constants (fixed_world), which XLA folds: in ga_maze
-    # the loop runs several times faster (docs/performance.md); its numbers differ in the last
-    # bits from a run with the world an argument, so the GA always runs this way.
-    args = (reset_keys, run_keys, world, sim_params, LTL, flat, episode, progress, _PROGRAMS)
-    batch = _rollout(*args, None, fixed_world=True)
+    # The world's walls are compiled in as constants (constant_world), which XLA folds: in
+    # ga_maze the loop runs several times faster (docs/performance.md); its numbers differ in the
+    # last bits from a run with the world an argument, so the GA always runs this way.
+    args = (reset_keys, run_keys, world, sim_params, LTL, flat, episode, progress)
+    batch = run_batch(*args, constant_world=True)
     out = outcome(batch.runs, episode, float(sim_params.dt))
     return {
         "tau": out["tau"].astype(np.float32).reshape(S, P, R),
@@ -123,7 +123,7 @@ def evaluate(
     """Every robot of ``population`` [P, R, 8] from ``config.starts`` random starts (means).
 
     ``key`` is split into ``config.starts`` start keys, or is an array [S] of start keys (S then
-    overrides ``config.starts``). ``progress``: see :func:`jaxais.episode.rollout`.
+    overrides ``config.starts``). ``progress``: see :func:`jaxais.runner.rollout`.
     """
     keys = start_keys(key, config.starts) if jnp.ndim(key) == 0 else key
     return _summarise(rollout(keys, population, world, sim_params, config, progress))

@@ -1,0 +1,347 @@
+"""The one driver of the task loop (:mod:`jaxais.loop`): batches of runs, sharded over devices.
+
+A batch of runs advances in lockstep, ``vmap`` inside a ``while_loop`` (:func:`advance`), in
+segments between which the host reads every run's counts. Two drivers share those programs:
+
+- :func:`rollout`: one batch to its end (every run's final state, and trajectories when
+  recorded): the GA's evaluations, recorded trials.
+- :func:`run_pool`: many more runs than one batch holds: the runs that ended in a segment are read
+  out and their slots start the next runs of the queue, so in runs of unequal length the ended
+  ones stop costing (trials, sweeps).
+
+Iteration t of a run draws from ``fold_in(run.key, t)`` alone, so a run's numbers depend neither
+on the chunk and segment sizes nor on the other runs of its batch, its slot, or when it started
+(slots are refilled at batch ticks that are multiples of the segment, which keeps a controller's
+periodic steps in phase: the STL's idiotope reads the batch tick). Bit for bit that holds for
+controllers whose arithmetic XLA compiles alike in every program: the STL network and the
+neural baseline (tested). A controller with dot products can round differently in another
+program, since XLA picks a dot's summation order per program, and over thousands of steps a few
+runs then take other paths: the same distribution, not the same bits (the neural baseline's MLP
+did, until it summed in a fixed order, :func:`jaxais.baselines.neural.policy_in_order`).
+
+The programs are ``jax.jit``'s, compiled once per controller, config, batch shape and device set;
+worlds, simulator constants and parameters are their arguments.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+import types
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxais import distributed, envs
+from jaxais.controllers import Controller
+from jaxais.envs.struct import pytree_dataclass
+from jaxais.loop import RUNNING, EpisodeConfig, Run, _draws, _iterate, outcome, start
+
+
+@pytree_dataclass
+class Batch:
+    """A batch of runs advanced together, with the optional trajectory buffer.
+
+    Attributes:
+        runs: Run with a leading batch axis [n].
+        poses: [n, K, 3] poses sampled once per chunk (K = 1 when not recording).
+        chunks: number of chunks done (the trajectory's fill level).
+    """
+
+    runs: Run
+    poses: jnp.ndarray
+    chunks: jnp.ndarray
+
+
+def start_batch(
+    reset_keys: jax.Array,
+    run_keys: jax.Array,
+    world: envs.World,
+    sim_params: envs.SimParams,
+    controller: Controller,
+    ctrl_params: Any,
+    config: EpisodeConfig,
+) -> Batch:
+    """Start n runs (``reset_keys``, ``run_keys`` [n]; ``ctrl_params`` batched along axis 0)."""
+    runs = jax.vmap(start, in_axes=(0, 0, None, None, None, 0))(
+        reset_keys, run_keys, world, sim_params, controller, ctrl_params
+    )
+    # One pose at the start and one per chunk.
+    k = -(-config.max_iterations(float(sim_params.dt)) // config.chunk) + 2 if config.record else 1
+    poses = jnp.zeros((reset_keys.shape[0], k, 3)).at[:, 0].set(runs.sim.pose)
+    return Batch(runs=runs, poses=poses, chunks=jnp.int32(0))
+
+
+def advance(
+    batch: Batch,
+    world: envs.World,
+    sim_params: envs.SimParams,
+    controller: Controller,
+    ctrl_params: Any,
+    config: EpisodeConfig,
+) -> Batch:
+    """Advance every run by up to ``config.segment`` iterations, stopping early once all ended.
+
+    Iteration t of a run is :func:`jaxais.loop.iterate` with the key ``fold_in(run.key, t)``.
+    """
+    step_all = jax.vmap(_iterate, in_axes=(0, 0, None, None, None, None, 0, None))
+    n_chunks = max(1, config.segment // config.chunk)
+
+    def chunk_draws(runs: Run):
+        """Every iteration's draws of the chunk, [chunk, n, ...]: each derivation and draw is a
+        threefry hash, a loop of its own on CPU whatever its size, so they are made once for
+        the chunk, over flat [chunk * n] keys. A run that ends within the chunk stops counting
+        t, but then its iterations change nothing, so those draws are unused."""
+        n = runs.t.shape[0]
+        t = (runs.t[None, :] + jnp.arange(config.chunk)[:, None]).reshape(-1)
+        keys = jax.vmap(jax.random.fold_in)(jnp.tile(runs.key, config.chunk), t)
+        draws = jax.vmap(_draws, in_axes=(0, None))(keys, world)
+        return jax.tree.map(lambda a: a.reshape(config.chunk, n, *a.shape[1:]), draws)
+
+    def chunk(batch: Batch) -> Batch:
+        draws = chunk_draws(batch.runs)
+
+        def body(i, r):
+            at_i = jax.tree.map(lambda a: a[i], draws)
+            tick = batch.chunks * config.chunk + i
+            return step_all(at_i, r, tick, world, sim_params, controller, ctrl_params, config)
+
+        runs = jax.lax.fori_loop(0, config.chunk, body, batch.runs)
+        poses = batch.poses
+        if config.record:
+            idx = jnp.minimum(batch.chunks + 1, poses.shape[1] - 1)
+            poses = jax.lax.dynamic_update_slice_in_dim(poses, runs.sim.pose[:, None], idx, 1)
+        return Batch(runs=runs, poses=poses, chunks=batch.chunks + 1)
+
+    def cond(carry):
+        i, b = carry
+        return (i < n_chunks) & jnp.any(b.runs.status == RUNNING)
+
+    return jax.lax.while_loop(cond, lambda c: (c[0] + 1, chunk(c[1])), (0, batch))[1]
+
+
+@jax.tree_util.register_static
+class _Constant:
+    """A world compiled into the programs as constants, which XLA folds (the GA's maze runs
+    several times faster so, and its numbers are those of this form): a static argument, equal
+    to another of the same values, so jax.jit compiles once per world."""
+
+    def __init__(self, world: envs.World):
+        self.world = world
+        leaves, treedef = jax.tree.flatten(world)
+        arrays = [np.asarray(x) for x in leaves]
+        self.key = treedef, tuple((a.shape, a.dtype.str, a.tobytes()) for a in arrays)
+
+    def __hash__(self) -> int:
+        return hash(self.key)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, _Constant) and self.key == other.key
+
+
+_STATIC = ("controller", "config", "sharding")
+
+
+def _spread(batch: Batch, sharding) -> Batch:
+    """The runs split over the devices; a no-op on one device."""
+    if sharding is None:
+        return batch
+    split = lambda x: jax.lax.with_sharding_constraint(x, sharding)
+    return batch.replace(runs=jax.tree.map(split, batch.runs), poses=split(batch.poses))
+
+
+@functools.partial(jax.jit, static_argnames=_STATIC)
+def _start(reset_keys, run_keys, idx, world, sim_params, params, controller, config, sharding):
+    """Runs ``idx`` [b] of the queue started (``params``: [n], one per run)."""
+    world = world.world if isinstance(world, _Constant) else world
+    p = jax.tree.map(lambda a: a[idx], params)
+    batch = start_batch(reset_keys[idx], run_keys[idx], world, sim_params, controller, p, config)
+    return _spread(batch, sharding)
+
+
+@functools.partial(jax.jit, static_argnames=_STATIC)
+def _advance(batch, idx, world, sim_params, params, controller, config, sharding):
+    """One segment of the slots' runs ``idx`` [b], and what the host reads of them."""
+    world = world.world if isinstance(world, _Constant) else world
+    p = jax.tree.map(lambda a: a[idx], params)
+    batch = _spread(
+        advance(_spread(batch, sharding), world, sim_params, controller, p, config), sharding
+    )
+    runs = batch.runs
+    read = {"t": runs.t, "status": runs.status, "collisions": runs.collisions}
+    read |= {"trapped": runs.trapped, "locked": runs.locked}
+    read |= {"boxes": runs.sim.boxes, "goal": runs.sim.goal}  # where the run's world put them
+    if controller.stats is not None:
+        read |= jax.vmap(controller.stats)(runs.ctrl, p)
+    if sharding is not None:  # every host reads every run's counts
+        read = jax.lax.with_sharding_constraint(read, distributed.replicated(sharding))
+    return batch, read
+
+
+@functools.partial(jax.jit, static_argnames=_STATIC)
+def _refill(
+    batch, mask, reset_keys, run_keys, idx, world, sim_params, params, controller, config, sharding
+):
+    """The slots ``mask`` [b] restarted with their new runs ``idx``."""
+    static = dict(controller=controller, config=config, sharding=sharding)
+    fresh = _start(reset_keys, run_keys, idx, world, sim_params, params, **static)
+    runs = jax.tree.map(
+        lambda new, old: jnp.where(mask.reshape(-1, *[1] * (old.ndim - 1)), new, old),
+        fresh.runs,
+        batch.runs,
+    )
+    # A segment that stopped early (every live run ended) leaves the tick short of a multiple of
+    # the segment: the next runs start on one.
+    chunks = config.segment // config.chunk
+    return _spread(batch.replace(runs=runs, chunks=-(-batch.chunks // chunks) * chunks), sharding)
+
+
+def rollout(
+    reset_keys: jax.Array,
+    run_keys: jax.Array,
+    world: envs.World,
+    sim_params: envs.SimParams,
+    controller: Controller,
+    ctrl_params: Any,
+    config: EpisodeConfig,
+    progress: Callable[[int], None] | None = None,
+    constant_world: bool = False,
+) -> Batch:
+    """Run a batch to the end: every run finished or stopped by a cap.
+
+    The batch is sharded over ``jax.local_devices()``, padded with copies of runs to a multiple
+    of their count (the copies are dropped from the result); every run's numbers are those of
+    one device.
+
+    Args:
+        reset_keys, run_keys: [n] PRNG keys (world placement; everything else).
+        ctrl_params: controller parameters with a leading batch axis [n].
+        progress: called with the iterations done after every segment (e.g. tqdm's update).
+        constant_world: compile ``world`` into the programs as constants (the GA's way; a world
+            of other values compiles programs of its own).
+
+    Returns:
+        The final :class:`Batch` of the n runs.
+    """
+    n = reset_keys.shape[0]
+    sharding = distributed.batch_sharding(jax.local_devices())
+    d = 1 if sharding is None else sharding.mesh.size
+    idx = np.arange(-(-n // d) * d, dtype=np.int32) % n
+    world = _Constant(world) if constant_world else world
+    static = dict(controller=controller, config=config, sharding=sharding)
+    batch = _start(reset_keys, run_keys, idx, world, sim_params, ctrl_params, **static)
+    done = 0
+    while True:
+        batch, read = _advance(batch, idx, world, sim_params, ctrl_params, **static)
+        read = jax.device_get(read)
+        if progress is not None:
+            progress(int(read["t"].max()) - done)
+        done = int(read["t"].max())
+        if not np.any(read["status"] == RUNNING):
+            break
+    return batch.replace(runs=jax.tree.map(lambda x: x[:n], batch.runs), poses=batch.poses[:n])
+
+
+def segment_length(chunk: int, period: int = 1, about: int = 600) -> int:
+    """A pool's ``align``: the smallest multiple of ``chunk`` and of a controller's ``period``
+    (the STL's idiotope period) at or above ``about`` iterations (one host check each)."""
+    align = math.lcm(chunk, period)
+    return align * max(1, -(-about // align))
+
+
+SHRINK = 8
+"""Once the queue is empty, the batch shrinks by this factor whenever that many slots are idle
+per live run: the last long runs do not pay for a full batch of ended ones (each new size
+compiles the loop once)."""
+
+
+def run_pool(
+    reset_keys: jax.Array,
+    run_keys: jax.Array,
+    params: Any,
+    world: envs.World,
+    sim_params: envs.SimParams,
+    controller: Controller,
+    config: EpisodeConfig,
+    slots: int = 1024,
+    align: int = 600,
+    progress: Callable[[int], None] | None = None,
+) -> dict[str, np.ndarray]:
+    """Run every run to its end, ``slots`` at a time, sharded over every process's devices.
+
+    Args:
+        reset_keys, run_keys: [n] PRNG keys of the runs (as in :func:`rollout`).
+        params: the controller's params with a leading axis [n] (one per run).
+        slots: runs live at once (the batch size of the compiled loop).
+        align: iterations per segment; slots are refilled between segments. A multiple of
+            ``config.chunk`` and of every period a controller keeps (600 = 24 chunks of 25 =
+            5 idiotope periods of 120).
+        progress: called after every segment with the number of runs that ended in it.
+
+    Returns:
+        NumPy arrays [n]: :func:`jaxais.loop.outcome`'s, the controller's ``stats``, and where
+        each run's world put its boxes (``boxes`` [n, B, 2]) and goal (``goal`` [n, 2]).
+
+    Raises:
+        ValueError: ``align`` is not a multiple of ``config.chunk``, or ``slots`` < 1.
+    """
+    if align % config.chunk or align < config.chunk:
+        raise ValueError(f"align must be a multiple of the chunk ({config.chunk}), got {align}")
+    if slots < 1:
+        raise ValueError(f"slots must be >= 1, got {slots}")
+    n = reset_keys.shape[0]
+    sharding = distributed.batch_sharding()
+    # Slots come in whole multiples of the devices: each holds as many.
+    d = 1 if sharding is None else sharding.mesh.size
+    b = -(-min(slots, n) // d) * d
+    config = dataclasses.replace(config, segment=align, record=False)
+    static = dict(controller=controller, config=config, sharding=sharding)
+
+    idx = np.arange(b, dtype=np.int32) % n  # slots past n pad the batch with ended copies
+    queued = min(b, n)  # the next run to start
+    live = np.arange(b) < n  # the slot holds a run not yet read out
+    batch = _start(reset_keys, run_keys, idx, world, sim_params, params, **static)
+    got: dict[str, np.ndarray] = {}
+    while live.any():
+        batch, read = _advance(batch, idx, world, sim_params, params, **static)
+        read = jax.device_get(read)
+        ended = live & (read["status"] != RUNNING)
+        if not ended.any():
+            continue
+        for name, values in read.items():
+            got.setdefault(name, np.zeros((n, *values.shape[1:]), values.dtype))
+            got[name][idx[ended]] = values[ended]
+        live &= ~ended
+        if progress is not None:
+            progress(int(ended.sum()))
+        new = np.flatnonzero(ended)[: n - queued]
+        if new.size:
+            idx[new] = np.arange(queued, queued + new.size)
+            queued += new.size
+            live[new] = True
+            mask = np.zeros(b, bool)
+            mask[new] = True
+            batch = _refill(
+                batch, mask, reset_keys, run_keys, idx, world, sim_params, params, **static
+            )
+        elif b > d and live.sum() <= b // SHRINK:
+            # The queue is empty and most slots idle: go on with a batch an eighth the size
+            # (ended runs never change, so an idle slot can pad it).
+            while b > d and live.sum() <= b // SHRINK:
+                b = max(d, -(-(b // SHRINK) // d) * d)
+            keep = np.flatnonzero(live)
+            keep = np.concatenate([keep, np.full(b - keep.size, np.flatnonzero(~live)[0])])
+            runs, poses = jax.tree.map(lambda a, k=keep: a[k], (batch.runs, batch.poses))
+            batch = batch.replace(runs=runs, poses=poses)
+            idx, live = idx[keep], live[keep]
+    counts = {name: got.pop(name) for name in ("t", "status", "collisions", "trapped", "locked")}
+    return outcome(types.SimpleNamespace(**counts), config, float(sim_params.dt)) | got
+
+
+def useful_iterations(result: dict[str, np.ndarray]) -> int:
+    """Robot-iterations the runs needed (the pool's useful work)."""
+    return int(np.sum(result["iterations"], dtype=np.int64))

@@ -162,7 +162,9 @@ class GACheckpointer:
         options = ocp.CheckpointManagerOptions(
             max_to_keep=max_to_keep,
             create=True,
-            enable_async_checkpointing=True,  # the next save and close() wait for it
+            # A save is complete when it returns: a signal ends a script at once (jaxais.cli),
+            # and must not take the newest checkpoint with it.
+            enable_async_checkpointing=False,
             cleanup_tmp_directories=True,  # what an interrupted save left (never a complete one)
         )
         self._manager = ocp.CheckpointManager(self.directory, options=options)
@@ -206,8 +208,8 @@ class GACheckpointer:
         return self._manager.latest_step()
 
     def save(self, state: GAState, config: GAConfig, extra: dict[str, Any] | None = None) -> None:
-        """Start saving ``state`` as checkpoint ``state.generation`` in the background (after
-        waiting for the previous save), with ``config`` and the JSON-able ``extra``."""
+        """Save ``state`` as checkpoint ``state.generation``, with ``config`` and the JSON-able
+        ``extra``."""
         ocp = self._ocp
         generation = int(state.generation)
         meta = {
@@ -217,7 +219,7 @@ class GACheckpointer:
             "config": config.to_dict(),
             "extra": extra or {},
         }
-        with self._writing():  # also reports a failure of the previous, background save
+        with self._writing():
             self._manager.save(
                 generation,
                 args=ocp.args.Composite(

@@ -8,7 +8,6 @@ import argparse
 import dataclasses
 import logging
 import sys
-from typing import Any
 
 from jaxais.cli import ArgumentParser, UserError, main_wrapper, run_script
 from jaxais.ga.config import CROSSING_STARTS, ConfigError, GAConfig
@@ -43,11 +42,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 
 @main_wrapper(PROG)
-def run(argv: list[str] | None = None) -> dict[str, Any]:
+def run(argv: list[str] | None = None) -> dict:
     try:
-        args = parse_args(argv)
+        return _run(parse_args(argv), argv)
     except ConfigError as err:
         raise UserError(f"--{err.field.replace('_', '-')} {err.reason}") from None
+
+
+def _run(args: argparse.Namespace, argv: list[str] | None) -> dict:
     for flag in ("out", "resume", "diversity") if args.check_seed else ():
         if getattr(args, flag):
             raise UserError(f"--check-seed measures a seed and writes nothing: drop --{flag}")
@@ -63,11 +65,9 @@ def run(argv: list[str] | None = None) -> dict[str, Any]:
     if args.check_seed is not None:
         result = evolution.check_seed(args.check_seed, **given)
     else:
+        given |= dict(resume=args.resume, argv=sys.argv[1:] if argv is None else list(argv))
         seeds = args.diversity_seeds if args.diversity else None
-        argv = sys.argv[1:] if argv is None else list(argv)
-        result = evolution.evolve(
-            args.out, **given, resume=args.resume, diversity_seeds=seeds, argv=argv
-        )
+        result = evolution.evolve(args.out, **given, diversity_seeds=seeds)
     print(evolution.report(result, args.check_seed or args.out))
     return result
 

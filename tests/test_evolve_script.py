@@ -2,7 +2,8 @@
 
 The runs call the script's ``main`` in this process with the tiny GA config of ``test_ga.py``
 (shared compiled programs). Subprocesses: the flag errors, which answer before anything is
-compiled, and one tiny run exactly as a user starts it.
+compiled, one tiny run exactly as a user starts it, and a run that SIGTERM ends (the signal
+ends the process at once).
 """
 
 from __future__ import annotations
@@ -11,18 +12,17 @@ import hashlib
 import importlib.util
 import json
 import os
-import signal
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from _python import run_python
 from test_ga import TINY
 
 from jaxais import ga
 from jaxais.checkpointing import GACheckpointer
-from jaxais.ga import driver
 from jaxais.seed import load_seed
 
 SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "evolve.py"
@@ -204,24 +204,31 @@ def test_resume_equals_uninterrupted(tmp_path: Path, full_run: Path):
     assert_same_state(a, b)
 
 
-def test_interrupted_run_resumes_exactly(tmp_path: Path, monkeypatch, capsys, full_run: Path):
+def test_interrupted_run_resumes_exactly(tmp_path: Path, full_run: Path):
+    """A real SIGTERM during generation 1 (after checkpoint 1) ends the script process at once
+    with its one line and status 143, leaving no seed or summary; resuming then gives the
+    uninterrupted run's seed."""
     out = tmp_path / "run"
-    real_step = driver.step
-    calls = []
-
-    def step_then_sigterm(*args, **kwargs):
-        calls.append(1)
-        if len(calls) == 2:  # a real SIGTERM during generation 1, after checkpoint 1
-            os.kill(os.getpid(), signal.SIGTERM)
-        return real_step(*args, **kwargs)
-
-    monkeypatch.setattr(driver, "step", step_then_sigterm)
-    handler = signal.getsignal(signal.SIGTERM)
-    last = expect_exit(capsys, "--generations", "3", "--out", str(out), status=143)
-    assert last == "evolve.py: error: terminated"
-    assert signal.getsignal(signal.SIGTERM) is handler  # restored
+    code = f"""
+import os, signal, sys
+from jaxais.cli import run_script
+from jaxais.ga import driver
+from jaxais.scripts import evolve
+sys.argv = ["evolve.py", *{[*TINY_ARGS, "--generations", "3", "--out", str(out)]!r}]
+real_step, calls = driver.step, []
+def step_then_sigterm(*args, **kwargs):
+    calls.append(1)
+    if len(calls) == 2:
+        os.kill(os.getpid(), signal.SIGTERM)
+    return real_step(*args, **kwargs)
+driver.step = step_then_sigterm
+run_script(evolve.main)
+"""
+    proc = run_python(code, timeout=300)
+    assert proc.returncode == 143, proc.stderr[-3000:]
+    assert "Traceback" not in proc.stderr
+    assert proc.stderr.strip().splitlines()[-1] == "evolve.py: error: terminated"
     assert not (out / "seed").exists() and not (out / "summary.json").exists()
-    monkeypatch.setattr(driver, "step", real_step)
     run_main("--generations", "3", "--out", str(out), "--resume")
     assert_same_arrays(seed_arrays(out / "seed"), seed_arrays(full_run / "seed"))
 

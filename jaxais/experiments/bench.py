@@ -24,7 +24,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from jaxais.console import SCRIPTS_DIR
 from jaxais.io import atomic_write_json
 
 SCHEMA = "jaxais-bench/1"
@@ -537,7 +536,8 @@ def bench_scripts(b: Bench) -> None:
                 bar.set_postfix_str(Path(run.argv[0]).name)
                 out = Path(tmp, f"{run.name}-{i}", run.out)
                 out.parent.mkdir()
-                command = [sys.executable, str(SCRIPTS_DIR / run.argv[0]), *run.argv[1:]]
+                script = f"jaxais.scripts.{Path(run.argv[0]).stem}"
+                command = [sys.executable, "-m", script, *run.argv[1:]]
                 times[run.name].append(run_timed([*command, "--out", str(out)], env))
                 bar.update()
     b.results["scripts"] = {

@@ -5,8 +5,8 @@
     python scripts/train_baseline.py --out /tmp/nn --generations 20 --no-eval
     python scripts/train_baseline.py --collect checkpoints/neural runs/nn-seed1   # one table
 
-Writes params.npz, config.json, training_curve.png, evaluation.json and .md (jaxais.baselines.
-driver) into --out: a fresh runs/baseline-DATE-TIME by default, checkpoints/ only if asked.
+Writes params.npz, config.json, training_curve.png, evaluation.json and .md into --out: a fresh
+runs/baseline-DATE-TIME by default, checkpoints/ only if asked (jaxais.experiments.baseline).
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 @main_wrapper("train_baseline.py")
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
-    from jaxais.baselines import driver
+    from jaxais.experiments import baseline as driver
 
     if args.collect:
         print(driver.collect_baselines(args.collect), end="")

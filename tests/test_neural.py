@@ -285,8 +285,8 @@ def test_script_collects_runs_into_one_table(tmp_path):
 def test_driver_writes_into_the_shipped_checkpoints_only_when_asked(tmp_path):
     """The shipped weights are never overwritten by default (the driver refuses before any
     work); the script's default --out is a fresh folder."""
-    from jaxais.baselines import evaluate_baseline, train_baseline
     from jaxais.baselines.neural import default_params_dir
+    from jaxais.experiments.baseline import evaluate_baseline, train_baseline
 
     shipped = default_params_dir()
     before = {p.name: p.read_bytes() for p in shipped.iterdir() if p.is_file()}

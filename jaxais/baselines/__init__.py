@@ -2,8 +2,8 @@
 
 :mod:`jaxais.baselines.neural`: a small neural controller (an MLP from the IR and camera
 features to the wheel speeds) trained by OpenES on the gymnax-style environment, and run under
-the task loop like SIE and HDC (:data:`NEURAL`); :mod:`jaxais.baselines.driver` trains it
-(:func:`train_baseline`) and runs it beside them (:func:`evaluate_baseline`). Its settings,
+the task loop like SIE and HDC (:data:`NEURAL`); :mod:`jaxais.experiments.baseline` trains it
+and runs it beside them (an experiment: it sits on top). Its settings,
 :class:`~jaxais.baselines.config.TrainConfig`, live in a module free of JAX, so a script checks
 its flags before JAX starts; the other names load on first use.
 """
@@ -16,7 +16,6 @@ from typing import Any
 from jaxais.baselines.config import TrainConfig
 
 _EXPORTS = {
-    **dict.fromkeys(("collect_baselines", "evaluate_baseline", "train_baseline"), "driver"),
     **dict.fromkeys(
         (
             "MLPParams",

@@ -54,9 +54,10 @@ CRUISE, GAIN = 300.0, 0.3
 
 @dataclass(frozen=True)
 class ScriptRun:
-    """A command whose wall time ``--scripts`` measures: its key in the JSON, the script (a path
-    relative to ``scripts/``) and its flags, its ``--out`` target's name (in a fresh temporary
-    folder per run) and the project's target for its wall time, s."""
+    """A command whose wall time ``--scripts`` measures: its key in the JSON, the script (a file
+    of ``scripts/``, run as ``python -m jaxais.scripts.NAME``, or an absolute path) and its
+    flags, its ``--out`` target's name (in a fresh temporary folder per run) and the project's
+    target for its wall time, s."""
 
     name: str
     argv: tuple[str, ...]
@@ -536,8 +537,13 @@ def bench_scripts(b: Bench) -> None:
                 bar.set_postfix_str(Path(run.argv[0]).name)
                 out = Path(tmp, f"{run.name}-{i}", run.out)
                 out.parent.mkdir()
-                script = f"jaxais.scripts.{Path(run.argv[0]).stem}"
-                command = [sys.executable, "-m", script, *run.argv[1:]]
+                script = Path(run.argv[0])
+                where = (
+                    [str(script)]
+                    if script.is_absolute()
+                    else ["-m", f"jaxais.scripts.{script.stem}"]
+                )
+                command = [sys.executable, *where, *run.argv[1:]]
                 times[run.name].append(run_timed([*command, "--out", str(out)], env))
                 bar.update()
     b.results["scripts"] = {

@@ -7,10 +7,11 @@ library never imports it. Every script keeps the same contract:
   directory that cannot be written) ends the run with ONE line on stderr,
   ``"{prog}: error: {message}"``, and exit status 2 (argparse's shape), never a traceback.
 - Ctrl-C (SIGINT) ends it with ``"{prog}: error: interrupted"`` and status 130, SIGTERM with
-  ``"{prog}: error: terminated"`` and 143, wherever the signal lands: the handler removes the
-  temporary files of writes in flight (:data:`jaxais.io.IN_FLIGHT`) and ends the process at
-  once. Every output is written atomically (:mod:`jaxais.io`) and checkpoints are committed whole
-  by orbax, so nothing is half-written and a resumable run resumes from its last checkpoint.
+  ``"{prog}: error: terminated"`` and 143, wherever the signal lands: the handler runs
+  :data:`jaxais.io.ON_SIGNAL`, removes the temporary files of writes in flight
+  (:data:`jaxais.io.IN_FLIGHT`) and ends the process at once. Every output is written
+  atomically (:mod:`jaxais.io`) and checkpoints are saved whole, so nothing is half-written and a
+  resumable run resumes from its last checkpoint.
 
 Typical use::
 
@@ -126,12 +127,16 @@ def _debug() -> bool:
 
 
 def _signal_handler(prog: str) -> Callable[[int, Any], None]:
-    """A handler that ends the process at once with the signal's one line, after removing the
-    temporary files of writes in flight. Nothing unwinds, so no interrupt can land half-way in
+    """A handler that ends the process at once with the signal's one line, after the library's
+    :data:`jaxais.io.ON_SIGNAL` (e.g. stopping child processes) and removing the temporary files
+    of writes in flight. Nothing unwinds, so no interrupt can land half-way in
     an import, a ``__del__`` or a C extension and come out as a traceback or a crash."""
 
     def handler(signum: int, frame: Any) -> None:
         status, message = _STATUS[signum]
+        for cleanup in reversed(list(io.ON_SIGNAL)):
+            with contextlib.suppress(Exception):
+                cleanup()
         for tmp in list(io.IN_FLIGHT):
             with contextlib.suppress(OSError):
                 tmp.unlink()

@@ -3,7 +3,8 @@
 Every file jaxais writes goes through :func:`atomic_write`: the contents fill a temporary file in
 the target's directory, which then replaces the target with :func:`os.replace`. A failed or
 interrupted write leaves the earlier file (if any) as it was. The command-line layer
-(:mod:`jaxais.cli`) removes the temporary files still in flight when a signal ends a script.
+(:mod:`jaxais.cli`) removes the temporary files still in flight when a signal ends a script, after
+running :data:`ON_SIGNAL`.
 """
 
 from __future__ import annotations
@@ -18,6 +19,9 @@ from typing import Any
 
 IN_FLIGHT: set[Path] = set()
 """Temporary files being written right now (removed by the CLI's signal handler)."""
+ON_SIGNAL: list[Callable[[], object]] = []
+"""What must still happen when a signal ends a script at once, newest first (the seed ledger
+stops its child processes here); each entry is removed by whoever added it."""
 
 
 def _umask() -> int:

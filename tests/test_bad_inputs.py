@@ -157,6 +157,20 @@ def test_interrupt_anywhere_in_main_is_one_line(case: str, tmp_path: Path):
     assert (tmp_path / "r.json").read_text() == "earlier\n"
 
 
+def test_a_signal_runs_the_librarys_last_steps_first():
+    """jaxais.io.ON_SIGNAL (the seed ledger stops its child processes there) runs, newest
+    first, before the process ends with the signal's line."""
+    body = (
+        "from jaxais import io\n"
+        "io.ON_SIGNAL.append(lambda: print('first registered', flush=True))\n"
+        "io.ON_SIGNAL.append(lambda: print('second registered', flush=True))\n"
+        "signal.raise_signal(signal.SIGTERM)\n" + _wait_loop()
+    )
+    proc = run_python(_script(body), timeout=60)
+    _assert_one_line_exit(proc, "demo.py", 143, "terminated")
+    assert proc.stdout == "second registered\nfirst registered\n"
+
+
 def test_interrupt_during_an_import_is_one_line(tmp_path: Path):
     """A signal in the middle of an import ends the run at once with its line (a
     KeyboardInterrupt inside a C extension's initialisation printed tracebacks or crashed the

@@ -196,6 +196,23 @@ def ledger(out: Path, runner, **kw) -> dict:
     return S.ltl_ledger(out, runner=runner, progress=False, **kw)
 
 
+def test_a_signal_that_ends_the_script_would_stop_the_ledgers_children(tmp_path):
+    """While the ledger runs, the CLI's signal handler has its child-stopper to call
+    (jaxais.io.ON_SIGNAL; tests/test_bad_inputs.py: the handler calls it); afterwards not."""
+    from jaxais import io
+
+    seen = []
+
+    class Watching(FakeScripts):
+        def __call__(self, cmd, log):
+            seen.append([getattr(f, "__name__", "") for f in io.ON_SIGNAL])
+            return super().__call__(cmd, log)
+
+    before = list(io.ON_SIGNAL)
+    ledger(tmp_path, Watching(), seeds=[0])
+    assert seen == [["stop"], ["stop"]] and before == io.ON_SIGNAL
+
+
 def test_ledger_runs_each_seed_once_and_writes_the_ledger(tmp_path):
     run = FakeScripts()
     doc = ledger(tmp_path, run, seeds=[0, 1], trials=4, command="seeds.py --out x")

@@ -42,7 +42,7 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
-from jaxais.io import atomic_write_json, atomic_write_text
+from jaxais.io import ON_SIGNAL, atomic_write_json, atomic_write_text
 
 __all__ = ["SeedRunError", "headline", "ltl_ledger", "ltl_state", "markdown", "summarise"]
 
@@ -475,6 +475,7 @@ def ltl_ledger(
 
     write()
     pool, errors = ThreadPoolExecutor(max_workers=jobs), []
+    ON_SIGNAL.append(procs.stop)  # a signal that ends the script at once stops the children too
     try:
         futures = [pool.submit(pipeline, s) for s in seeds]
         for future in as_completed(futures):
@@ -487,6 +488,7 @@ def ltl_ledger(
         procs.stop()
         raise
     finally:
+        ON_SIGNAL.remove(procs.stop)
         pool.shutdown(wait=True, cancel_futures=True)
     if errors:
         raise errors[0]

@@ -40,11 +40,17 @@ import signal
 import sys
 import threading
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any, NoReturn
 
 from jaxais import io
-from jaxais.io import atomic_write, atomic_write_json, atomic_write_text
+from jaxais.io import (
+    UserError,
+    atomic_write,
+    atomic_write_json,
+    atomic_write_text,
+    check_output_file,
+    check_writable_dir,
+)
 
 __all__ = [
     "ArgumentParser",
@@ -75,10 +81,6 @@ _STATUS = {
     signal.SIGINT: (EXIT_INTERRUPTED, "interrupted"),
     signal.SIGTERM: (EXIT_TERMINATED, "terminated"),
 }
-
-
-class UserError(Exception):
-    """A mistake by the user, reported as one line without a traceback (exit status 2)."""
 
 
 def _one_line(text: str) -> str:
@@ -194,56 +196,3 @@ def run_script(main: Callable[[], object]) -> NoReturn:
     callers such as tests), or that of a ``SystemExit`` it raises."""
     main()
     raise SystemExit(0)
-
-
-# ---------------------------------------------------------------------------------- checks
-
-
-def check_writable_dir(path: str | os.PathLike[str]) -> Path:
-    """Check that ``path`` is an existing directory this process can create files in.
-
-    Args:
-        path: the directory ("" means the current directory).
-
-    Returns:
-        The directory as a ``Path``.
-
-    Raises:
-        UserError: it does not exist, is not a directory, or is not writable.
-    """
-    d = Path(path) if str(path) else Path(".")
-    if not d.exists():
-        raise UserError(f"{d}: directory does not exist")
-    if not d.is_dir():
-        raise UserError(f"{d}: not a directory")
-    if not os.access(d, os.W_OK | os.X_OK):
-        raise UserError(f"{d}: directory is not writable")
-    return d
-
-
-def check_output_file(
-    path: str | os.PathLike[str], suffixes: tuple[str, ...] | None = None
-) -> Path:
-    """Check, before any work is done, that an output file can be written later.
-
-    Args:
-        path: the output file.
-        suffixes: allowed lower-case suffixes (e.g. ``(".png", ".pdf")``), or None for any.
-
-    Returns:
-        The path as a ``Path``.
-
-    Raises:
-        UserError: the path is a directory, its suffix is not allowed, or its directory is
-            missing or not writable.
-    """
-    p = Path(path)
-    if not p.name or p.is_dir():
-        raise UserError(f"{p}: is a directory, expected a file name")
-    if suffixes is not None and p.suffix.lower() not in suffixes:
-        raise UserError(f"{p}: expected a file name ending in {' or '.join(suffixes)}")
-    check_writable_dir(p.parent)
-    if p.exists() and not os.access(p, os.W_OK):
-        # os.replace would succeed anyway (it needs only the directory); refuse to be surprising.
-        raise UserError(f"{p}: file exists and is not writable")
-    return p

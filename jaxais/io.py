@@ -1,4 +1,5 @@
-"""Atomic writes: a file is either its earlier complete self or its new complete self.
+"""Writing files: atomic writes (a file is either its earlier complete self or its new
+complete self) and the checks that an output can be written, made before any work.
 
 Every file jaxais writes goes through :func:`atomic_write`: the contents fill a temporary file in
 the target's directory, which then replaces the target with :func:`os.replace`. A failed or
@@ -16,6 +17,12 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+
+
+class UserError(ValueError):
+    """A mistake by the user (a bad path, flag or argument): one line, exit status 2, from a
+    script (:mod:`jaxais.cli`); a ``ValueError`` for a library caller."""
+
 
 IN_FLIGHT: set[Path] = set()
 """Temporary files being written right now (removed by the CLI's signal handler)."""
@@ -79,3 +86,53 @@ def atomic_write_json(path: str | os.PathLike[str], obj: Any, indent: int | None
     """
     text = json.dumps(obj, indent=indent, allow_nan=False) + "\n"
     return atomic_write_text(path, text)
+
+
+def check_writable_dir(path: str | os.PathLike[str]) -> Path:
+    """Check that ``path`` is an existing directory this process can create files in.
+
+    Args:
+        path: the directory ("" means the current directory).
+
+    Returns:
+        The directory as a ``Path``.
+
+    Raises:
+        UserError: it does not exist, is not a directory, or is not writable.
+    """
+    d = Path(path) if str(path) else Path(".")
+    if not d.exists():
+        raise UserError(f"{d}: directory does not exist")
+    if not d.is_dir():
+        raise UserError(f"{d}: not a directory")
+    if not os.access(d, os.W_OK | os.X_OK):
+        raise UserError(f"{d}: directory is not writable")
+    return d
+
+
+def check_output_file(
+    path: str | os.PathLike[str], suffixes: tuple[str, ...] | None = None
+) -> Path:
+    """Check, before any work is done, that an output file can be written later.
+
+    Args:
+        path: the output file.
+        suffixes: allowed lower-case suffixes (e.g. ``(".png", ".pdf")``), or None for any.
+
+    Returns:
+        The path as a ``Path``.
+
+    Raises:
+        UserError: the path is a directory, its suffix is not allowed, or its directory is
+            missing or not writable.
+    """
+    p = Path(path)
+    if not p.name or p.is_dir():
+        raise UserError(f"{p}: is a directory, expected a file name")
+    if suffixes is not None and p.suffix.lower() not in suffixes:
+        raise UserError(f"{p}: expected a file name ending in {' or '.join(suffixes)}")
+    check_writable_dir(p.parent)
+    if p.exists() and not os.access(p, os.W_OK):
+        # os.replace would succeed anyway (it needs only the directory); refuse to be surprising.
+        raise UserError(f"{p}: file exists and is not writable")
+    return p

@@ -13,11 +13,10 @@ from __future__ import annotations
 import os
 import sys
 from collections.abc import Callable, Mapping
-from pathlib import Path
 from typing import Any
 
 from jaxais.experiments import protocol
-from jaxais.io import atomic_write_json
+from jaxais.io import atomic_write_json, check_output_file
 from jaxais.labels import RANDOM_SETS, SYSTEMS, label
 
 __all__ = ["command_line", "trials"]
@@ -33,23 +32,6 @@ def command_line(prog: str, flags: Mapping[str, Any]) -> str:
         elif value is not None and value is not False:
             words += [flag, f"{value:g}" if isinstance(value, float) else str(value)]
     return " ".join(words)
-
-
-def check_output_file(path: str | os.PathLike[str], suffix: str) -> Path:
-    """Check, before any work, that ``path`` (ending in ``suffix``) can be written later."""
-    p = Path(path)
-    if not p.name or p.is_dir():
-        raise ValueError(f"{p}: is a directory, expected a file name")
-    if p.suffix.lower() != suffix:
-        raise ValueError(f"{p}: expected a file name ending in {suffix}")
-    d = p.parent
-    if not d.is_dir():
-        raise ValueError(f"{d}: {'not a directory' if d.exists() else 'directory does not exist'}")
-    if not os.access(d, os.W_OK | os.X_OK):
-        raise ValueError(f"{d}: directory is not writable")
-    if p.exists() and not os.access(p, os.W_OK):
-        raise ValueError(f"{p}: file exists and is not writable")
-    return p
 
 
 def trials(
@@ -113,9 +95,9 @@ def trials(
     if seeds and system not in ("SIE", "SRL"):
         raise ValueError(f"--seeds applies to the seeded systems SIE and SRL, not {system}")
     if out is not None:
-        check_output_file(out, ".json")
+        check_output_file(out, (".json",))
     if plot:
-        check_output_file(plot, ".png")
+        check_output_file(plot, (".png",))
 
     if before_jax is not None:
         before_jax()

@@ -237,11 +237,11 @@ def test_older_records_still_load():
     res = {"world1": {"SRL": [old_trial(300, 150, "collisions"), old_trial(4000, 4, "time")]}}
     assert stats.table3(res)["world1"]["SRL"]["c"] == 52.0  # (min(150, 100) + 4) / 2
     assert stats.table5(res)["world1"]["SRL"] == {"c": 50.0, "tau": 50.0, "total": 100.0}
-    assert stats.trapped_times(res) == {"world1": {"SRL": None}}
+    assert stats.record_means(res, "trapped_s") == {"world1": {"SRL": None}}
 
 
 def test_trapped_times():
-    trapped = stats.trapped_times(small_results())
+    trapped = stats.record_means(small_results(), "trapped_s")
     assert trapped["world1"]["SIE"] == 2.0
     assert trapped["world1"]["HDC"] == pytest.approx((0 + 20 + 3000 + 0) / 4)
     assert list(trapped["world1"]) == ["SIE", "UIE-R2", "HDC"]
@@ -281,7 +281,7 @@ def test_table4_and_comparisons_filtered_per_world():
 
 
 def test_idiotypic_difference_rates():
-    rates = stats.idiotypic_difference_rates(small_results())
+    rates = stats.record_means(small_results(), "idiotypic_difference_rate")
     assert rates["world1"]["UIE-R2"] == pytest.approx(0.2)  # None ignored
     assert rates["world1"]["HDC"] is None
     assert rates["real"]["SIE"] == pytest.approx(0.3)
@@ -614,7 +614,7 @@ def test_locked_times_and_the_calibration_point():
         "real": {"SIE": [rec(2.0, 0.5), rec(4.0, 0.6)]},
     }
     hold1 = {"world1": {"SIE": [rec(0.0, 0.1), rec(0.0, 0.2)]}, "real": {"SIE": [rec(0, 0.25)]}}
-    locked = stats.locked_times(default)
+    locked = stats.record_means(default, "locked_s")
     assert locked == {"world1": {"SIE": 5.0, "SRL": 30.0}, "real": {"SIE": 3.0}}
     cal = stats.calibration(default, hold1, {"k1": 0.85, "k2": 1.1})
     assert (cal["system"], cal["k1"], cal["k2"], cal["paper_percent"]) == ("SIE", 0.85, 1.1, 20)

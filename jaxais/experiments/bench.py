@@ -1,12 +1,7 @@
 """The simulator's benchmark suite (``scripts/bench.py``): every figure into one JSON document.
 
-Each of :data:`BENCHMARKS` adds its figures to ``Bench.results``: robot-steps per second of
-``jax.vmap(step)`` in one compiled ``lax.scan`` per batch size (best of ``repeats`` timed calls
-after a warm-up call; on one device and sharded over all), the NumPy reference
-(``jaxais.envs.reference``) on the same work, SIE's controller and the simulator in the trials'
-task loop, XLA's flops per step against the float32 matmul peak, the end-to-end wall time of
-:data:`SCRIPT_RUNS` (``scripts > 0``) and the machine. JAX is imported by the benchmarks, not
-here, so :func:`force_host_devices` can set the CPU device count first.
+Rates are robot-steps per second, best of ``repeats`` timed calls after a warm-up. JAX is
+imported by the benchmarks, not here, so :func:`force_host_devices` can set the device count.
 """
 
 from __future__ import annotations
@@ -39,25 +34,17 @@ QUICK = dict(
     controller_batches=(30,),
     controller_steps=50,
 )
-"""``BenchConfig``'s values with ``quick`` (fewer steps, repeats and batch sizes)."""
-SPEEDUP_BATCH = 30
-"""The batch size whose JAX rate is compared with NumPy's (a population of 30, as in the GA)."""
-RESET_CHUNK = 1000
-"""Robots reset in one compiled call; larger batches repeat these states (same work per step)."""
-SHARDING_HELPS = 1.1
-"""Sharding "helps" when it is this much faster at the largest batch (timings are noisy)."""
-FLOPS_BATCH = 1000
-"""Largest batch whose single-step program is cost-analysed."""
-CRUISE, GAIN = 300.0, 0.3
-"""The benchmark policy: wheels = CRUISE -/+ GAIN x (right IR - left IR)."""
+SPEEDUP_BATCH = 30  # compared with NumPy: a population of 30, as in the GA
+RESET_CHUNK = 1000  # robots reset in one call; larger batches repeat them (same work per step)
+SHARDING_HELPS = 1.1  # sharding "helps" when this much faster at the largest batch (noise)
+FLOPS_BATCH = 1000  # the largest batch whose single-step program is cost-analysed
+CRUISE, GAIN = 300.0, 0.3  # the policy: wheels = CRUISE -/+ GAIN x (right IR - left IR)
 
 
 @dataclass(frozen=True)
 class ScriptRun:
-    """A command whose wall time ``--scripts`` measures: its key in the JSON, the script (a file
-    of ``scripts/``, run as ``python -m jaxais.scripts.NAME``, or an absolute path) and its
-    flags, its ``--out`` target's name (in a fresh temporary folder per run) and the project's
-    target for its wall time, s."""
+    """A command ``--scripts`` times: JSON key, script (``jaxais.scripts.NAME`` or an absolute
+    path) and flags, its ``--out`` name (in a fresh folder) and the wall-time target, s."""
 
     name: str
     argv: tuple[str, ...]
@@ -78,16 +65,11 @@ SCRIPT_RUNS: tuple[ScriptRun, ...] = (
         15.0,
     ),
 )
-"""The commands ``--scripts`` times, with their targets."""
-
-
-# ---------------------------------------------------------------------------------- config
 
 
 @dataclass(frozen=True)
 class BenchConfig:
-    """What to measure (as ``scripts/bench.py --help`` says); :func:`bench_config` fills in
-    the :data:`QUICK` values with ``quick`` and checks them."""
+    """What to measure (``scripts/bench.py --help``); made by :func:`bench_config`."""
 
     world: str = "world1"
     steps: int = 200
@@ -115,8 +97,8 @@ def _sizes(value: str | Sequence[int], flag: str) -> tuple[int, ...]:
 
 
 def bench_config(quick: bool = False, **values: Any) -> BenchConfig:
-    """A checked :class:`BenchConfig` from ``values`` (None: the default, or the quick one);
-    batch sizes may be given as ``"1,30,1000"``. Raises ValueError (one line) on a bad value."""
+    """A checked :class:`BenchConfig` (None: the default or :data:`QUICK`'s); batch sizes may be
+    ``"1,30,1000"``; one-line ValueError on a bad value."""
     values = {k: v for k, v in values.items() if v is not None}
     values = (QUICK if quick else {}) | values
     counts = ("steps", "repeats", "numpy_robots", "numpy_steps", "matmul", "controller_steps")
@@ -144,14 +126,10 @@ def force_host_devices(n: int) -> None:
     os.environ["XLA_FLAGS"] = " ".join([*flags, f"{DEVICE_FLAG}={n}"])
 
 
-# ---------------------------------------------------------------------------------- context
-
-
 @dataclass
 class Bench:
-    """What every benchmark gets: the config, the world and constants, the environment the
-    benchmark started with (the timed scripts run in it, before ``--devices`` set ``XLA_FLAGS``),
-    the JSON document being built, values shared between benchmarks, and notes."""
+    """What every benchmark gets: config, world, constants, the starting environment (the timed
+    scripts run in it), the document (``results``), shared values and notes."""
 
     config: BenchConfig
     world: Any
@@ -163,8 +141,8 @@ class Bench:
 
 
 def _timed(fn: Callable[[], Any], repeats: int) -> dict[str, Any]:
-    """``best_s``, ``median_s`` and ``times_s`` of ``repeats`` calls of ``fn`` after a warm-up
-    call, and ``cpu_per_wall``: CPU time over wall time (about the number of cores kept busy)."""
+    """``best_s``, ``median_s``, ``times_s`` of ``repeats`` calls after a warm-up, and
+    ``cpu_per_wall`` (about the cores kept busy)."""
     import jax
 
     jax.block_until_ready(fn())
@@ -202,7 +180,7 @@ def policy_numpy(obs: dict[str, Any]):
 
 def make_rollout(n_steps: int, sharding: Any = None) -> Callable[..., Any]:
     """``rollout(key, state, obs, world, params) -> (state, obs)``: ``n_steps`` batched steps,
-    the per-step keys and wheel speeds constrained to ``sharding`` (None: one device)."""
+    keys and wheels constrained to ``sharding`` (None: one device)."""
     import jax
     import jax.numpy as jnp
 
@@ -254,9 +232,6 @@ def initial(b: Bench, n: int) -> tuple[Any, Any]:
     chunk = state.t.shape[0]
     idx = np.arange(n) % chunk
     return jax.tree.map(lambda x: np.asarray(x)[idx], (state, obs))
-
-
-# ---------------------------------------------------------------------------------- benchmarks
 
 
 def bench_machine(b: Bench) -> None:
@@ -454,10 +429,8 @@ def bench_peak(b: Bench) -> None:
 
 
 def bench_controller(b: Bench) -> None:
-    """``controller_iterations_per_s``: SIE's STL controller (``stl_for``: no replacement, as in
-    the trials) and the simulator, robot-iterations per second through the trials' compiled task
-    loop (caps off: no run ends) at each controller batch size, compile time apart; with several
-    devices also ``..._sharded``, the batch over all of them as the trials run it."""
+    """``controller_iterations_per_s``: SIE's STL controller and the simulator in the trials'
+    task loop (caps off), robot-iterations/s per batch; ``..._sharded`` over several devices."""
     import jax
     import jax.numpy as jnp
 
@@ -503,23 +476,9 @@ def bench_controller(b: Bench) -> None:
         b.results[f"controller_compile_s{suffix}"] = compile_s
 
 
-def run_timed(command: list[str], env: dict[str, str]) -> float:
-    """Wall time of ``command`` run to its end, s; ChildProcessError (ending with the last line
-    it wrote on stderr) if it failed."""
-    t0 = time.perf_counter()
-    proc = subprocess.run(command, env=env, capture_output=True, text=True, check=False)
-    seconds = time.perf_counter() - t0
-    if proc.returncode:
-        last = (proc.stderr.strip().splitlines() or ["(nothing on stderr)"])[-1]
-        name = Path(command[1]).name
-        raise ChildProcessError(f"--scripts: {name} exited with status {proc.returncode}: {last}")
-    return seconds
-
-
 def bench_scripts(b: Bench) -> None:
-    """``scripts``: each of :data:`SCRIPT_RUNS` run ``config.scripts`` times, alternating, each
-    a fresh process (import, compile, run, write) with ``JAXAIS_CACHE_DIR=off``; outputs go to a
-    temporary folder. ``within_target`` counts the runs at or under ``target_s``."""
+    """``scripts``: :data:`SCRIPT_RUNS` ``config.scripts`` times each, alternating, in fresh
+    processes with ``JAXAIS_CACHE_DIR=off``; ``within_target`` counts runs <= ``target_s``."""
     if not b.config.scripts:
         return
     from tqdm import tqdm
@@ -544,7 +503,14 @@ def bench_scripts(b: Bench) -> None:
                     else ["-m", f"jaxais.scripts.{script.stem}"]
                 )
                 command = [sys.executable, *where, *run.argv[1:]]
-                times[run.name].append(run_timed([*command, "--out", str(out)], env))
+                t0 = time.perf_counter()
+                proc = subprocess.run([*command, "--out", str(out)], env=env, capture_output=True,
+                                      text=True, check=False)  # fmt: skip
+                times[run.name].append(time.perf_counter() - t0)
+                if proc.returncode:
+                    last = (proc.stderr.strip().splitlines() or ["(nothing on stderr)"])[-1]
+                    raise ChildProcessError(f"--scripts: {Path(command[1]).name} exited with "
+                                            f"status {proc.returncode}: {last}")  # fmt: skip
                 bar.update()
     b.results["scripts"] = {
         run.name: {
@@ -570,7 +536,6 @@ BENCHMARKS: list[tuple[str, Callable[[Bench], None]]] = [
     ("matmul peak", bench_peak),
     ("scripts end to end", bench_scripts),
 ]
-"""The benchmarks, run in this order; each adds its figures to ``Bench.results``."""
 
 
 def derive(b: Bench) -> None:
@@ -639,9 +604,8 @@ def summary(b: Bench, out: str | os.PathLike[str], seconds: float) -> str:
 def run_bench(
     config: BenchConfig, out: str | os.PathLike[str], environ: dict[str, str] | None = None
 ) -> Bench:
-    """Run :data:`BENCHMARKS` and write their figures as JSON to ``out``; the scripts
-    ``config.scripts`` times run in ``environ`` (default: this process's). Returns the
-    :class:`Bench` (its ``results`` are the document)."""
+    """Run :data:`BENCHMARKS`, write ``results`` as JSON to ``out`` and return the :class:`Bench`;
+    timed scripts run in ``environ`` (default: this process's)."""
     from tqdm import tqdm
 
     from jaxais import envs

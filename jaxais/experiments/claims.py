@@ -1,52 +1,12 @@
-"""The paper's 32 qualitative claims, checked one by one against our results (the claims ledger).
+"""The paper's 32 qualitative claims, each checked against our results (the claims ledger).
 
-Per world (Simulated World 1, Simulated World 2, the real world), from the paper's section 6:
-
-1. SIE has the lowest mean c, 2. the lowest mean tau, 3. the lowest mean f;
-4. SIE has a 0 % failure rate;
-5. SIE's f is significantly lower than each unseeded system's (one claim per unseeded system:
-   four in each simulated world, two in the real world);
-6. SRL has a lower mean f than URL-R1; 7. UIE-R1 has a lower mean f than URL-R1.
-
-That is 10 + 10 + 8 = 28 claims, plus H1-H4 "supported" as decided by
-:func:`jaxais.experiments.stats.hypotheses`: 32 in all.
-
-Rules. "Lowest" compares SIE with the other systems of the world that have results and allows
-ties (SIE's mean <= every other mean): the paper calls SIE's c lowest in Simulated World 2 where
-HDC ties it at 2. "Lower" between two systems is strict. "Significantly lower" is a lower mean
-and a two-tailed Student's t p-value below ``alpha`` (the paper's 99 % level for 0.01). Means use
-the capped c (Table 3's). A claim whose world or systems have no results is not evaluated
-(``held`` is ``None``); so is a hypothesis that :func:`~jaxais.experiments.stats.hypotheses` finds
-not testable. The worlds, their systems and the significance level are
-:mod:`jaxais.experiments.protocol`'s.
-
-With intervals. Every claim also has a reading with 95 % confidence intervals, beside ``held``
-(which is unchanged): ``ci_held`` (``None`` when not evaluated), ``ci_verdict`` and
-``ci_evidence`` (the intervals). The means' intervals are the percentile bootstrap ones of
-Table 3 (:func:`jaxais.experiments.stats.table3_ci`), the failure rate's the Wilson interval
-(:func:`~jaxais.experiments.stats.proportion_ci`). A claim holds with its intervals
-(``ci_held``) when it holds and:
-
-* "lowest" (1-3): SIE's interval lies wholly below every other system's (SIE's upper bound
-  under the smallest lower bound of the others); a tie of means never does;
-* "lower" (6, 7) and "significantly lower" (5): the first system's interval lies wholly below
-  the second's;
-* "0 % failure rate" (4): the interval of SIE's failure rate contains 0. A sample cannot show a
-  rate of exactly 0, only bound it (with no failure in n trials the upper bound is about
-  3.8 / (n + 3.8)); one failure puts the interval above 0, so here ``ci_held`` is ``held``;
-* H1-H4: as :func:`jaxais.experiments.stats.hypotheses` reads them with intervals
-  (``ci_supported``): each "lower" and "significantly lower" of the rule is a separation.
-
-Two independent 95 % intervals that do not overlap mean a difference at the 95 % level whatever
-the standard errors, and at about the 99.4 % level when they are equal
-(:func:`~jaxais.experiments.stats.ci_below`); a "significantly lower" claim needs its 99 %
-t-test as well, so ``ci_held`` is never weaker than ``held``. It is a conservative reading:
-overlapping intervals do not show that two means are equal.
-``ci_verdict`` is one of :data:`CI_VERDICTS`: "held, CIs separated" (``ci_held``), "held, CIs
-overlap" (held on the means alone), "not held, CIs overlap", "not held, CIs separated" (some
-comparison of the claim separated the other way: the data contradict it), and for the 0 %
-claims "held, CI contains 0 %" / "not held, CI excludes 0 %". A claim that fails only its
-t-test while its intervals separate as claimed reads "not held, CIs separated as claimed".
+Per world [paper, section 6]: SIE has the lowest mean c, tau and f (ties allowed: the paper calls
+a tie at 2 lowest), a 0 % failure rate, f significantly below each unseeded system's (Student's
+t, p < alpha), and SRL and UIE-R1 each a lower mean f than URL-R1: 10 + 10 + 8 claims, plus
+H1-H4 (:func:`stats.hypotheses`). A claim without results is not evaluated (``held`` None).
+Each claim is also read with 95 % intervals [ours]: ``ci_held`` when it holds and every
+comparison's intervals separate as claimed (:func:`stats.ci_below`; a 0 % rate: its Wilson
+interval contains 0), never weaker than ``held``; ``ci_verdict`` is one of :data:`CI_VERDICTS`.
 """
 
 from __future__ import annotations
@@ -84,23 +44,17 @@ HYPOTHESES = {
 }
 """The paper's hypotheses (section 2), verbatim."""
 
-HELD_SEPARATED = "held, CIs separated"
-HELD_OVERLAP = "held, CIs overlap"
-NOT_HELD_OVERLAP = "not held, CIs overlap"
-NOT_HELD_SEPARATED = "not held, CIs separated"
-NOT_HELD_BY_TEST = "not held, CIs separated as claimed"
-HELD_ZERO_IN_CI = "held, CI contains 0 %"
-NOT_HELD_ZERO_OUT = "not held, CI excludes 0 %"
 CI_VERDICTS = (
-    HELD_SEPARATED,
-    HELD_OVERLAP,
-    NOT_HELD_OVERLAP,
-    NOT_HELD_SEPARATED,
-    NOT_HELD_BY_TEST,
-    HELD_ZERO_IN_CI,
-    NOT_HELD_ZERO_OUT,
+    "held, CIs separated",
+    "held, CIs overlap",
+    "not held, CIs overlap",
+    "not held, CIs separated",
+    "not held, CIs separated as claimed",  # failed only its t-test
+    "held, CI contains 0 %",
+    "not held, CI excludes 0 %",
 )
-"""The ``ci_verdict`` values (see the module docstring)."""
+(HELD_SEPARATED, HELD_OVERLAP, NOT_HELD_OVERLAP, NOT_HELD_SEPARATED, NOT_HELD_BY_TEST,
+ HELD_ZERO_IN_CI, NOT_HELD_ZERO_OUT) = CI_VERDICTS  # fmt: skip
 _CONTRADICTED = (NOT_HELD_SEPARATED, NOT_HELD_ZERO_OUT)
 
 _METRIC_WORDS = {"c": "the lowest mean c", "tau": "the fastest mean τ", "f": "the best mean f"}
@@ -162,9 +116,6 @@ def _mean(results: stats.Results, system: str, metric: str) -> float:
     return float(stats.metric_values(results[system], metric).mean())
 
 
-# --------------------------------------------------------------------------- per-world claims
-
-
 def _lowest(world: str, results: stats.Results, have: list[str], metric: str, cis: Mapping) -> dict:
     cid = f"{world}/SIE-lowest-{metric}"
     text = (
@@ -202,10 +153,7 @@ def _no_failures(world: str, results: stats.Results, have: list[str]) -> dict:
     if why:
         return _claim(cid, world, text, None, why)
     trials = results["SIE"]
-    causes = [stats.failure_causes(t) for t in trials]
-    failed = sum(bool(t.get("failed")) or bool(b) for t, b in zip(trials, causes, strict=True))
-    by_c = sum("collisions" in b for b in causes)
-    by_tau = sum("time" in b for b in causes)
+    by_c, by_tau, failed = stats.failure_counts(trials).values()
     evidence = (
         f"{failed} of {len(trials)} SIE trials failed ({100 * failed / len(trials):.0f} %; "
         f"by c: {by_c}, by τ: {by_tau})."
@@ -286,29 +234,14 @@ def _hypothesis_reading(h: str, verdict: Mapping[str, Any]) -> tuple:
     return ci_held, label, verdict["ci_summary"]
 
 
-# --------------------------------------------------------------------------- public
-
-
 def claims(
     results_by_world: stats.ResultsByWorld,
     alpha: float = protocol.ALPHA,
     cis: stats.CIs | None = None,
 ) -> list[dict]:
-    """The paper's 32 claims, each judged on our results (see the module docstring for rules).
-
-    Args:
-        results_by_world: ``{world: {system: [trial record]}}``; worlds other than the paper's
-            three count only for H1-H4.
-        alpha: significance threshold of the t-tests (the paper's 0.01).
-        cis: :func:`~jaxais.experiments.stats.table3_ci` of ``results_by_world`` (computed here
-            when ``None``).
-
-    Returns:
-        32 dicts ``{"id": str, "world": str | None, "text": str, "held": bool | None,
-        "evidence": str, "ci_held": bool | None, "ci_verdict": str | None, "ci_evidence":
-        str}`` in a fixed order: world1, world2, real (10, 10, 8 claims), then H1-H4. ``held``
-        and ``ci_held`` are ``None`` (and ``ci_verdict`` too) when the claim's data are missing.
-    """
+    """The 32 claims in order (world1, world2, real, H1-H4), each ``{"id", "world", "text",
+    "held", "evidence", "ci_held", "ci_verdict", "ci_evidence"}``; other worlds count for H1-H4
+    only; ``cis``: :func:`stats.table3_ci` (computed when None)."""
     cis = stats.table3_ci(results_by_world) if cis is None else cis
     out = []
     for world in protocol.WORLDS:
@@ -333,11 +266,8 @@ def summary(ledger: Sequence[Mapping[str, Any]]) -> dict[str, int]:
 
 
 def ci_summary(ledger: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """Counts of the interval readings: ``{"reproduced": claims held, "reproduced_with_ci":
-    claims that hold with their intervals, "contradicted_with_ci": claims whose intervals
-    contradict them ("not held, CIs separated" or "not held, CI excludes 0 %"), "evaluated":
-    claims with data, "level": the intervals' confidence level}``. Entries without interval
-    fields (an older ledger) count as not held with intervals."""
+    """``{"reproduced", "reproduced_with_ci", "contradicted_with_ci" (separated the other way),
+    "evaluated", "level"}``; entries without interval fields count as not held with them."""
     evaluated = [c for c in ledger if c["held"] is not None]
     return {
         "reproduced": sum(c["held"] is True for c in evaluated),
@@ -349,24 +279,19 @@ def ci_summary(ledger: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
 
 
 def document(ledger: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """The ``claims.json`` document: ``{"summary": summary(ledger), "ci_summary":
-    ci_summary(ledger), "claims": [...]}``."""
+    """The ``claims.json`` document: ``{"summary", "ci_summary", "claims"}``."""
     return stats.jsonable(
         {"summary": summary(ledger), "ci_summary": ci_summary(ledger), "claims": list(ledger)}
     )
 
 
 def headline(counts: Mapping[str, int]) -> str:
-    """The report's opening line, ``**N of M of the paper's claims reproduced**``.
-
-    M counts the evaluated claims only; :func:`summary` gives the counts.
-    """
+    """The report's opening line, ``**N of M of the paper's claims reproduced**`` (M evaluated)."""
     return f"**{counts['reproduced']} of {counts['evaluated']} of the paper's claims reproduced**"
 
 
 def ci_headline(counts: Mapping[str, Any]) -> str:
-    """The line under the headline: how many claims hold, and how many are contradicted, with
-    their intervals (:func:`ci_summary`'s counts)."""
+    """How many claims hold, and how many are contradicted, with their intervals."""
     level = f"{100 * counts['level']:g} %"
     others = counts["evaluated"] - counts["reproduced"]
     return (

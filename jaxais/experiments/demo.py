@@ -1,9 +1,5 @@
-"""A world and a few robots' trajectories under a Braitenberg-style demo controller, drawn.
-
-:func:`render` resets R robots (each in its own copy of the world), drives them for T iterations
-in one jitted ``lax.scan`` over a ``vmap``-ped step, and writes a figure of the world with every
-trajectory (and optionally a GIF).
-"""
+"""A world and a few robots' trajectories under a Braitenberg-style demo controller, drawn: one
+jitted ``lax.scan`` over a vmapped step, then a figure (and optionally a GIF)."""
 
 from __future__ import annotations
 
@@ -18,28 +14,18 @@ from jaxais import envs
 from jaxais.experiments import plotting
 
 # Demo controller constants (speed units; IR readings are 0..4095, ~120 at 5 cm from the rim).
-CRUISE = 500.0
-"""Forward wheel speed with nothing nearby."""
-AVOID_GAIN = 0.6
-"""Turn (speed units) per unit of left/right IR imbalance."""
+CRUISE = 500.0  # forward speed with nothing nearby
+AVOID_GAIN = 0.6  # turn per unit of left/right IR imbalance
 AVOID_MAX_TURN = 600.0
-BLOCKED_IR = 800.0
-"""A front reading at which forward motion stops (the robot turns on the spot)."""
-TRACK_GAIN = 60.0
-"""Turn per column of blue-centroid offset from the image centre."""
-TRACK_QUIET_IR = 200.0
-"""Blue is tracked only while no front reading exceeds this (obstacles come first)."""
-MAX_GIF_FRAMES = 1000
-"""Pillow holds every frame in memory (0.6 MB each) until the GIF is written."""
+BLOCKED_IR = 800.0  # a front reading that stops forward motion (the robot turns on the spot)
+TRACK_GAIN = 60.0  # turn per column of blue-centroid offset
+TRACK_QUIET_IR = 200.0  # blue is tracked only below this front reading (obstacles come first)
+MAX_GIF_FRAMES = 1000  # Pillow holds every frame (0.6 MB each) until the GIF is written
 
 
 def demo_wheels(obs: envs.Observation) -> jnp.ndarray:
-    """Wheel speeds [2] (left, right) from one robot's observation.
-
-    The right-side sensors (ps0..ps2) turn the robot left and the left-side ones (ps5..ps7)
-    right, harder the closer; a blocked front stops forward motion (the robot spins left). With
-    the front clear it turns towards the blue pixels' centroid (column 7 is straight ahead).
-    """
+    """Wheel speeds [2] from one robot's observation: away from the nearer side's IR (a blocked
+    front spins it left), else towards the blue centroid (column 7 is straight ahead)."""
     ir = obs.ir
     right = 1.0 * ir[0] + 0.7 * ir[1] + 0.3 * ir[2]
     left = 1.0 * ir[7] + 0.7 * ir[6] + 0.3 * ir[5]
@@ -54,11 +40,8 @@ def demo_wheels(obs: envs.Observation) -> jnp.ndarray:
 
 
 def make_run(world: envs.World, params: envs.SimParams, n_robots: int, n_steps: int):
-    """``run(key) -> (states after reset, poses [T+1, R, 3], wanderers [T+1, R, W, 3])``.
-
-    Two compiled programs, the vmapped reset and then the whole scan: as one program they take
-    XLA about half as long again to compile, for the same run time.
-    """
+    """``run(key) -> (states after reset, poses [T+1, R, 3], wanderers [T+1, R, W, 3])``; reset
+    and scan compile apart (as one program XLA takes half as long again)."""
     v_step = jax.vmap(envs.step, in_axes=(0, 0, 0, None, None))
     v_reset = jax.jit(jax.vmap(envs.reset, in_axes=(0, None, None)))
     v_observe = jax.vmap(envs.observe, in_axes=(0, 0, None, None))
@@ -100,10 +83,9 @@ def render(
     every: int = 10,
     fps: float = 25.0,
 ) -> tuple[str, int | None]:
-    """Draw ``robots`` demo runs of ``steps`` iterations in ``world`` (a name or a .toml path)
-    into the figure ``out``, and with ``gif`` an animation of every ``every``-th iteration.
-    Returns (the world's name, the GIF's frame count or None); ValueError (one line) on a bad
-    argument, before anything runs."""
+    """Draw ``robots`` demo runs of ``steps`` iterations in ``world`` into the figure ``out`` (and
+    ``gif``, every ``every``-th iteration); returns (world name, GIF frames or None). One-line
+    ValueError on a bad argument, before anything runs."""
     for name, value in (("steps", steps), ("robots", robots), ("every", every)):
         if value <= 0:
             raise ValueError(f"--{name} must be a positive integer, got {value}")

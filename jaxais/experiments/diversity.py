@@ -47,20 +47,10 @@ def compare_diversity(
     done: Mapping[int, GAState] | None = None,
     on_run: Callable[[str, int], None] | None = None,
 ) -> dict[str, Any]:
-    """Diversity of P populations of R (the best robot of each in the final generation) against
-    one population of P × R (its P best robots), one GA run of each per seed (key
-    ``jax.random.key(s)``), compared by Welch's t-test and the Mann-Whitney U test (two-sided).
-
-    Args:
-        seeds: >= 2 distinct GA seeds.
-        config: the multi-population settings (P >= 2).
-        done: finished multi-population states by seed, reused instead of re-running.
-        on_run: called after each run with ("multi" or "single", seed).
-
-    Returns:
-        A JSON-able dict: per-seed diversities of both arms, their means, and both tests'
-        statistics and p-values (None where undefined, e.g. zero variance).
-    """
+    """Diversity of P populations of R (each one's final best) against one of P × R (its P best),
+    one GA run each per seed (``jax.random.key(s)``), by two-sided Welch and Mann-Whitney tests.
+    ``done``: finished multi-population states by seed, reused; ``on_run(arm, seed)`` after each
+    run. Returns a JSON-able dict (statistics None where undefined)."""
     from scipy import stats
 
     if config.populations < 2:

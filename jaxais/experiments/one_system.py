@@ -1,12 +1,5 @@
-"""n STL trials of one system in one world: the call behind ``scripts/trials.py``.
-
-:func:`trials` checks its arguments before JAX starts (one-line ``ValueError``\\ s naming the
-script's flags), runs the trials in a compiled, vmapped pool of slots (each refilled when its
-trial ends) or, with ``plot``, as one batch that keeps every trajectory, and returns the results
-document (written to ``out`` when given). The pool is sharded over every device JAX sees; in a
-multi-process run (``jax.distributed``) process 0 writes. The same arguments give the same
-document, byte for byte.
-"""
+"""n STL trials of one system in one world: the call behind ``scripts/trials.py``. Arguments
+are checked before JAX starts; the same arguments give the same document, byte for byte."""
 
 from __future__ import annotations
 
@@ -50,28 +43,13 @@ def trials(
     command: str | None = None,
     before_jax: Callable[[], object] | None = None,
 ) -> dict[str, Any] | None:
-    """Run ``trials`` STL trials of ``system`` in ``world`` and return their results document.
+    """Run ``trials`` STL trials of ``system`` in ``world`` (a name or ``.toml``) and return the
+    results document (``config``, one record per trial, ``summary``), written to ``out`` if given;
+    None on processes other than 0 of a multi-process run.
 
-    Args:
-        system: one of :data:`jaxais.labels.SYSTEMS`.
-        out: the results JSON file (None: write nothing).
-        world: a built-in world's name or a ``.toml`` path (default: the protocol's first).
-        trials: how many (default: the paper's count in a simulated world).
-        seed: the trials' PRNG seed, in [0, 2**32).
-        random_set: the unseeded systems' fixed random set (default R1).
-        seeds: the LTL seed directory of SIE and SRL (default: the shipped one).
-        tau_cap, collision_cap: the caps (default: the paper's).
-        plot: also draw every trial's trajectory to this PNG (the trials then run as one batch).
-        progress: show a progress bar on stderr.
-        command: the command recorded in the document (default: the ``trials.py`` command line
-            these arguments stand for).
-        before_jax: called once the arguments are checked, before JAX computes anything (the
-            scripts' XLA and multi-process settings, :mod:`jaxais._speed`).
-
-    Returns:
-        The results document: ``system``, ``label``, ``world``, ``random_set``, ``seed``,
-        ``config`` (every parameter used), ``trials`` (one record per trial), ``summary``; None
-        on the other processes of a multi-process run (process 0 writes).
+    ``plot`` also draws every trajectory to a PNG (the trials then run as one batch); ``command``
+    is recorded (default: the ``trials.py`` line these arguments stand for); ``before_jax`` runs
+    once the arguments are checked (the scripts' XLA settings). Defaults are the paper's.
     """
     if command is None:
         flags = {"--system": system, "--world": world, "--trials": trials, "--seed": seed or None,

@@ -1,18 +1,9 @@
-"""Pictures of worlds and runs with matplotlib: a world's map, trajectories and GIF animations.
+"""Pictures of worlds and runs: a world's map, trajectories and GIFs (matplotlib, Agg canvas, no
+pyplot state, NumPy values outside jit).
 
-Everything here works on plain NumPy values outside jit (``np.asarray`` of the simulator's
-``World`` and ``State``), draws on an explicit ``Axes`` or a new ``matplotlib.figure.Figure``
-with the Agg canvas, and never touches pyplot's global state, so it is safe in scripts, tests
-and threads.
-
-Colours: walls dark grey, marker paint light blue, the goal dark blue; the robot's start
-region is a dashed green rectangle, the goal region dashed blue, the wanderers' regions dashed
-grey and the regions of randomly placed boxes dotted grey.
-
-Boxes and the goal are drawn where a run had them: pass its ``State`` (after reset), or a
-*placement*, any object with ``boxes`` [B, 2] and ``goal`` [2] (``jaxais.trials.Placement``,
-what ``run_trials`` keeps of each trial). Only without either do they sit at their regions'
-centres, which for randomly placed ones is where no run had them.
+Boxes and the goal are drawn where a run had them: pass its ``State`` or a placement (any object
+with ``boxes`` [B, 2] and ``goal`` [2], e.g. ``jaxais.trials.Placement``); without either they
+sit at their regions' centres.
 """
 
 from __future__ import annotations
@@ -40,18 +31,16 @@ __all__ = [
     "animate",
     "draw_trajectory",
     "draw_world",
+    "new_figure",
     "save_figure",
     "world_figure",
 ]
 
 MATERIAL_COLOURS = {WALL: "0.3", MARKER: "#5aa9e6", GOAL: "#1030c0"}
-"""Fill/line colour per surface material."""
 START_COLOUR = "tab:green"
 WANDERER_COLOUR = "0.55"
-BODY_RADIUS = 0.037
-"""E-puck body radius used for drawing robots, m (``default_params().body_radius``)."""
+BODY_RADIUS = 0.037  # m, ``default_params().body_radius``
 ROBOT_COLOURS = ("tab:red", "tab:orange", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
-"""Colours of successive robots' trajectories (cycled)."""
 
 
 def _np(x: Any) -> np.ndarray:
@@ -64,8 +53,7 @@ def _region_rect(region: np.ndarray, **kw: Any) -> Rectangle:
 
 
 Placed = Any
-"""A ``State`` or a placement: an object with ``boxes`` [B, 2] and ``goal`` [2] (and, for a
-``State``, ``wanderers`` [W, 3]); with a leading robot axis when batched."""
+"""A ``State`` or a placement (``boxes`` [B, 2], ``goal`` [2]), with a robot axis if batched."""
 
 
 def _is_placed(x: Any) -> bool:
@@ -109,37 +97,12 @@ def _draw_static(ax: Axes, world: World, show_regions: bool) -> None:
             ax.add_patch(Circle((x, y), r, facecolor=colour, edgecolor="k", lw=0.5, zorder=3))
     if not show_regions:
         return
-    ax.add_patch(
-        _region_rect(
-            _np(world.start_region),
-            ls="--",
-            lw=1.2,
-            ec=START_COLOUR,
-            label="start region",
-            zorder=2,
-        )
-    )
-    ax.add_patch(
-        _region_rect(
-            _np(world.goal_region),
-            ls="--",
-            lw=1.2,
-            ec=MATERIAL_COLOURS[GOAL],
-            label="goal region",
-            zorder=2,
-        )
-    )
-    for k, region in enumerate(_np(world.wanderer_region)):
-        ax.add_patch(
-            _region_rect(
-                region,
-                ls="--",
-                lw=1.0,
-                ec=WANDERER_COLOUR,
-                label="wanderer region" if k == 0 else None,
-                zorder=2,
-            )
-        )
+    regions = [(world.start_region, 1.2, START_COLOUR, "start region")]
+    regions += [(world.goal_region, 1.2, MATERIAL_COLOURS[GOAL], "goal region")]
+    regions += [(r, 1.0, WANDERER_COLOUR, "wanderer region" if k == 0 else None)
+                for k, r in enumerate(_np(world.wanderer_region))]  # fmt: skip
+    for region, lw, colour, label in regions:
+        ax.add_patch(_region_rect(_np(region), ls="--", lw=lw, ec=colour, label=label, zorder=2))
     seen: set[tuple[float, ...]] = set()
     for region, ok in zip(_np(world.box_region), np.asarray(world.box_valid), strict=True):
         fixed = region[0] == region[2] and region[1] == region[3]
@@ -166,6 +129,7 @@ def _draw_objects(
     boxes = _np(state.boxes) if state is not None else region_centre(_np(world.box_region))
     goal = _np(state.goal) if state is not None else region_centre(_np(world.goal_region))
     lw = 0.5 if edge == "k" else 1.2
+    style = dict(edgecolor=edge, lw=lw, alpha=alpha, zorder=3)
     for (cx, cy), (hx, hy), m, ok in zip(
         boxes,
         _np(world.box_half),
@@ -175,38 +139,19 @@ def _draw_objects(
     ):
         if ok:
             colour = MATERIAL_COLOURS.get(int(m), "k")
-            ax.add_patch(
-                Rectangle(
-                    (cx - hx, cy - hy),
-                    2 * hx,
-                    2 * hy,
-                    facecolor=colour,
-                    edgecolor=edge,
-                    lw=lw,
-                    alpha=alpha,
-                    zorder=3,
-                )
-            )
+            ax.add_patch(Rectangle((cx - hx, cy - hy), 2 * hx, 2 * hy, facecolor=colour, **style))
     gh = _np(world.goal_half)
-    style = dict(facecolor=MATERIAL_COLOURS[GOAL], edgecolor=edge, lw=lw, alpha=alpha, zorder=3)
+    style = dict(facecolor=MATERIAL_COLOURS[GOAL], **style)
     if world.goal_shape == "ball":
         ax.add_patch(Circle(tuple(goal), gh[0], **style))
     else:
         ax.add_patch(Rectangle(tuple(goal - gh), 2 * gh[0], 2 * gh[1], **style))
     if state is not None and show_wanderers and hasattr(state, "wanderers"):
         for k, (x, y, _) in enumerate(_np(state.wanderers)):
-            ax.add_patch(
-                Circle(
-                    (x, y),
-                    body_radius,
-                    facecolor=WANDERER_COLOUR,
-                    edgecolor="k",
-                    lw=0.5,
-                    alpha=alpha,
-                    zorder=4,
-                    label=wanderer_label if k == 0 else None,
-                )
-            )
+            label = wanderer_label if k == 0 else None
+            disc = Circle((x, y), body_radius, facecolor=WANDERER_COLOUR, edgecolor="k", lw=0.5,
+                          alpha=alpha, zorder=4, label=label)  # fmt: skip
+            ax.add_patch(disc)
 
 
 def _frame_axes(ax: Axes, world: World) -> None:
@@ -229,22 +174,11 @@ def draw_world(
     alpha: float = 1.0,
     body_radius: float = BODY_RADIUS,
 ) -> Axes:
-    """Draw a world: walls and marker paint, boxes, pillars, the goal and the regions.
+    """Draw ``world`` on ``ax`` (limits and aspect set to the arena) and return ``ax``.
 
-    Args:
-        ax: the axes to draw on (its limits and aspect are set to the arena).
-        world: the world (padding entries, ``*_valid == False``, are skipped).
-        state: one robot's ``State`` (no batch axis): boxes, goal and wanderers are drawn where
-            it has them; or a placement (``jaxais.trials.Placement``): boxes and goal only.
-            Without either, each box and the goal sit at the centre of their regions and no
-            wanderers are drawn.
-        show_regions: draw the start, goal, wanderer and random-box regions (dashed/dotted).
-        show_wanderers: draw ``state``'s wanderers as grey discs.
-        alpha: opacity of the boxes, goal and wanderers.
-        body_radius: radius of a drawn e-puck, m.
-
-    Returns:
-        ``ax``.
+    ``state`` is one robot's ``State`` (boxes, goal and wanderers where it has them) or a
+    placement (boxes and goal); ``show_regions`` draws the start, goal, wanderer and random-box
+    regions; ``alpha`` is the opacity of boxes, goal and wanderers.
     """
     if state is not None and _is_batched(state):
         raise ValueError("draw_world takes one robot's State; index a batched State first")
@@ -259,17 +193,8 @@ def draw_world(
 
 
 def draw_trajectory(ax: Axes, xy: Any, label: str | None = None, **kw: Any) -> Line2D:
-    """Draw a path as a line with a hollow circle at its start and a filled square at its end.
-
-    Args:
-        ax: the axes.
-        xy: [T, 2] positions (a [T, 3] pose array is fine: the heading is ignored).
-        label: legend label of the line.
-        **kw: passed to ``ax.plot`` for the line (e.g. ``color``, ``lw``).
-
-    Returns:
-        The line.
-    """
+    """Draw ``xy`` [T, 2+] as a line (``kw`` to ``ax.plot``), a hollow circle at its start and a
+    filled square at its end; returns the line."""
     xy = _np(xy)
     if xy.ndim != 2 or xy.shape[1] < 2 or xy.shape[0] == 0:
         raise ValueError(f"draw_trajectory needs a [T, 2] array with T >= 1, got {xy.shape}")
@@ -292,10 +217,11 @@ def _states_list(states: Placed | Sequence[Placed] | None) -> list[Placed]:
     return out
 
 
-def _new_figure(figsize: tuple[float, float], layout: str | None = "constrained"):
+def new_figure(figsize: tuple[float, float], layout: str | None = "constrained") -> Figure:
+    """A ``Figure`` on its own Agg canvas (no pyplot)."""
     fig = Figure(figsize=figsize, layout=layout)
     FigureCanvasAgg(fig)
-    return fig, fig.add_subplot()
+    return fig
 
 
 def world_figure(
@@ -307,29 +233,21 @@ def world_figure(
     labels: Sequence[str] | None = None,
     show_regions: bool = True,
 ) -> Figure:
-    """A figure of a world with optional robot states and trajectories.
+    """A figure (Agg canvas) of ``world`` with robots and trajectories.
 
     Args:
-        world: the world.
-        states: a ``State``, a batched ``State`` (leading robot axis), a placement
-            (``jaxais.trials.Placement``) or a list of them, one per trajectory. The first
-            robot's boxes, goal and wanderers are drawn solid; further robots' (which may
-            differ in worlds with random placement) faintly. With several, each robot's boxes
-            and goal are outlined in its trajectory's colour.
-        trajectories: a [T, 2+] array, a [N, T, 2+] array or a list of [T_i, 2+] arrays.
-        title: the axes title (default: the world's name).
-        labels: legend labels of the trajectories (default ``robot 0``, ``robot 1``, ...).
-        show_regions: draw the start/goal/wanderer/box regions.
-
-    Returns:
-        A ``matplotlib.figure.Figure`` with an Agg canvas (``fig.savefig`` works; see also
-        :func:`save_figure`).
+        states: a ``State`` or placement, batched or not, or a list: the first robot's boxes,
+            goal and wanderers solid, the others' faint and, with several, outlined in their
+            trajectory's colour.
+        trajectories: [T, 2+], [N, T, 2+] or a list of [T_i, 2+].
+        title: default the world's name; ``labels``: default ``robot i``.
     """
     x0, y0, x1, y1 = _np(world.arena)
     w, h = 5.0 * (x1 - x0) / (y1 - y0), 5.0  # plot area in inches, the arena's shape
     if w > 9.0:
         w, h = 9.0, 45.0 / w
-    fig, ax = _new_figure((w + 2.0, h + 0.7))  # room for the labels and the legend
+    fig = new_figure((w + 2.0, h + 0.7))  # room for the labels and the legend
+    ax = fig.add_subplot()
     _draw_static(ax, world, show_regions)
     robots = _states_list(states)
     if robots:
@@ -359,7 +277,7 @@ def world_figure(
 
 
 def save_figure(fig: Figure, path: str | os.PathLike[str], dpi: float = 120) -> None:
-    """Save ``fig`` atomically; the format follows the file's suffix (png when it has none)."""
+    """Save ``fig`` atomically in its suffix's format (png without one)."""
     fmt = os.path.splitext(os.fspath(path))[1].lstrip(".").lower() or "png"
     atomic_write(path, lambda tmp: fig.savefig(tmp, format=fmt, dpi=dpi))
 
@@ -378,28 +296,12 @@ def animate(
     trail: bool = True,
     body_radius: float = BODY_RADIUS,
 ) -> int:
-    """Write a GIF of a run (atomically, with matplotlib's ``PillowWriter``).
+    """Write a GIF of poses [T, 3] or [T, R, 3] (x, y, heading; R robots in copies of the world)
+    and ``wanderers`` [T, (R,) W, 3] or None, one frame per row, atomically; returns the frame
+    count.
 
-    Each robot is a coloured disc with a tick along its heading (and, with ``trail``, the path
-    so far); wanderers are grey discs edged in their robot's colour.
-
-    Args:
-        world: the world.
-        poses: [T, 3] robot poses (x, y, heading), or [T, R, 3] for R robots in copies of the
-            world (one frame per row: subsample before calling).
-        wanderers: [T, W, 3] (or [T, R, W, 3]) wanderer poses, or None.
-        out_path: the GIF file (name ending in .gif: Pillow picks the format from it).
-        fps: frames per second.
-        state: the first robot's ``State`` or placement for box and goal positions (they do
-            not move during a run); without it they sit at their regions' centres.
-        dt: simulated seconds between frames, for a clock in the title (none if None).
-        title: title prefix (default: the world's name).
-        dpi: resolution (the figure is 5 x 5 inches).
-        trail: draw each robot's path so far.
-        body_radius: radius of a drawn e-puck, m.
-
-    Returns:
-        The number of frames written.
+    ``state``: the first robot's ``State`` or placement (boxes and goal do not move); ``dt``:
+    seconds between frames, for a clock in the title; ``trail``: each robot's path so far.
     """
     poses = _np(poses)
     if poses.ndim == 2:
@@ -419,7 +321,8 @@ def animate(
         raise ValueError(f"{out_path}: an animation must be written to a .gif file")
 
     # A fixed layout: constrained layout would be re-solved for every frame (half the time).
-    fig, ax = _new_figure((5.0, 5.0), layout=None)
+    fig = new_figure((5.0, 5.0), layout=None)
+    ax = fig.add_subplot()
     fig.subplots_adjust(left=0.02, right=0.98, bottom=0.02, top=0.93)
     _draw_static(ax, world, show_regions=False)
     _draw_objects(ax, world, state, show_wanderers=False)

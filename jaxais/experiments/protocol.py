@@ -1,16 +1,6 @@
-"""The paper's experimental protocol, stated once (Whitbrook, Aickelin & Garibaldi, sections 5-6).
-
-Its worlds and systems in table order, which systems run in which world, how many trials each,
-Table 4's comparisons, the significance level and the caps. Everything that runs or judges the
-paper's experiments reads them from here: ``scripts/reproduce.py``, ``scripts/ablate.py`` and
-``scripts/trials.py`` (their worlds, trial counts and caps), :mod:`~jaxais.experiments.ablation`
-(what runs where), :mod:`~jaxais.experiments.stats` (the tables' order, Table 4's rows, H1-H4),
-:mod:`~jaxais.experiments.claims` (what the 32 claims range over) and
-:mod:`~jaxais.experiments.report` (row order, the 99 % verdicts).
-
-The system labels themselves are :data:`jaxais.labels.LABELS`. Like that module, this one is free
-of JAX: the scripts check their flags against it before JAX starts.
-"""
+"""The paper's experimental protocol, stated once [paper, sections 5-6]: worlds and systems in
+table order, who runs where, trial counts, Table 4's comparisons, the significance level and the
+caps. Free of JAX: the scripts check their flags against it before JAX starts."""
 
 from __future__ import annotations
 
@@ -87,29 +77,22 @@ TAU_CAP = 4000.0
 
 
 def systems_for_world(world: str) -> tuple[str, ...]:
-    """The systems the paper runs in ``world``, in table order.
-
-    The real world has the unseeded systems with R1 only; every other world (simulated,
-    including a world file of ours) has all seven.
-    """
+    """The systems the paper runs in ``world``, in table order: all seven, but only R1's
+    unseeded ones in the real world."""
     if world == REAL_WORLD:
         return tuple(s for s in SYSTEMS if parse_label(s)[1] in (None, "R1"))
     return SYSTEMS
 
 
 def trials_for_world(world: str) -> int:
-    """The paper's trials of each system in ``world``: 30 in a simulated world (including a
-    world file of ours), 20 in the real world."""
+    """The paper's trials per system in ``world``: 20 in the real world, else 30."""
     return REAL_TRIALS if world == REAL_WORLD else SIMULATED_TRIALS
 
 
 def add_cap_arguments(parser: argparse.ArgumentParser) -> None:
     """Add ``--tau-cap`` and ``--collision-cap`` to a script's flags, defaulting to the caps."""
     parser.add_argument(
-        "--tau-cap",
-        type=float,
-        default=TAU_CAP,
-        help=f"time cap, s [paper: {TAU_CAP:g}]",
+        "--tau-cap", type=float, default=TAU_CAP, help=f"time cap, s [paper: {TAU_CAP:g}]"
     )
     parser.add_argument(
         "--collision-cap",
@@ -120,13 +103,7 @@ def add_cap_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def load_paper_tables() -> dict:
-    """The paper's Tables 3, 4, 5 (+ notes, source, hypotheses, protocol) from package data.
-
-    Returns:
-        ``{"source": str, "notes": [str], "table3": {world: {system: {"c","tau","f"}}},
-        "table4": {world: {"A vs B": {"c","tau","f"}}}, "table5": {world: {system:
-        {"c","tau","total"}}}, "table5_mean": {system: {...}}, "hypotheses": {"H1": {"supported",
-        "statement", "paper_says"}, ...}, "protocol": {...}}``.
-    """
+    """The paper's Tables 3-5 (``table3``: ``{world: {system: {"c", "tau", "f"}}}``, ``table4``
+    by ``"A vs B"``, ``table5``), ``hypotheses``, ``protocol``, ``notes`` and ``source``."""
     text = resources.files("jaxais").joinpath("data/paper_tables.json").read_text("utf-8")
     return json.loads(text)

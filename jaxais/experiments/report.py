@@ -1,12 +1,5 @@
 """The results report: the claims ledger, our Tables 3-5 beside the paper's, H1-H4, robustness
-tests and figures.
-
-Figures are drawn with matplotlib's object-oriented API on the Agg canvas (no pyplot, no
-display, no global backend change). The paper's tables ship as package data and are loaded with
-:func:`load_paper_tables` (:mod:`jaxais.experiments.protocol`'s, also importable from here).
-Worlds, systems and Table 4's comparisons appear in the order of
-:mod:`jaxais.experiments.protocol`.
-"""
+tests and figures (matplotlib on the Agg canvas, no pyplot), in the protocol's order."""
 
 from __future__ import annotations
 
@@ -17,31 +10,25 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from . import claims, protocol, stats
+from .plotting import new_figure
 from .protocol import load_paper_tables
 
 __all__ = ["load_paper_tables", "ordering_differences", "write_report"]
 
 WorldDrawer = Callable[..., None]
-"""``world_drawer(ax, world_name)`` draws a world's walls and obstacles on a matplotlib Axes;
-``world_drawer(ax, world_name, placement)`` with the boxes and goal where one trial had them
-(a ``jaxais.trials.Placement``), when the report is given placements."""
+"""``world_drawer(ax, world_name[, placement])`` draws a world (boxes and goal as placed)."""
 
 _T3_COLS = (("c", "c", 1), ("tau", "τ (s)", 0), ("f", "f", 0))  # key, header, decimals
 _T5_COLS = (("c", "c cap", 0), ("tau", "τ cap", 0), ("total", "total", 0))
+_T3_TITLE = "Table 3: mean c, τ and f"
+_T5_TITLE = "Table 5: failure rates (%) by collision cap, by time cap and overall"
 _METRIC_NAME = {"c": "c", "tau": "τ", "f": "f", "total": "total"}
 _RANK_MARK = "†"
 _SIG_MARK = "‡"
 _LEVEL = f"{100 * stats.CI_LEVEL:g} %"
-"""The confidence level of the report's intervals, as text."""
-_SIG_LEVEL = stats.significance_level(protocol.ALPHA)
-"""Table 4's level at the paper's significance threshold (99)."""
-
-
-# --------------------------------------------------------------------------- small helpers
+_SIG_LEVEL = stats.significance_level(protocol.ALPHA)  # 99
 
 
 def _canonical(names: Sequence[str], order: Sequence[str]) -> list[str]:
@@ -92,24 +79,17 @@ def _order_string(values: Mapping[str, float]) -> str:
     return out
 
 
-# --------------------------------------------------------------------------- ordering
-
-
 def ordering_differences(
     ours: Mapping[str, Mapping[str, Mapping[str, Any]]],
     paper: Mapping[str, Mapping[str, Mapping[str, Any]]],
     columns: Sequence[str],
 ) -> list[dict[str, Any]]:
-    """Where the ranking of systems differs between our table and the paper's.
-
-    For each world and column, the systems present in both tables are ranked by value (lower is
-    better; competition ranking). Our values are first rounded to integers, the paper's
-    precision, so that rounding alone does not break a tie.
+    """Where the systems' ranks (lower is better) differ from the paper's, per world and column;
+    ours rounded to integers first, the paper's precision, so rounding alone breaks no tie.
 
     Returns:
-        One ``{"world", "column", "systems": [names whose rank differs], "ours": {system: rank},
-        "paper": {system: rank}, "ours_order": str, "paper_order": str}`` per world and column
-        with a difference.
+        ``[{"world", "column", "systems": [whose rank differs], "ours": {system: rank},
+        "paper": {...}, "ours_order": str, "paper_order": str}]``.
     """
     out = []
     for world in _worlds(ours, paper):
@@ -122,16 +102,10 @@ def ordering_differences(
             r_ours, r_paper = _ranks(mine), _ranks(theirs)
             differ = [s for s in common if r_ours[s] != r_paper[s]]
             if differ:
+                orders = {"ours_order": _order_string(mine), "paper_order": _order_string(theirs)}
                 out.append(
-                    {
-                        "world": world,
-                        "column": col,
-                        "systems": differ,
-                        "ours": r_ours,
-                        "paper": r_paper,
-                        "ours_order": _order_string(mine),
-                        "paper_order": _order_string(theirs),
-                    }
+                    dict(world=world, column=col, systems=differ, ours=r_ours, paper=r_paper)
+                    | orders
                 )
     return out
 
@@ -140,12 +114,8 @@ def _flagged(diffs: Sequence[Mapping[str, Any]]) -> set[tuple[str, str, str]]:
     return {(d["world"], s, d["column"]) for d in diffs for s in d["systems"]}
 
 
-# --------------------------------------------------------------------------- sections
-
-
 def _claims_section(ledger: Sequence[Mapping[str, Any]]) -> list[str]:
-    """The ledger line, the line of the interval readings (when the ledger has them), a note on
-    unevaluated claims, and one table row per claim."""
+    """The ledger's headlines, a note on unevaluated claims and a row per claim."""
     counts = claims.summary(ledger)
     lines = [claims.headline(counts), ""]
     with_ci = any("ci_verdict" in c for c in ledger)
@@ -181,10 +151,8 @@ def _side_by_side(
     intervals: Mapping[str, Mapping[str, Mapping[str, Sequence[float]]]] | None = None,
     note: str = "",
 ) -> list[str]:
-    """Our table beside the paper's, per world; each ``(header, {world: {system: value}})`` of
-    ``extra`` adds a last column of ours alone (one decimal); ``intervals`` (``{world: {system:
-    {key: [lo, hi]}}}``) puts ``[lo, hi]`` after each of our values; ``note`` opens the
-    section."""
+    """Our table beside the paper's, per world; ``extra``: ``(header, {world: {system: v}})``
+    columns of ours alone; ``intervals`` (:data:`stats.CIs`): ``[lo, hi]`` after our values."""
     lines = [f"### {title}", ""] + ([note, ""] if note else [])
     ci = f" [{_LEVEL} CI]" if intervals else ""
     for world in _worlds(ours, paper):
@@ -209,7 +177,7 @@ def _side_by_side(
 
 
 def _interval_note(settings: Mapping[str, Any]) -> str:
-    """What the brackets of Table 3 are (``tables["ci"]``, :func:`stats.ci_settings`)."""
+    """What Table 3's brackets are (``tables["ci"]``)."""
     level = 100 * float(settings.get("level", stats.CI_LEVEL))
     resamples = settings.get("resamples", stats.BOOTSTRAP_RESAMPLES)
     seed = settings.get("seed", stats.BOOTSTRAP_SEED)
@@ -323,17 +291,8 @@ def _robustness_section(
         f"A > B. The last column says whether all three tests agree at p < {alpha:g}.",
         "",
     ]
-    header = [
-        "Comparison",
-        "",
-        "Δ mean",
-        "Student t (p)",
-        "level ours / paper",
-        "Welch t (p)",
-        "Mann–Whitney U (p)",
-        "Cohen's d",
-        "tests agree",
-    ]
+    header = ["Comparison", "", "Δ mean", "Student t (p)", "level ours / paper", "Welch t (p)"]
+    header += ["Mann–Whitney U (p)", "Cohen's d", "tests agree"]
     for world in _worlds(comps):
         body = []
         by_pair = comps[world]
@@ -341,18 +300,12 @@ def _robustness_section(
             for m, r in by_metric.items():
                 ref = paper4.get(world, {}).get(pair, {}).get(m)
                 sig = {r["student_p"] < alpha, r["welch_p"] < alpha, r["mwu_p"] < alpha}
+                test = lambda stat, p, dec, r=r: f"{_num(r[stat], dec)} ({_p(r[p])})"
                 body.append(
-                    [
-                        pair,
-                        _METRIC_NAME[m],
-                        _num(r["mean_diff"], 1),
-                        f"{_num(r['student_t'], 2)} ({_p(r['student_p'])})",
-                        f"{r['level']} / {_num(ref)}",
-                        f"{_num(r['welch_t'], 2)} ({_p(r['welch_p'])})",
-                        f"{_num(r['mwu_u'], 1)} ({_p(r['mwu_p'])})",
-                        _num(r["cohens_d"], 2),
-                        "yes" if len(sig) == 1 else "**no**",
-                    ]
+                    [pair, _METRIC_NAME[m], _num(r["mean_diff"], 1)]
+                    + [test("student_t", "student_p", 2), f"{r['level']} / {_num(ref)}"]
+                    + [test("welch_t", "welch_p", 2), test("mwu_u", "mwu_p", 1)]
+                    + [_num(r["cohens_d"], 2), "yes" if len(sig) == 1 else "**no**"]
                 )
         lines += [f"**{world}**", ""] + _table(header, body, align="llrrrrrrl")
     return lines
@@ -385,8 +338,7 @@ def _percent(rate: float | None) -> str:
 
 
 def _calibration_section(cal: Mapping[str, Any] | None) -> list[str]:
-    """SIE's difference rate at the paper's k1, k2 under our bout and per-iteration selection
-    (:func:`stats.calibration`)."""
+    """:func:`stats.calibration`'s difference rates beside the paper's."""
     if not cal:
         return []
     lines = [
@@ -521,14 +473,8 @@ def _baseline_section(baseline: Mapping[str, Any] | None) -> list[str]:
 def _ltl_populations(ltl: Mapping[str, Any]) -> list[dict[str, Any]]:
     """Per-population best f (generation 0, final generation, any generation) of a summary."""
     if "populations" in ltl:
-        return [
-            {
-                "first": p.get("best_f_generation_0"),
-                "final": p.get("best_f_final_generation"),
-                "overall": p.get("best_f_overall"),
-            }
-            for p in ltl["populations"]
-        ]
+        keys = {"first": "generation_0", "final": "final_generation", "overall": "overall"}
+        return [{k: p.get(f"best_f_{v}") for k, v in keys.items()} for p in ltl["populations"]]
     gens = sorted(ltl.get("generations", []), key=lambda g: g["generation"])
     if not gens:
         return []
@@ -587,15 +533,6 @@ def _config_section(config: Mapping[str, Any], timings: Mapping[str, Any] | None
     return lines + _table(["Stage", "Value"], [[k, _value(v)] for k, v in _flatten(timings)], "lr")
 
 
-# --------------------------------------------------------------------------- figures
-
-
-def _new_figure(width: float, height: float) -> Figure:
-    fig = Figure(figsize=(width, height), layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig
-
-
 def _box_figure(
     world: str,
     results: Mapping[str, Sequence[Mapping[str, Any]]],
@@ -604,7 +541,7 @@ def _box_figure(
     path: Path,
 ) -> None:
     systems = _rows({s: t for s, t in results.items() if len(t) > 0})
-    fig = _new_figure(4.2 * len(stats.METRICS), 4.0)
+    fig = new_figure((4.2 * len(stats.METRICS), 4.0))
     for ax, m in zip(fig.subplots(1, len(stats.METRICS)), stats.METRICS, strict=True):
         data = [stats.metric_values(results[s], m) for s in systems]
         x = np.arange(1, len(systems) + 1)
@@ -632,7 +569,7 @@ def _trajectory_figure(
     systems = _rows(trajectories)
     cols = min(4, len(systems))
     rows = math.ceil(len(systems) / cols)
-    fig = _new_figure(3.6 * cols, 3.6 * rows)
+    fig = new_figure((3.6 * cols, 3.6 * rows))
     axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
     for ax, s in zip(axes, systems, strict=False):
         if drawer is not None:
@@ -660,7 +597,7 @@ def _ltl_figure(ltl: Mapping[str, Any], path: Path) -> bool:
     gens = sorted(ltl.get("generations", []), key=lambda g: g["generation"])
     if not gens:
         return False
-    fig = _new_figure(7.0, 4.5)
+    fig = new_figure((7.0, 4.5))
     ax = fig.subplots()
     g = [row["generation"] for row in gens]
     for i in range(len(gens[0]["populations"])):
@@ -678,9 +615,6 @@ def _ltl_figure(ltl: Mapping[str, Any], path: Path) -> bool:
     return True
 
 
-# --------------------------------------------------------------------------- entry point
-
-
 def write_report(
     out_dir: str | Path,
     tables: Mapping[str, Any],
@@ -695,35 +629,20 @@ def write_report(
     example_placements: Mapping[str, Mapping[str, Any]] | None = None,
     baseline: Mapping[str, Any] | None = None,
 ) -> Path:
-    """Write ``out_dir/report.md`` and its figures in ``out_dir/figures/``.
-
-    The report opens with the claims ledger ("**N of M of the paper's claims reproduced**" and a
-    table of every claim), then H1-H4, the tables beside the paper's, the robustness tests, the
-    idiotypic difference rates, the LTL summary, the figures and the run configuration.
+    """Write ``out_dir/report.md`` (claims ledger, H1-H4, tables beside the paper's, robustness,
+    difference rates, baseline, LTL, figures, configuration) and ``out_dir/figures/``.
 
     Args:
-        out_dir: output folder (created if needed).
-        tables: :func:`jaxais.experiments.stats.build_tables` of ``results_by_world``.
-        results_by_world: ``{world: {system: [trial record]}}`` (for the robustness tests, trial
-            counts and box plots).
+        tables: :func:`stats.build_tables` of ``results_by_world`` (``{world: {system:
+            [record]}}``), with ``"calibration"`` optionally.
         paper: :func:`load_paper_tables`.
-        ltl_summary: ``None`` or an ``evolve.py`` ``summary.json``: ``{"populations":
-            [{"best_f_generation_0", "best_f_final_generation", "best_f_overall"}],
-            "generations": [{"generation": g, "populations": [{"best_f", "mean_f"}]}],
-            **scalars}`` (each part optional; per-population first/final best f are taken from
-            ``generations`` when ``populations`` is absent; other scalar entries such as
-            ``wall_time_s`` are listed).
-        config: the run configuration (shown as JSON).
-        timings: ``None`` or ``{stage: seconds or nested dict}``.
-        example_trajectories: ``{world: {system: xy [T, 2]}}`` drawn to ``figures/traj_{world}``.
-        world_drawer: ``world_drawer(ax, world_name)`` draws the world under each trajectory
-            (``world_drawer(ax, world_name, placement)`` where ``example_placements`` has one).
-        claims_ledger: :func:`jaxais.experiments.claims.claims` of ``results_by_world``
-            (computed here at the 99 % level when ``None``).
-        example_placements: ``{world: {system: placement}}``: where each example trajectory's
-            trial had its boxes and goal (``jaxais.trials.Placement``), passed to the drawer.
-        baseline: :func:`jaxais.experiments.stats.baseline_tables` of systems beyond the
-            paper, shown in a section of their own after the idiotypic difference rates.
+        ltl_summary: an ``evolve.py`` ``summary.json`` (``populations`` and/or ``generations``,
+            plus scalars listed as they are) or None.
+        config, timings: the run configuration (shown as JSON) and ``{stage: seconds or dict}``.
+        example_trajectories: ``{world: {system: xy [T, 2]}}``, drawn over ``world_drawer``'s
+            world with ``example_placements`` (``{world: {system: placement}}``).
+        claims_ledger: :func:`claims.claims` of ``results_by_world`` (computed when None).
+        baseline: :func:`stats.baseline_tables`, a section of its own.
 
     Returns:
         The path of ``report.md``.
@@ -786,25 +705,12 @@ def write_report(
     lines += _hypotheses_section(tables["hypotheses"], paper.get("hypotheses", {}))
     lines += ["## Tables", ""]
     intervals = tables.get("table3_ci")
+    note = _interval_note(tables.get("ci", {})) if intervals else ""
+    t3, t5 = tables["table3"], tables["table5"]
     lines += _side_by_side(
-        "Table 3: mean c, τ and f",
-        tables["table3"],
-        p3,
-        _T3_COLS,
-        _flagged(diffs3),
-        n_trials,
-        extra,
-        intervals,
-        _interval_note(tables.get("ci", {})) if intervals else "",
+        _T3_TITLE, t3, p3, _T3_COLS, _flagged(diffs3), n_trials, extra, intervals, note
     )
-    lines += _side_by_side(
-        "Table 5: failure rates (%) by collision cap, by time cap and overall",
-        tables["table5"],
-        p5,
-        _T5_COLS,
-        _flagged(diffs5),
-        None,
-    )
+    lines += _side_by_side(_T5_TITLE, t5, p5, _T5_COLS, _flagged(diffs5), None)
     lines += [
         "A run can breach both caps (more than 100 collisions and no finish by 4000 s), so the "
         "c-cap and τ-cap columns overlap and c + τ may exceed total, in ours as in the paper's.",

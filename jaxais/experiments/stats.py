@@ -1,41 +1,12 @@
-"""Statistics of STL trials: the paper's Tables 3, 4 and 5, robustness tests and H1-H4 (SPEC 11).
+"""Statistics of STL trials: the paper's Tables 3-5, robustness tests and H1-H4 (SPEC 11).
 
-Plain NumPy/SciPy, run outside jit on finished trial records. Lower is better for every metric
-(c collisions, tau seconds, f = (rho c + tau) / 2), as in the paper. The worlds and systems (and
-their order), Table 4's comparisons, the significance level and the collision cap are
-:mod:`jaxais.experiments.protocol`'s.
-
-A trial record is a dict (see :class:`TrialRecord`); the results of one world are
-``dict[system_name, list[TrialRecord]]`` and ``results_by_world`` maps world names to those.
-Failed trials are included in the means with their capped values, as the paper's Table 3 does:
-c is the collision count capped at 100 (``collisions_capped``; the raw count can run to
-thousands) and tau is capped at 4000 s by the run itself. A run can breach both caps (SPEC 9), so
-Table 5's c and tau columns overlap. Records of the older schema (no ``collisions_capped``,
-``failed_by`` a single string or ``None``) are still read.
-
-Degenerate samples never raise or return NaN:
-
-* a test is impossible when a group is too small to estimate its variance (Student: fewer than
-  3 observations in all; Welch: fewer than 2 in a group): the test returns ``(0.0, 1.0)``,
-  i.e. "no evidence of a difference";
-* both groups have zero variance: identical means give ``(0.0, 1.0)``, different means give
-  ``(+-inf, 0.0)`` (the limit of the statistic; the difference is certain);
-* an empty group is a caller error and raises ``ValueError``.
-
-:func:`jsonable` turns the infinities into ``None`` when results are written as JSON.
-
-Confidence intervals (:func:`table3_ci`, :func:`table5_ci`). Every Table 3 mean has a 95 %
-percentile bootstrap interval: the trials of a system are resampled with replacement
-:data:`BOOTSTRAP_RESAMPLES` (2000) times, the mean of each resample is taken, and the interval
-runs from the 2.5th to the 97.5th percentile of those means (linear interpolation, as
-``np.quantile`` and ``scipy.stats.bootstrap(method="percentile")`` do). c, tau and f of one
-system share the same resamples of its trials. The draws come from a NumPy Generator seeded with
-``(seed, crc32(world), crc32(system))``, so an interval depends on the seed and on that
-system's trials only, never on which other systems or worlds are present, and every caller
-(tables, hypotheses, claims) gets the same interval. A system with one trial, or with the same
-value in every trial, gets the point interval ``[x, x]``. A failure rate (Table 5) has a 95 %
-Wilson score interval (:func:`proportion_ci`), which stays informative at 0 of n failures
-(upper bound about 3.8 / (n + 3.8)), where a bootstrap would collapse onto ``[0, 0]``.
+Plain NumPy/SciPy on finished trial records (``{world: {system: [TrialRecord]}}``); lower is
+better for c, tau and f. Means use capped values, as the paper's Table 3 does [paper]. Degenerate
+samples never raise or give NaN: a test without a variance estimate gives ``(0.0, 1.0)``, zero
+variance with different means ``(+-inf, 0.0)``; an empty group raises ValueError. Means get 95 %
+percentile bootstrap intervals drawn from ``(seed, crc32(world), crc32(system))``, so an interval
+depends on that system's trials only; failure rates get Wilson intervals, informative at 0 of n
+[ours].
 """
 
 from __future__ import annotations
@@ -43,7 +14,7 @@ from __future__ import annotations
 import math
 import zlib
 from collections.abc import Iterable, Mapping, Sequence
-from typing import Any, Literal, TypedDict
+from typing import Any
 
 import numpy as np
 from scipy import stats as sps
@@ -59,7 +30,6 @@ __all__ = [
     "METRICS",
     "Results",
     "ResultsByWorld",
-    "TrialRecord",
     "baseline_tables",
     "bootstrap_mean_ci",
     "build_tables",
@@ -68,13 +38,14 @@ __all__ = [
     "cohens_d",
     "comparison_pairs",
     "comparisons",
-    "hypotheses",
-    "idiotypic_difference_rates",
     "failure_causes",
+    "failure_counts",
+    "hypotheses",
     "jsonable",
     "mann_whitney_u",
     "metric_values",
     "proportion_ci",
+    "record_means",
     "significance_level",
     "student_t",
     "table3",
@@ -82,9 +53,6 @@ __all__ = [
     "table4",
     "table5",
     "table5_ci",
-    "trapped_times",
-    "locked_times",
-    "record_means",
     "calibration",
     "welch_t",
 ]
@@ -95,61 +63,27 @@ FAILURE_COLUMNS: tuple[str, ...] = ("c", "tau", "total")
 """Table 5 keys: failures by collision cap, by time cap, overall."""
 
 _RECORD_KEY = {"tau": "tau", "f": "fitness"}
+_MEANS = ("idiotypic_difference_rate", "trapped_s", "locked_s")
+"""Record fields whose per-system means the tables hold."""
 
 CI_LEVEL = 0.95
-"""Confidence level of the report's intervals."""
 BOOTSTRAP_RESAMPLES = 2000
-"""Bootstrap resamples B per interval. Efron & Tibshirani (1993, ch. 19) ask for B >= 1000 for
-percentile intervals; at 2000 the Monte Carlo error of a 2.5 % endpoint is a few per cent of the
-interval's width."""
+"""B >= 1000 for percentile intervals (Efron & Tibshirani 1993, ch. 19)."""
 BOOTSTRAP_SEED = 0
-"""Seed of the bootstrap draws (with the world and system names, see the module docstring)."""
-
-
-class TrialRecord(TypedDict):
-    """One STL trial, as produced by the trial runner (SPEC 9).
-
-    ``collisions`` is the raw count; ``collisions_capped = min(collisions, 100)`` and
-    ``fitness = (8 collisions_capped + tau) / 2``. ``failed_by`` lists the caps breached (both
-    may be): ``failed_collisions`` is ``collisions > 100``, ``failed_time`` a run that hit the
-    4000 s cap, ``failed`` either. ``trapped_s`` is the simulated time spent trapped.
-    """
-
-    tau: float
-    collisions: int
-    collisions_capped: int
-    fitness: float
-    failed: bool
-    failed_collisions: bool
-    failed_time: bool
-    failed_by: list[Literal["collisions", "time"]]
-    trapped_s: float
-    idiotypic_difference_rate: float | None
-    iterations: int
-    replaced: int
 
 
 Results = Mapping[str, Sequence[Mapping[str, Any]]]
-"""One world's trials: ``{system: [TrialRecord]}``."""
+"""One world's trials: ``{system: [trial record]}`` (SPEC 9, :mod:`.records`)."""
 ResultsByWorld = Mapping[str, Results]
-"""``{world: {system: [TrialRecord]}}``."""
+
 CIs = Mapping[str, Mapping[str, Mapping[str, Sequence[float]]]]
-"""Intervals as :func:`table3_ci` gives them: ``{world: {system: {metric: [lo, hi]}}}``."""
-
-
-# --------------------------------------------------------------------------- systems and pairs
+"""``{world: {system: {metric: [lo, hi]}}}`` (:func:`table3_ci`)."""
 
 
 def comparison_pairs(
     world: str, present: Iterable[str] | None = None
 ) -> tuple[tuple[str, str], ...]:
-    """Table 4's comparisons for ``world``, in the paper's order.
-
-    Args:
-        world: world name; filters by :func:`~jaxais.experiments.protocol.systems_for_world`.
-        present: if given, keep only pairs whose two systems are both in it (e.g. the systems
-            with results).
-    """
+    """Table 4's comparisons of ``world``'s systems (both in ``present`` when given), in order."""
     allowed = set(protocol.systems_for_world(world))
     if present is not None:
         allowed &= set(present)
@@ -164,30 +98,21 @@ def _ordered_systems(results: Results) -> list[str]:
     ]
 
 
-def _capped_c(trial: Mapping[str, Any]) -> float:
-    """``collisions_capped``, or ``min(collisions, 100)`` for records without it."""
-    if "collisions_capped" in trial:
-        return float(trial["collisions_capped"])
-    return float(min(trial["collisions"], protocol.COLLISION_CAP))
-
-
 def metric_values(trials: Sequence[Mapping[str, Any]], metric: str) -> np.ndarray:
-    """Values of ``metric`` ("c", "tau" or "f") over ``trials``, float64 ``[n]``.
-
-    "c" is the capped collision count (Table 3's, and the one in f), not the raw count.
-    """
+    """``metric`` ("c" capped, "tau" or "f") over ``trials``, float64 ``[n]``; records without
+    ``collisions_capped`` (older schema) are capped here."""
     if metric == "c":
-        return np.asarray([_capped_c(t) for t in trials], dtype=np.float64)
+        cap = protocol.COLLISION_CAP
+        c = [t["collisions_capped"] if "collisions_capped" in t else min(t["collisions"], cap)
+             for t in trials]  # fmt: skip
+        return np.asarray(c, dtype=np.float64)
     key = _RECORD_KEY[metric]
     return np.asarray([float(t[key]) for t in trials], dtype=np.float64)
 
 
 def failure_causes(trial: Mapping[str, Any]) -> frozenset[str]:
-    """The caps a trial breached: a subset of ``{"collisions", "time"}``.
-
-    Read from ``failed_collisions`` / ``failed_time`` when present, else from ``failed_by``
-    (a list, or the older single string or ``None``).
-    """
+    """The caps a trial breached, a subset of ``{"collisions", "time"}`` (older records: from
+    ``failed_by``, a list, a string or None)."""
     if "failed_collisions" in trial or "failed_time" in trial:
         flags = {"collisions": trial.get("failed_collisions"), "time": trial.get("failed_time")}
         return frozenset(k for k, v in flags.items() if v)
@@ -197,7 +122,15 @@ def failure_causes(trial: Mapping[str, Any]) -> frozenset[str]:
     return frozenset([by] if isinstance(by, str) else by)
 
 
-# --------------------------------------------------------------------------- tests
+def failure_counts(trials: Sequence[Mapping[str, Any]]) -> dict[str, int]:
+    """Trials failed ``{"c": by collisions, "tau": by time, "total": by either or ``failed``}``."""
+    causes = [failure_causes(t) for t in trials]
+    failed = [bool(t.get("failed")) or bool(b) for t, b in zip(trials, causes, strict=True)]
+    return {
+        "c": sum("collisions" in b for b in causes),
+        "tau": sum("time" in b for b in causes),
+        "total": sum(failed),
+    }
 
 
 def _two_groups(a: Sequence[float], b: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
@@ -218,36 +151,25 @@ def _t_result(diff: float, se2: float, df: float) -> tuple[float, float]:
     return t, float(2.0 * sps.t.sf(abs(t), df))
 
 
+def _pooled_var(x: np.ndarray, y: np.ndarray) -> float:
+    """``((n_a - 1) s_a^2 + (n_b - 1) s_b^2) / (n_a + n_b - 2)``; the caller checks df >= 1."""
+    ss = np.sum((x - x.mean()) ** 2) + np.sum((y - y.mean()) ** 2)
+    return float(ss) / (x.size + y.size - 2)
+
+
 def student_t(a: Sequence[float], b: Sequence[float]) -> tuple[float, float]:
-    """Two-sample Student's t-test with pooled variance, two-tailed (the paper's test).
-
-    ``t = (mean_a - mean_b) / sqrt(s_p^2 (1/n_a + 1/n_b))`` with
-    ``s_p^2 = ((n_a - 1) s_a^2 + (n_b - 1) s_b^2) / (n_a + n_b - 2)`` on ``n_a + n_b - 2`` degrees
-    of freedom.
-
-    Returns:
-        ``(t, p)``; ``(0.0, 1.0)`` when ``n_a + n_b < 3``; see the module docstring for zero
-        variance.
-    """
+    """Two-sample pooled-variance Student's t, two-tailed (the paper's test): ``(t, p)``;
+    ``(0.0, 1.0)`` when ``n_a + n_b < 3``."""
     x, y = _two_groups(a, b)
     df = x.size + y.size - 2
     if df < 1:
         return 0.0, 1.0
-    ss = np.sum((x - x.mean()) ** 2) + np.sum((y - y.mean()) ** 2)
-    pooled = float(ss) / df
-    return _t_result(float(x.mean() - y.mean()), pooled * (1 / x.size + 1 / y.size), df)
+    return _t_result(float(x.mean() - y.mean()), _pooled_var(x, y) * (1 / x.size + 1 / y.size), df)
 
 
 def welch_t(a: Sequence[float], b: Sequence[float]) -> tuple[float, float]:
-    """Welch's unequal-variance t-test, two-tailed.
-
-    ``t = (mean_a - mean_b) / sqrt(s_a^2/n_a + s_b^2/n_b)`` with Welch-Satterthwaite degrees of
-    freedom ``(s_a^2/n_a + s_b^2/n_b)^2 / ((s_a^2/n_a)^2/(n_a-1) + (s_b^2/n_b)^2/(n_b-1))``.
-
-    Returns:
-        ``(t, p)``; ``(0.0, 1.0)`` when a group has fewer than 2 observations; see the module
-        docstring for zero variance.
-    """
+    """Welch's unequal-variance t, two-tailed, Welch-Satterthwaite df: ``(t, p)``;
+    ``(0.0, 1.0)`` when a group has fewer than 2 observations."""
     x, y = _two_groups(a, b)
     if x.size < 2 or y.size < 2:
         return 0.0, 1.0
@@ -259,12 +181,8 @@ def welch_t(a: Sequence[float], b: Sequence[float]) -> tuple[float, float]:
 
 
 def mann_whitney_u(a: Sequence[float], b: Sequence[float]) -> tuple[float, float]:
-    """Two-sided Mann-Whitney U test (scipy's exact or tie-corrected asymptotic method).
-
-    Returns:
-        ``(U, p)`` where ``U`` counts the pairs with ``a_i > b_j`` plus half the ties (so small
-        ``U`` means ``a`` tends to be lower). When every value is the same: ``(n_a n_b / 2, 1.0)``.
-    """
+    """Two-sided Mann-Whitney U (scipy's method): ``(U, p)``, U counting pairs with
+    ``a_i > b_j`` plus half the ties; ``(n_a n_b / 2, 1.0)`` when every value is the same."""
     x, y = _two_groups(a, b)
     if np.all(np.concatenate([x, y]) == x[0]):
         return x.size * y.size / 2.0, 1.0
@@ -273,18 +191,13 @@ def mann_whitney_u(a: Sequence[float], b: Sequence[float]) -> tuple[float, float
 
 
 def cohens_d(a: Sequence[float], b: Sequence[float]) -> float:
-    """Cohen's d = (mean_a - mean_b) / pooled SD (the pooled SD of :func:`student_t`).
-
-    Returns:
-        d; ``0.0`` when ``n_a + n_b < 3`` or both means are equal with zero pooled SD, and
-        ``+-inf`` when the pooled SD is zero but the means differ.
-    """
+    """(mean_a - mean_b) / pooled SD; 0.0 when ``n_a + n_b < 3`` or nothing differs, ``+-inf``
+    for different means with zero SD."""
     x, y = _two_groups(a, b)
-    df = x.size + y.size - 2
     diff = float(x.mean() - y.mean())
-    if df < 1:
+    if x.size + y.size < 3:
         return 0.0
-    pooled_sd = math.sqrt(float(np.sum((x - x.mean()) ** 2) + np.sum((y - y.mean()) ** 2)) / df)
+    pooled_sd = math.sqrt(_pooled_var(x, y))
     if pooled_sd == 0.0:
         return 0.0 if diff == 0.0 else math.copysign(math.inf, diff)
     return diff / pooled_sd
@@ -295,36 +208,16 @@ def significance_level(p: float) -> int:
     return int(math.floor(100.0 * (1.0 - float(p)) + 0.5))
 
 
-# --------------------------------------------------------------------------- intervals
-
-
 def bootstrap_mean_ci(
     values: Sequence[float] | np.ndarray,
     level: float = CI_LEVEL,
     resamples: int = BOOTSTRAP_RESAMPLES,
     rng: np.random.Generator | int | None = BOOTSTRAP_SEED,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Percentile bootstrap confidence interval of the mean.
-
-    The rows of ``values`` are resampled with replacement ``resamples`` times in one draw,
-    ``rng.integers(0, n, (resamples, n))`` (the draw ``scipy.stats.bootstrap`` makes), the mean of
-    each resample is taken, and the interval is the ``(1 - level) / 2`` and ``(1 + level) / 2``
-    quantiles of those means (``np.quantile``'s linear interpolation).
-
-    Args:
-        values: ``[n]`` observations, or ``[n, k]``: k statistics of n trials resampled together
-            (the same rows in every column).
-        level: confidence level in (0, 1).
-        resamples: number of resamples, at least 1.
-        rng: a NumPy Generator, or a seed for ``np.random.default_rng``.
-
-    Returns:
-        ``(lo, hi)``, float64 arrays of shape ``[]`` or ``[k]``; ``lo == hi == x`` when n = 1 or
-        every observation is x.
-
-    Raises:
-        ValueError: no observations, a level outside (0, 1) or fewer than one resample.
-    """
+    """Percentile bootstrap interval of the mean of ``values`` ``[n]`` or ``[n, k]`` (the k
+    columns resampled together), scipy's draw ``rng.integers(0, n, (resamples, n))`` and
+    ``np.quantile``'s interpolation: ``(lo, hi)`` of shape ``[]`` or ``[k]``, ``[x, x]`` for a
+    constant sample. ValueError on no values, a level outside (0, 1) or resamples < 1."""
     x = np.asarray(values, dtype=np.float64)
     if x.ndim not in (1, 2) or x.shape[0] == 0:
         raise ValueError(f"need [n] or [n, k] values with n >= 1, got shape {x.shape}")
@@ -349,15 +242,8 @@ def bootstrap_mean_ci(
 
 
 def proportion_ci(successes: int, n: int, level: float = CI_LEVEL) -> tuple[float, float]:
-    """Wilson score interval of a proportion ``successes / n`` (e.g. a failure rate).
-
-    ``(k + z^2/2) / (n + z^2) +- z / (n + z^2) sqrt(k (n - k) / n + z^2 / 4)`` with z the
-    normal quantile of ``(1 + level) / 2``: inside [0, 1], ``[0, z^2 / (n + z^2)]`` at k = 0 and
-    ``[n / (n + z^2), 1]`` at k = n.
-
-    Raises:
-        ValueError: n < 1, k outside [0, n] or a level outside (0, 1).
-    """
+    """Wilson score interval of ``successes / n`` in [0, 1] (``[0, z^2 / (n + z^2)]`` at 0);
+    ValueError on n < 1, successes outside [0, n] or a level outside (0, 1)."""
     if n < 1 or not 0 <= successes <= n:
         raise ValueError(f"need 0 <= successes <= n and n >= 1, got {successes} of {n}")
     if not 0.0 < level < 1.0:
@@ -371,72 +257,41 @@ def proportion_ci(successes: int, n: int, level: float = CI_LEVEL) -> tuple[floa
 
 
 def ci_below(a: Sequence[float], b: Sequence[float]) -> bool:
-    """Whether interval ``a = (lo, hi)`` lies wholly below interval ``b``: ``a_hi < b_lo``.
-
-    For two independent estimates with standard errors s_a and s_b, non-overlapping 95 %
-    intervals mean ``|difference| > 1.96 (s_a + s_b) >= 1.96 sqrt(s_a^2 + s_b^2)``: a
-    difference at the 95 % level whatever the standard errors, and at about the 99.4 % level
-    (z = 1.96 sqrt(2) = 2.77) when they are equal. It is a conservative reading of "a is lower
-    than b"; overlapping intervals do not show that the means are equal.
-    """
+    """Whether interval ``a`` lies wholly below ``b`` (``a_hi < b_lo``): for two independent
+    95 % intervals a difference at >= the 95 % level (about 99.4 % for equal errors)."""
     return float(a[1]) < float(b[0])
 
 
 def _bootstrap_rng(seed: int, world: str, system: str) -> np.random.Generator:
-    """The Generator of one system's intervals in one world (see the module docstring)."""
+    """The Generator of one system's intervals in one world: independent of the others."""
     names = [zlib.crc32(world.encode()), zlib.crc32(system.encode())]
     return np.random.default_rng([int(seed), *names])
 
 
-# --------------------------------------------------------------------------- tables
+def _per_system(results_by_world: ResultsByWorld, row: Any) -> dict[str, dict[str, Any]]:
+    """``{world: {system: row(world, system, trials)}}`` over the systems with trials."""
+    return {
+        world: {s: row(world, s, results[s]) for s in _ordered_systems(results)}
+        for world, results in results_by_world.items()
+    }
 
 
 def table3(results_by_world: ResultsByWorld) -> dict[str, dict[str, dict[str, float]]]:
-    """Mean c, tau and f per world and system (the paper's Table 3).
-
-    Returns:
-        ``{world: {system: {"c": float, "tau": float, "f": float}}}``; systems without trials
-        are left out.
-    """
-    out: dict[str, dict[str, dict[str, float]]] = {}
-    for world, results in results_by_world.items():
-        out[world] = {
-            s: {m: float(metric_values(results[s], m).mean()) for m in METRICS}
-            for s in _ordered_systems(results)
-        }
-    return out
-
-
-def _failure_counts(trials: Sequence[Mapping[str, Any]]) -> dict[str, int]:
-    causes = [failure_causes(t) for t in trials]
-    failed = [bool(t.get("failed")) or bool(b) for t, b in zip(trials, causes, strict=True)]
-    return {
-        "c": sum("collisions" in b for b in causes),
-        "tau": sum("time" in b for b in causes),
-        "total": sum(failed),
-    }
-
-
-def _failure_row(trials: Sequence[Mapping[str, Any]]) -> dict[str, float]:
-    n = len(trials)
-    return {k: 100.0 * v / n for k, v in _failure_counts(trials).items()}
+    """Mean c, tau and f: ``{world: {system: {"c", "tau", "f"}}}`` (the paper's Table 3)."""
+    return _per_system(
+        results_by_world,
+        lambda w, s, trials: {m: float(metric_values(trials, m).mean()) for m in METRICS},
+    )
 
 
 def table5(results_by_world: ResultsByWorld) -> dict[str, dict[str, dict[str, float]]]:
-    """Failure percentages per world and system (the paper's Table 5).
+    """Failure percentages ``{world: {system: {"c", "tau", "total"}}}`` (the paper's Table 5);
+    a run can breach both caps, so c + tau may exceed total."""
 
-    ``"c"`` counts the trials failed by collisions (c > 100), ``"tau"`` those failed by time (the
-    4000 s cap), ``"total"`` those failed by either (or marked ``failed``); see
-    :func:`failure_causes`. A run can breach both caps, so c + tau may exceed total, as in the
-    paper.
+    def row(w: str, s: str, trials: Sequence[Mapping[str, Any]]) -> dict[str, float]:
+        return {k: 100.0 * v / len(trials) for k, v in failure_counts(trials).items()}
 
-    Returns:
-        ``{world: {system: {"c": %, "tau": %, "total": %}}}`` as floats in [0, 100].
-    """
-    return {
-        world: {s: _failure_row(results[s]) for s in _ordered_systems(results)}
-        for world, results in results_by_world.items()
-    }
+    return _per_system(results_by_world, row)
 
 
 def table3_ci(
@@ -445,43 +300,30 @@ def table3_ci(
     resamples: int = BOOTSTRAP_RESAMPLES,
     seed: int = BOOTSTRAP_SEED,
 ) -> dict[str, dict[str, dict[str, list[float]]]]:
-    """Percentile bootstrap intervals of every Table 3 mean (:func:`bootstrap_mean_ci`).
+    """Bootstrap intervals of every Table 3 mean, c, tau and f from the same resamples:
+    ``{world: {system: {metric: [lo, hi]}}}``."""
 
-    c, tau and f of a system share its resamples; the draws of a system depend on ``seed``,
-    its world's and its own name only (the module docstring), so the result is deterministic.
+    def row(w: str, s: str, trials: Sequence[Mapping[str, Any]]) -> dict[str, list[float]]:
+        values = np.stack([metric_values(trials, m) for m in METRICS], axis=1)
+        lo, hi = bootstrap_mean_ci(values, level, resamples, _bootstrap_rng(seed, w, s))
+        return {m: [float(lo[i]), float(hi[i])] for i, m in enumerate(METRICS)}
 
-    Returns:
-        ``{world: {system: {"c": [lo, hi], "tau": [lo, hi], "f": [lo, hi]}}}``, the systems of
-        :func:`table3`.
-    """
-    out: dict[str, dict[str, dict[str, list[float]]]] = {}
-    for world, results in results_by_world.items():
-        out[world] = {}
-        for s in _ordered_systems(results):
-            values = np.stack([metric_values(results[s], m) for m in METRICS], axis=1)
-            lo, hi = bootstrap_mean_ci(values, level, resamples, _bootstrap_rng(seed, world, s))
-            out[world][s] = {m: [float(lo[i]), float(hi[i])] for i, m in enumerate(METRICS)}
-    return out
+    return _per_system(results_by_world, row)
 
 
 def table5_ci(
     results_by_world: ResultsByWorld, level: float = CI_LEVEL
 ) -> dict[str, dict[str, dict[str, list[float]]]]:
-    """Wilson score intervals (:func:`proportion_ci`) of every Table 5 failure rate, in %.
+    """Wilson intervals of every Table 5 rate, in %: ``{world: {system: {column: [lo, hi]}}}``."""
 
-    Returns:
-        ``{world: {system: {"c": [lo, hi], "tau": [lo, hi], "total": [lo, hi]}}}`` in [0, 100].
-    """
-    out: dict[str, dict[str, dict[str, list[float]]]] = {}
-    for world, results in results_by_world.items():
-        out[world] = {}
-        for s in _ordered_systems(results):
-            n = len(results[s])
-            counts = _failure_counts(results[s])
-            out[world][s] = {
-                k: [100.0 * v for v in proportion_ci(counts[k], n, level)] for k in FAILURE_COLUMNS
-            }
-    return out
+    def row(w: str, s: str, trials: Sequence[Mapping[str, Any]]) -> dict[str, list[float]]:
+        counts = failure_counts(trials)
+        return {
+            k: [100.0 * v for v in proportion_ci(counts[k], len(trials), level)]
+            for k in FAILURE_COLUMNS
+        }
+
+    return _per_system(results_by_world, row)
 
 
 def _compare_metric(a: np.ndarray, b: np.ndarray) -> dict[str, float | int]:
@@ -506,16 +348,9 @@ def _compare_metric(a: np.ndarray, b: np.ndarray) -> dict[str, float | int]:
 
 
 def comparisons(results_by_world: ResultsByWorld) -> dict[str, dict[str, dict[str, dict]]]:
-    """Every Table 4 comparison with Student's, Welch's and Mann-Whitney tests and Cohen's d.
-
-    Only pairs whose systems both belong to the world and have trials are included.
-
-    Returns:
-        ``{world: {"A vs B": {metric: {"n_a", "n_b", "mean_a", "mean_b", "mean_diff",
-        "student_t", "student_p", "level", "welch_t", "welch_p", "mwu_u", "mwu_p",
-        "cohens_d"}}}}`` with ``mean_diff = mean_a - mean_b`` (negative: A is better) and
-        ``level = significance_level(student_p)``. Statistics may be ``+-inf`` (zero variance).
-    """
+    """Every Table 4 pair with results under Student's, Welch's and Mann-Whitney tests and
+    Cohen's d: ``{world: {"A vs B": {metric: {"n_a", "mean_diff" (A - B), "student_p",
+    "level", "welch_t", "mwu_u", "cohens_d", ...}}}}``."""
     out: dict[str, dict[str, dict[str, dict]]] = {}
     for world, results in results_by_world.items():
         out[world] = {
@@ -529,61 +364,23 @@ def comparisons(results_by_world: ResultsByWorld) -> dict[str, dict[str, dict[st
 
 
 def table4(results_by_world: ResultsByWorld) -> dict[str, dict[str, dict[str, int]]]:
-    """Significance levels ``100 (1 - p)`` of two-tailed Student's t-tests (the paper's Table 4).
-
-    Returns:
-        ``{world: {"A vs B": {"c": int, "tau": int, "f": int}}}`` in the paper's row order.
-    """
+    """Student's t significance levels ``100 (1 - p)``: ``{world: {"A vs B": {metric: int}}}``
+    (the paper's Table 4)."""
     return {
         world: {pair: {m: row[m]["level"] for m in METRICS} for pair, row in by_pair.items()}
         for world, by_pair in comparisons(results_by_world).items()
     }
 
 
-def idiotypic_difference_rates(results_by_world: ResultsByWorld) -> dict[str, dict[str, Any]]:
-    """Mean idiotypic difference rate per world and system, over trials that report one.
-
-    Returns:
-        ``{world: {system: float | None}}``; ``None`` when no trial has a rate (non-idiotypic
-        systems). The unit is whatever the trial records hold.
-    """
-    out: dict[str, dict[str, Any]] = {}
-    for world, results in results_by_world.items():
-        row: dict[str, Any] = {}
-        for s in _ordered_systems(results):
-            rates = [t.get("idiotypic_difference_rate") for t in results[s]]
-            rates = [float(r) for r in rates if r is not None]
-            row[s] = float(np.mean(rates)) if rates else None
-        out[world] = row
-    return out
-
-
 def record_means(results_by_world: ResultsByWorld, key: str) -> dict[str, dict[str, Any]]:
-    """Mean of a per-trial record field (e.g. ``trapped_s``) per world and system.
+    """Mean of a record field (``trapped_s``, ``idiotypic_difference_rate``, ...) over the
+    trials that have it: ``{world: {system: float | None}}``."""
 
-    Returns:
-        ``{world: {system: float | None}}``; ``None`` when no trial of the system records it.
-    """
-    out: dict[str, dict[str, Any]] = {}
-    for world, results in results_by_world.items():
-        row: dict[str, Any] = {}
-        for s in _ordered_systems(results):
-            values = [float(t[key]) for t in results[s] if t.get(key) is not None]
-            row[s] = float(np.mean(values)) if values else None
-        out[world] = row
-    return out
+    def row(w: str, s: str, trials: Sequence[Mapping[str, Any]]) -> float | None:
+        values = [float(t[key]) for t in trials if t.get(key) is not None]
+        return float(np.mean(values)) if values else None
 
-
-def trapped_times(results_by_world: ResultsByWorld) -> dict[str, dict[str, float | None]]:
-    """Mean simulated time spent trapped (``trapped_s``, seconds) per world and system."""
-    return record_means(results_by_world, "trapped_s")
-
-
-def locked_times(results_by_world: ResultsByWorld) -> dict[str, dict[str, float | None]]:
-    """Mean simulated time spent locked (``locked_s``, seconds: trapped while the same antibody
-    kept being selected for each antigen, :class:`jaxais.loop.EpisodeConfig`) per world and
-    system."""
-    return record_means(results_by_world, "locked_s")
+    return _per_system(results_by_world, row)
 
 
 def calibration(
@@ -592,24 +389,11 @@ def calibration(
     network: Mapping[str, Any],
     system: str = "SIE",
 ) -> dict[str, Any]:
-    """The idiotypic difference rate at the network's k1, k2, beside the paper's 20 %.
-
-    Section 5: k1 and k2 "are chosen in order to yield a mean idiotypic difference rate of
-    approximately 20 %" (the target is read from the packaged paper tables,
-    :func:`protocol.load_paper_tables`). Ours is reported under our bout reading and under
-    per-iteration selection (``hold=1``).
-
-    Args:
-        default_by_world: ``{world: {label: [trial record]}}`` under the default readings.
-        hold1_by_world: the same system's trials with ``hold=1``, under its plain label.
-        network: the network constants (``k1`` and ``k2`` are shown).
-
-    Returns:
-        ``{"system", "k1", "k2", "paper_percent": 20, "worlds": {world: {"default": rate,
-        "hold=1": rate}}}`` (rates as fractions, ``None`` where no trial has one).
-    """
-    default = idiotypic_difference_rates(default_by_world)
-    hold1 = idiotypic_difference_rates(hold1_by_world)
+    """The idiotypic difference rate at the network's k1, k2 under our bouts and with ``hold=1``,
+    beside the paper's target ("approximately 20 %" [paper, section 5]): ``{"system", "k1",
+    "k2", "paper_percent", "worlds": {world: {"default": rate, "hold=1": rate}}}``."""
+    default = record_means(default_by_world, "idiotypic_difference_rate")
+    hold1 = record_means(hold1_by_world, "idiotypic_difference_rate")
     return {
         "system": system,
         "k1": float(network["k1"]),
@@ -618,16 +402,10 @@ def calibration(
             "idiotypic_difference_rate_target_percent"
         ],
         "worlds": {
-            w: {
-                "default": default[w].get(system),
-                "hold=1": hold1.get(w, {}).get(system),
-            }
+            w: {"default": default[w].get(system), "hold=1": hold1.get(w, {}).get(system)}
             for w in default
         },
     }
-
-
-# --------------------------------------------------------------------------- hypotheses
 
 
 def _fmt(x: float) -> str:
@@ -756,12 +534,12 @@ def _h4(results_by_world: ResultsByWorld) -> dict[str, Any]:
     parts, fails, ci_parts = [], [], []
     for w in worlds:
         trials = results_by_world[w]["SIE"]
-        row = _failure_row(trials)
-        n = len(trials)
-        parts.append(f"{w}: {row['total']:.0f} % of {n} trials failed")
-        if row["total"] > 0:
-            fails.append(f"{w}: {row['total']:.0f} % failures")
-        lo, hi = proportion_ci(_failure_counts(trials)["total"], n)
+        n, failed = len(trials), failure_counts(trials)["total"]
+        rate = 100.0 * failed / n
+        parts.append(f"{w}: {rate:.0f} % of {n} trials failed")
+        if rate > 0:
+            fails.append(f"{w}: {rate:.0f} % failures")
+        lo, hi = proportion_ci(failed, n)
         ci_parts.append(f"{w}: SIE failure rate [{100 * lo:.2g}, {100 * hi:.2g}] % (Wilson)")
     # A 0 % claim cannot be shown by a sample, only bounded: it holds with its CI when the CI
     # of the rate contains 0 (no failure), and any failure puts the Wilson CI above 0.
@@ -784,40 +562,18 @@ def _verdict(ok: bool, rule: str, parts: list[str], fails: list[str]) -> dict[st
 def hypotheses(
     results_by_world: ResultsByWorld, alpha: float = protocol.ALPHA, cis: CIs | None = None
 ) -> dict[str, dict]:
-    """Verdicts on the paper's hypotheses H1-H4 (section 2), judged on fitness f.
+    """Verdicts on H1-H4 [paper, section 2], judged on f, each also read with the intervals.
 
-    Worlds missing from the results (or lacking the systems a rule needs) are skipped; a
-    hypothesis with no world to test is "not supported" with evidence "Not testable".
-    "Significantly lower" means a lower mean and a two-tailed Student's t p-value below
-    ``alpha`` (the paper's 99 % level for the default 0.01).
-
-    * **H1** (seeded beats unseeded): in every world, each seeded system has a lower mean f than
-      each unseeded system with the same selection mechanism (SIE < UIE-R1/R2, SRL <
-      URL-R1/R2) and SIE's f is significantly lower than every unseeded system's.
-    * **H2** (SIE beats SRL) and **H3** (SIE beats HDC): SIE's mean f is lower in every world,
-      and significantly lower in a strict majority of the worlds tested (2 of 3 for the paper's
-      worlds; on the paper's own numbers H2 is significant in 2 of 3 worlds, H3 in 2 of 3).
-    * **H4** (no replacement needed when seeded): SIE has no failed trial in any world.
-
-    Each verdict also has a reading with the 95 % intervals (``ci_supported``), stricter than
-    ``supported``: it holds when the hypothesis is supported and every "lower" and "significantly
-    lower" in its rule is also a separation of the f intervals (:func:`table3_ci`,
-    :func:`ci_below`): for H1 every pair of the rule (SIE/unseeded, SRL/URL-*); for H2 and H3
-    a strict majority of the worlds. H4's 0 % can only be bounded: its CI reading is the rule
-    itself (with no failure the Wilson interval of the rate contains 0; after one it does not).
-    ``ci_contradicted`` says whether some pair of the rule is separated the other way (H4: some
-    failure).
-
-    Args:
-        results_by_world: the trials.
-        alpha: significance threshold of the t-tests.
-        cis: :func:`table3_ci` of ``results_by_world`` (computed here when ``None``).
+    H1: each seeded system's mean f below each unseeded one's of its selection, SIE's
+    significantly (Student's t, p < ``alpha``) in every world. H2/H3: SIE's mean f below SRL's /
+    HDC's in every world, significantly in a strict majority. H4: SIE never fails. The interval
+    reading (``ci_supported``, stricter) also needs every "lower" of the rule to be a separation
+    of the f intervals (:func:`ci_below`); ``ci_contradicted``: some pair separates the other way.
+    Worlds lacking a rule's systems are skipped; none left is "Not testable".
 
     Returns:
-        ``{"H1": {"supported": bool, "evidence": str, "summary": str, "ci_supported": bool,
-        "ci_contradicted": bool, "ci_summary": str}, ..., "H4": {...}}``; the evidence states the
-        verdict, the rule, the per-world numbers and any violations; the summary only the numbers
-        and violations (it starts "Not testable" when untestable); the CI summary the intervals.
+        ``{"H1": {"supported", "evidence", "summary", "ci_supported", "ci_contradicted",
+        "ci_summary"}, ..., "H4": {...}}``.
     """
     cis = table3_ci(results_by_world) if cis is None else cis
     return {
@@ -828,12 +584,8 @@ def hypotheses(
     }
 
 
-# --------------------------------------------------------------------------- assembly
-
-
 def jsonable(obj: Any) -> Any:
-    """A copy of ``obj`` with plain Python types only: numpy scalars and arrays converted,
-    tuples as lists, non-finite floats as ``None``."""
+    """``obj`` as plain JSON types: NumPy values converted, tuples as lists, inf/NaN as None."""
     if isinstance(obj, Mapping):
         return {str(k): jsonable(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
@@ -855,21 +607,10 @@ def baseline_tables(
     against: Sequence[str] = ("SIE", "HDC"),
     alpha: float = protocol.ALPHA,
 ) -> dict[str, Any]:
-    """Systems beyond the paper (e.g. the neural baseline) beside some of the paper's.
-
-    Args:
-        results_by_world: the paper's systems' trials.
-        baseline_by_world: ``{world: {system: [TrialRecord]}}`` of the other systems, run under
-            the same protocol, seed and worlds.
-        against: the paper's systems to set them beside (those a world has).
-
-    Returns:
-        ``{"against": [...], "table3": ..., "table3_ci": ..., "table5": ..., "table5_ci": ...,
-        "tests": {world: {"NN vs SIE": {"welch_t", "welch_p", "mann_whitney_u",
-        "mann_whitney_p", "significant"}}}}``: the tables as :func:`table3` etc. give them for
-        the systems of both, and two-sided tests of f between each baseline and each of
-        ``against`` at level ``alpha``.
-    """
+    """Systems beyond the paper (``baseline_by_world``, e.g. the neural baseline) beside those of
+    ``against``: Tables 3 and 5 with intervals and two-sided Welch / Mann-Whitney tests of f,
+    ``{"against", "table3", "table3_ci", "table5", "table5_ci", "tests": {world: {"NN vs SIE":
+    {"welch_t", "welch_p", "mann_whitney_u", "mann_whitney_p", "significant"}}}}``."""
     merged = {
         world: {s: results_by_world[world][s] for s in against if s in results_by_world[world]}
         | dict(extra)
@@ -919,20 +660,7 @@ def ci_settings() -> dict[str, Any]:
 def build_tables(
     results_by_world: ResultsByWorld, alpha: float = protocol.ALPHA, cis: CIs | None = None
 ) -> dict[str, Any]:
-    """All of the report's tables, JSON-serialisable.
-
-    Args:
-        results_by_world: the trials.
-        alpha: significance threshold of the t-tests.
-        cis: :func:`table3_ci` of ``results_by_world`` (computed here when ``None``).
-
-    Returns:
-        ``{"table3": table3(...), "table3_ci": table3_ci(...), "table4": table4(...),
-        "table5": table5(...), "table5_ci": table5_ci(...), "ci": ci_settings(),
-        "idiotypic_difference_rate": idiotypic_difference_rates(...),
-        "trapped_s": trapped_times(...), "locked_s": locked_times(...),
-        "hypotheses": hypotheses(..., alpha)}``.
-    """
+    """Every table of the report as JSON (``cis``: :func:`table3_ci`, computed when None)."""
     cis = table3_ci(results_by_world) if cis is None else cis
     return jsonable(
         {
@@ -942,9 +670,7 @@ def build_tables(
             "table5": table5(results_by_world),
             "table5_ci": table5_ci(results_by_world),
             "ci": ci_settings(),
-            "idiotypic_difference_rate": idiotypic_difference_rates(results_by_world),
-            "trapped_s": trapped_times(results_by_world),
-            "locked_s": locked_times(results_by_world),
+            **{k: record_means(results_by_world, k) for k in _MEANS},
             "hypotheses": hypotheses(results_by_world, alpha, cis),
         }
     )

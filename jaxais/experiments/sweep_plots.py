@@ -7,10 +7,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
-from jaxais.experiments.plotting import save_figure
+from jaxais.experiments.plotting import new_figure, save_figure
 from jaxais.experiments.sweeps import surface
 
 PANELS = (
@@ -25,12 +23,6 @@ CONTOUR = 0.20
 """The idiotypic difference rate the paper tuned k1 and k2 for (section 5)."""
 
 
-def _new_figure(size: tuple[float, float]) -> Figure:
-    fig = Figure(figsize=size, layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig
-
-
 def _panels(doc: dict[str, Any]) -> list[tuple[str, str]]:
     present = lambda m: any(p.get(m) is not None for p in doc["points"])
     return [(m, title) for m, title in PANELS if present(m)]
@@ -39,7 +31,7 @@ def _panels(doc: dict[str, Any]) -> list[tuple[str, str]]:
 def _line_figure(doc: dict[str, Any], path: Path) -> None:
     ((name, values),) = doc["axes"].items()
     panels = _panels(doc)
-    fig = _new_figure((4.0 * len(panels), 3.2))
+    fig = new_figure((4.0 * len(panels), 3.2))
     axes = fig.subplots(1, len(panels), squeeze=False)[0]
     for ax, (metric, title) in zip(axes, panels, strict=True):
         mean = surface(doc, metric)
@@ -64,7 +56,7 @@ def _heatmap_figure(doc: dict[str, Any], path: Path) -> None:
     panels = _panels(doc)
     cols = 3
     rows = -(-len(panels) // cols)
-    fig = _new_figure((4.3 * cols, 3.6 * rows))
+    fig = new_figure((4.3 * cols, 3.6 * rows))
     axes = fig.subplots(rows, cols, squeeze=False).ravel()
     for ax in axes[len(panels) :]:
         ax.set_visible(False)
@@ -107,7 +99,7 @@ def save_sweep_figures(doc: dict[str, Any], out: Path) -> list[Path]:
 def save_noise_figure(doc: dict[str, Any], out: Path) -> Path:
     """f and the failure rate against the noise scale, one line per system (reality_gap.png)."""
     scales = np.asarray(doc["scales"])
-    fig = _new_figure((9.0, 3.6))
+    fig = new_figure((9.0, 3.6))
     axes = fig.subplots(1, 2)
     labels = list(doc["points"][0]["systems"])
     for k, label in enumerate(labels):

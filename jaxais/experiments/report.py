@@ -31,18 +31,12 @@ _LEVEL = f"{100 * stats.CI_LEVEL:g} %"
 _SIG_LEVEL = stats.significance_level(protocol.ALPHA)  # 99
 
 
-def _canonical(names: Sequence[str], order: Sequence[str]) -> list[str]:
-    """``names`` without repeats: those in ``order`` first, in that order, then the rest."""
-    unique = list(dict.fromkeys(names))
-    return [n for n in order if n in unique] + [n for n in unique if n not in order]
-
-
 def _worlds(*tables: Mapping[str, Any]) -> list[str]:
-    return _canonical([w for t in tables for w in t], protocol.WORLDS)
+    return stats.in_order([w for t in tables for w in t], protocol.WORLDS)
 
 
 def _rows(*rows: Mapping[str, Any]) -> list[str]:
-    return _canonical([s for r in rows for s in r], protocol.SYSTEMS)
+    return stats.in_order([s for r in rows for s in r], protocol.SYSTEMS)
 
 
 def _num(x: Any, decimals: int = 0) -> str:

@@ -1,6 +1,6 @@
 """Statistics of STL trials: the paper's Tables 3-5, robustness tests and H1-H4 (SPEC 11).
 
-Plain NumPy/SciPy on finished trial records (``{world: {system: [TrialRecord]}}``); lower is
+Plain NumPy/SciPy on finished trial records (``{world: {system: [record]}}``); lower is
 better for c, tau and f. Means use capped values, as the paper's Table 3 does [paper]. Degenerate
 samples never raise or give NaN: a test without a variance estimate gives ``(0.0, 1.0)``, zero
 variance with different means ``(+-inf, 0.0)``; an empty group raises ValueError. Means get 95 %
@@ -41,6 +41,7 @@ __all__ = [
     "failure_causes",
     "failure_counts",
     "hypotheses",
+    "in_order",
     "jsonable",
     "mann_whitney_u",
     "metric_values",
@@ -90,12 +91,15 @@ def comparison_pairs(
     return tuple((a, b) for a, b in protocol.COMPARISONS if a in allowed and b in allowed)
 
 
+def in_order(names: Iterable[str], order: Sequence[str]) -> list[str]:
+    """``names`` without repeats: those in ``order`` first, in that order, then the rest."""
+    unique = list(dict.fromkeys(names))
+    return [n for n in order if n in unique] + [n for n in unique if n not in order]
+
+
 def _ordered_systems(results: Results) -> list[str]:
-    """Systems with at least one trial: the paper's order first, then any others as given."""
-    have = [s for s, trials in results.items() if len(trials) > 0]
-    return [s for s in protocol.SYSTEMS if s in have] + [
-        s for s in have if s not in protocol.SYSTEMS
-    ]
+    """Systems with at least one trial, in the paper's order."""
+    return in_order([s for s, trials in results.items() if len(trials) > 0], protocol.SYSTEMS)
 
 
 def metric_values(trials: Sequence[Mapping[str, Any]], metric: str) -> np.ndarray:
@@ -422,8 +426,7 @@ def _p(p: float) -> str:
 
 def _worlds(results_by_world: ResultsByWorld, needed: Iterable[str]) -> list[str]:
     """Worlds (paper order first) whose results have trials for every system in ``needed``."""
-    names = [w for w in protocol.WORLDS if w in results_by_world]
-    names += [w for w in results_by_world if w not in protocol.WORLDS]
+    names = in_order(results_by_world, protocol.WORLDS)
     return [w for w in names if set(needed) <= set(_ordered_systems(results_by_world[w]))]
 
 

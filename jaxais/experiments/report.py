@@ -48,6 +48,10 @@ def _num(x: Any, decimals: int = 0) -> str:
     return f"{x:.{decimals}f}"
 
 
+def _span(iv: Sequence[float] | None, decimals: int) -> str:
+    return f" [{_num(iv[0], decimals)}, {_num(iv[1], decimals)}]" if iv else ""
+
+
 def _p(p: float) -> str:
     return "0" if p == 0 else f"{p:.2g}"
 
@@ -161,8 +165,7 @@ def _side_by_side(
                 a = mine.get(s, {}).get(key)
                 b = theirs.get(s, {}).get(key)
                 mark = f" {_RANK_MARK}" if (world, s, key) in flagged else ""
-                iv = (intervals or {}).get(world, {}).get(s, {}).get(key)
-                span = f" [{_num(iv[0], dec)}, {_num(iv[1], dec)}]" if iv else ""
+                span = _span((intervals or {}).get(world, {}).get(s, {}).get(key), dec)
                 row.append(f"{_num(a, dec)}{span} / {_num(b)}{mark}")
             row += [_num(values.get(world, {}).get(s), 1) for _, values in extra]
             body.append(row)
@@ -449,10 +452,8 @@ def _baseline_section(baseline: Mapping[str, Any] | None) -> list[str]:
         for s, row in t3[world].items():
             cells = [s]
             for key, dec in (("c", 1), ("tau", 0), ("f", 0)):
-                lo, hi = ci3[world][s][key]
-                cells.append(f"{_num(row[key], dec)} [{_num(lo, dec)}, {_num(hi, dec)}]")
-            lo, hi = ci5[world][s]["total"]
-            cells.append(f"{_num(t5[world][s]['total'], 1)} [{_num(lo, 1)}, {_num(hi, 1)}]")
+                cells.append(_num(row[key], dec) + _span(ci3[world][s][key], dec))
+            cells.append(_num(t5[world][s]["total"], 1) + _span(ci5[world][s]["total"], 1))
             tests = [
                 f"{pair.split(' vs ')[1]}: {_p(test['welch_p'])}"
                 for pair, test in baseline["tests"].get(world, {}).items()

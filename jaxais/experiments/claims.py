@@ -1,12 +1,12 @@
 """The paper's 32 qualitative claims, each checked against our results (the claims ledger).
 
 Per world [paper, section 6]: SIE has the lowest mean c, tau and f (ties allowed: the paper calls
-a tie at 2 lowest), a 0 % failure rate, f significantly below each unseeded system's (Student's
-t, p < alpha), and SRL and UIE-R1 each a lower mean f than URL-R1: 10 + 10 + 8 claims, plus
-H1-H4 (:func:`stats.hypotheses`). A claim without results is not evaluated (``held`` None).
-Each claim is also read with 95 % intervals [ours]: ``ci_held`` when it holds and every
-comparison's intervals separate as claimed (:func:`stats.ci_below`; a 0 % rate: its Wilson
-interval contains 0), never weaker than ``held``; ``ci_verdict`` is one of :data:`CI_VERDICTS`.
+SIE's c lowest in World 2, where HDC ties it), a 0 % failure rate, f significantly below each
+unseeded system's (Student's t, p < alpha), and SRL and UIE-R1 each a lower mean f than URL-R1:
+10 + 10 + 8 claims, plus H1-H4 (:func:`stats.hypotheses`). A claim without results is not
+evaluated (``held`` None). Each is also read with 95 % intervals [ours]: ``ci_held`` needs
+``held`` and every comparison's intervals separated as claimed (:func:`stats.ci_below`; a 0 %
+rate: its Wilson interval contains 0); ``ci_verdict`` is one of :data:`CI_VERDICTS`.
 """
 
 from __future__ import annotations

@@ -1,25 +1,25 @@
 """n STL trials of one system in one world: the call behind ``scripts/trials.py``.
 
-:func:`trials` checks its arguments before JAX starts (one-line ``ValueError``\\ s naming the
-script's flags), runs the trials in a compiled, vmapped pool of slots (each refilled when its
-trial ends) or, with ``plot``, as one batch that keeps every trajectory, and returns the results
-document (written to ``out`` when given). The pool is sharded over every device JAX sees; in a
-multi-process run (``jax.distributed``) process 0 writes. The same arguments give the same
-document, byte for byte.
+:func:`trials` checks its arguments before JAX starts (:func:`check_trials`: one-line
+``ValueError``\\ s naming the script's flags), runs the trials in a compiled, vmapped pool of
+slots (each refilled when its trial ends) or, with ``plot``, as one batch that keeps every
+trajectory, and returns the results document (written to ``out`` when given). The pool is
+sharded over every device JAX sees; in a multi-process run (``jax.distributed``) process 0
+writes. The same arguments give the same document, byte for byte.
 """
 
 from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any
 
 from jaxais.experiments import protocol
 from jaxais.io import atomic_write_json, check_output_file
 from jaxais.labels import RANDOM_SETS, SYSTEMS, label
 
-__all__ = ["command_line", "trials"]
+__all__ = ["check_trials", "command_line", "trials"]
 
 
 def command_line(prog: str, flags: Mapping[str, Any]) -> str:
@@ -34,7 +34,7 @@ def command_line(prog: str, flags: Mapping[str, Any]) -> str:
     return " ".join(words)
 
 
-def trials(
+def check_trials(
     system: str,
     out: str | os.PathLike[str] | None = None,
     *,
@@ -46,38 +46,13 @@ def trials(
     tau_cap: float | None = None,
     collision_cap: int | None = None,
     plot: str | os.PathLike[str] | None = None,
-    progress: bool = True,
-    command: str | None = None,
-    before_jax: Callable[[], object] | None = None,
-) -> dict[str, Any] | None:
-    """Run ``trials`` STL trials of ``system`` in ``world`` and return their results document.
-
-    Args:
-        system: one of :data:`jaxais.labels.SYSTEMS`.
-        out: the results JSON file (None: write nothing).
-        world: a built-in world's name or a ``.toml`` path (default: the protocol's first).
-        trials: how many (default: the paper's count in a simulated world).
-        seed: the trials' PRNG seed, in [0, 2**32).
-        random_set: the unseeded systems' fixed random set (default R1).
-        seeds: the LTL seed directory of SIE and SRL (default: the shipped one).
-        tau_cap, collision_cap: the caps (default: the paper's).
-        plot: also draw every trial's trajectory to this PNG (the trials then run as one batch).
-        progress: show a progress bar on stderr.
-        command: the command recorded in the document (default: the ``trials.py`` command line
-            these arguments stand for).
-        before_jax: called once the arguments are checked, before JAX computes anything (the
-            scripts' XLA and multi-process settings, :mod:`jaxais._speed`).
+) -> tuple[str | os.PathLike[str], int, float, int]:
+    """Check :func:`trials`'s arguments as it does, without loading JAX (one-line
+    ``ValueError``\\ s naming the script's flags): a script's check before its slow start.
 
     Returns:
-        The results document: ``system``, ``label``, ``world``, ``random_set``, ``seed``,
-        ``config`` (every parameter used), ``trials`` (one record per trial), ``summary``; None
-        on the other processes of a multi-process run (process 0 writes).
+        The world, the trial count and the two caps, defaults filled in.
     """
-    if command is None:
-        flags = {"--system": system, "--world": world, "--trials": trials, "--seed": seed or None,
-                 "--random-set": random_set, "--seeds": seeds, "--tau-cap": tau_cap,
-                 "--collision-cap": collision_cap, "--out": out, "--plot": plot}  # fmt: skip
-        command = command_line("trials.py", flags)
     world = protocol.WORLDS[0] if world is None else world
     n = protocol.SIMULATED_TRIALS if trials is None else trials
     tau_cap = float(protocol.TAU_CAP if tau_cap is None else tau_cap)  # 10 and 10.0: one record
@@ -98,9 +73,53 @@ def trials(
         check_output_file(out, (".json",))
     if plot:
         check_output_file(plot, (".png",))
+    return world, n, tau_cap, collision_cap
 
-    if before_jax is not None:
-        before_jax()
+
+def trials(
+    system: str,
+    out: str | os.PathLike[str] | None = None,
+    *,
+    world: str | os.PathLike[str] | None = None,
+    trials: int | None = None,
+    seed: int = 0,
+    random_set: str | None = None,
+    seeds: str | os.PathLike[str] | None = None,
+    tau_cap: float | None = None,
+    collision_cap: int | None = None,
+    plot: str | os.PathLike[str] | None = None,
+    progress: bool = True,
+    command: str | None = None,
+) -> dict[str, Any] | None:
+    """Run ``trials`` STL trials of ``system`` in ``world`` and return their results document.
+
+    Args:
+        system: one of :data:`jaxais.labels.SYSTEMS`.
+        out: the results JSON file (None: write nothing).
+        world: a built-in world's name or a ``.toml`` path (default: the protocol's first).
+        trials: how many (default: the paper's count in a simulated world).
+        seed: the trials' PRNG seed, in [0, 2**32).
+        random_set: the unseeded systems' fixed random set (default R1).
+        seeds: the LTL seed directory of SIE and SRL (default: the shipped one).
+        tau_cap, collision_cap: the caps (default: the paper's).
+        plot: also draw every trial's trajectory to this PNG (the trials then run as one batch).
+        progress: show a progress bar on stderr.
+        command: the command recorded in the document (default: the ``trials.py`` command line
+            these arguments stand for).
+
+    Returns:
+        The results document: ``system``, ``label``, ``world``, ``random_set``, ``seed``,
+        ``config`` (every parameter used), ``trials`` (one record per trial), ``summary``; None
+        on the other processes of a multi-process run (process 0 writes).
+    """
+    if command is None:
+        flags = {"--system": system, "--world": world, "--trials": trials, "--seed": seed or None,
+                 "--random-set": random_set, "--seeds": seeds, "--tau-cap": tau_cap,
+                 "--collision-cap": collision_cap, "--out": out, "--plot": plot}  # fmt: skip
+        command = command_line("trials.py", flags)
+    world, n, tau_cap, collision_cap = check_trials(
+        system, out, world=world, trials=trials, seed=seed, random_set=random_set, seeds=seeds,
+        tau_cap=tau_cap, collision_cap=collision_cap, plot=plot)  # fmt: skip
     # Imported after the arguments are checked: a bad one answers at once, without loading JAX.
     import jax
     from tqdm import tqdm

@@ -39,12 +39,9 @@ TIMEOUT_S = 60.0
 """How long a process waits for the others by default (seconds)."""
 PER_PROCESS = ("process_id", "timeout_s", "out", "plot")
 """Flags that may differ between the processes of a run (the others write nothing)."""
-CLUSTERS = {
-    "SLURM (srun)": ("SLURM_JOB_ID", "SLURM_STEP_NODELIST", "SLURM_NTASKS", "SLURM_PROCID",
-                     "SLURM_LOCALID"),
-    "Open MPI (mpirun)": ("OMPI_MCA_orte_hnp_uri",),
-}  # fmt: skip
-"""The variables JAX's ``auto`` detection reads, by cluster (jax._src.clusters)."""
+AUTO = ("SLURM_STEP_NODELIST", "OMPI_MCA_orte_hnp_uri")
+"""What ``--coordinator auto`` (JAX's detection) needs: SLURM's variable under ``srun`` or Open
+MPI's under ``mpirun``."""
 ABANDONED: list = []
 """The runtime of a join that timed out, mid-way in its thread: a process holding one ends with
 ``os._exit`` (:func:`jaxais.cli.fail`), as its teardown at exit would wait on it or abort."""
@@ -84,11 +81,11 @@ def check(args: argparse.Namespace) -> None:
     if not args.timeout_s > 0:
         raise ValueError(f"--timeout-s must be > 0, got {args.timeout_s}")
     if args.coordinator == "auto":
-        if not any(all(v in os.environ for v in names) for names in CLUSTERS.values()):
+        if not any(name in os.environ for name in AUTO):
             raise ValueError(
-                f"--coordinator auto reads the variables of {' or '.join(CLUSTERS)} and none "
-                "are set: start the processes with srun or mpirun, or give --coordinator "
-                "HOST:PORT --num-processes N --process-id I"
+                f"--coordinator auto reads SLURM's or Open MPI's variables (${' or $'.join(AUTO)})"
+                ", and neither is set: start the processes with srun or mpirun, or give "
+                "--coordinator HOST:PORT --num-processes N --process-id I"
             )
         return
     if args.coordinator in (None, ""):

@@ -124,7 +124,7 @@ def test_two_processes_give_one_processs_trials_bit_for_bit(runs):
             ],
             "--timeout-s must be > 0",
         ),
-        (["--coordinator", "auto"], "none are set: start the processes with srun or mpirun"),
+        (["--coordinator", "auto"], "neither is set: start the processes with srun or mpirun"),
     ],
 )
 def test_inconsistent_flags_are_rejected(flags, message, monkeypatch):

@@ -42,7 +42,7 @@ import threading
 from collections.abc import Callable
 from typing import Any, NoReturn
 
-from jaxais import io
+from jaxais import distributed, io
 from jaxais.io import (
     UserError,
     atomic_write,
@@ -113,6 +113,9 @@ def fail(prog: str, message: str, status: int = EXIT_USAGE) -> NoReturn:
     """Print ``"{prog}: error: {message}"`` (one line) on stderr and exit with ``status``."""
     sys.stderr.write(_error_line(prog, message))
     sys.stderr.flush()
+    if distributed.ABANDONED:  # a join that timed out: the exit's teardown would hang or abort
+        sys.stdout.flush()
+        os._exit(status)
     raise SystemExit(status)
 
 

@@ -8,66 +8,95 @@ the same host logic and writes the same results. A run's numbers do not depend o
 the results are those of one process, bit for bit.
 
 Tell a process where it stands by flags (:func:`add_arguments`: ``--coordinator HOST:PORT
---num-processes N --process-id I``) or by environment variables (``JAXAIS_COORDINATOR``,
-``JAXAIS_NUM_PROCESSES``, ``JAXAIS_PROCESS_ID``). Under SLURM or Open MPI, ``--coordinator auto``
-lets JAX read the cluster's own variables. On CPUs the processes exchange data through gloo.
+--num-processes N --process-id I --timeout-s S``) or by environment variables
+(``JAXAIS_COORDINATOR``, ``JAXAIS_NUM_PROCESSES``, ``JAXAIS_PROCESS_ID``, ``JAXAIS_TIMEOUT_S``).
+Under SLURM or Open MPI, ``--coordinator auto`` lets JAX read the cluster's own variables. On
+CPUs the processes exchange data through gloo.
+
+Joining fails fast and says why, in one line (a ``ValueError``): a process that does not find
+all the others within the timeout, or whose flags differ from another's (every process
+publishes its flags, and each compares them all), stops with the cause and the fix. While it
+waits it says so on stderr every few seconds, and Ctrl-C ends it (the scripts' handler).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import socket
+import sys
+import threading
+import time
 
 ENV = {
     "coordinator": "JAXAIS_COORDINATOR",
     "num_processes": "JAXAIS_NUM_PROCESSES",
     "process_id": "JAXAIS_PROCESS_ID",
+    "timeout_s": "JAXAIS_TIMEOUT_S",
 }
+TIMEOUT_S = 60.0
+"""How long a process waits for the others by default (seconds)."""
+PER_PROCESS = ("process_id", "timeout_s", "out", "plot")
+"""Flags that may differ between the processes of a run (the others write nothing)."""
+AUTO = ("SLURM_STEP_NODELIST", "OMPI_MCA_orte_hnp_uri")
+"""What ``--coordinator auto`` (JAX's detection) needs: SLURM's variable under ``srun`` or Open
+MPI's under ``mpirun``."""
+ABANDONED: list = []
+"""The runtime of a join that timed out, mid-way in its thread: a process holding one ends with
+``os._exit`` (:func:`jaxais.cli.fail`), as its teardown at exit would wait on it or abort."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The flags of a multi-process run (each defaults to its environment variable)."""
     group = parser.add_argument_group("across processes (jax.distributed)")
-    group.add_argument(
-        "--coordinator",
-        default=os.environ.get(ENV["coordinator"]),
-        metavar="HOST:PORT",
-        help="process 0's address: join a multi-process run (or 'auto' under SLURM/Open MPI; "
-        f"default ${ENV['coordinator']}, unset: one process)",
-    )
-    group.add_argument(
-        "--num-processes",
-        type=int,
-        default=_env_int("num_processes"),
-        help=f"processes in the run (default ${ENV['num_processes']})",
-    )
-    group.add_argument(
-        "--process-id",
-        type=int,
-        default=_env_int("process_id"),
-        help=f"this process's index, 0 .. N-1 (default ${ENV['process_id']})",
-    )
+    # fmt: off
+    group.add_argument("--coordinator", default=os.environ.get(ENV["coordinator"]),
+                       metavar="HOST:PORT", help="process 0's address: join a multi-process run "
+                       f"(or 'auto' under SLURM/Open MPI; default ${ENV['coordinator']}, unset: "
+                       "one process)")
+    group.add_argument("--num-processes", type=int, default=_env("num_processes", int),
+                       help=f"processes in the run (default ${ENV['num_processes']})")
+    group.add_argument("--process-id", type=int, default=_env("process_id", int),
+                       help=f"this process's index, 0 .. N-1 (default ${ENV['process_id']})")
+    group.add_argument("--timeout-s", type=float, default=_env("timeout_s", float, TIMEOUT_S),
+                       help="seconds to wait for every process to join (default "
+                       f"${ENV['timeout_s']}, unset: {TIMEOUT_S:g})")
+    # fmt: on
 
 
-def _env_int(name: str) -> int | None:
+def _env(name: str, kind: type, default=None):
     value = os.environ.get(ENV[name])
     if value is None or value == "":
-        return None
+        return default
     try:
-        return int(value)
+        return kind(value)
     except ValueError:
-        raise ValueError(f"${ENV[name]} must be an integer, got {value!r}") from None
+        what = "an integer" if kind is int else "a number"
+        raise ValueError(f"${ENV[name]} must be {what}, got {value!r}") from None
 
 
 def check(args: argparse.Namespace) -> None:
     """Reject inconsistent flags before JAX starts (one-line ValueErrors)."""
-    if args.coordinator in (None, "", "auto"):
-        if args.coordinator != "auto" and (args.num_processes or args.process_id is not None):
+    if not args.timeout_s > 0:
+        raise ValueError(f"--timeout-s must be > 0, got {args.timeout_s}")
+    if args.coordinator == "auto":
+        if not any(name in os.environ for name in AUTO):
+            raise ValueError(
+                f"--coordinator auto reads SLURM's or Open MPI's variables (${' or $'.join(AUTO)})"
+                ", and neither is set: start the processes with srun or mpirun, or give "
+                "--coordinator HOST:PORT --num-processes N --process-id I"
+            )
+        return
+    if args.coordinator in (None, ""):
+        if args.num_processes or args.process_id is not None:
             raise ValueError("--num-processes and --process-id need --coordinator HOST:PORT")
         return
     host, _, port = args.coordinator.rpartition(":")
-    if not host or not port.isdigit():
-        raise ValueError(f"--coordinator must be HOST:PORT, got {args.coordinator!r}")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ValueError(
+            f"--coordinator must be HOST:PORT with a port in 1..65535, got {args.coordinator!r}"
+        )
     if args.num_processes is None or args.num_processes < 1:
         raise ValueError("--coordinator needs --num-processes N (N >= 1)")
     if args.process_id is None or not 0 <= args.process_id < args.num_processes:
@@ -79,23 +108,108 @@ def check(args: argparse.Namespace) -> None:
 def initialize(args: argparse.Namespace) -> bool:
     """Join the multi-process run the flags describe; False (and nothing done) for one process.
 
-    Must run before JAX computes anything.
+    Must run before JAX computes anything. Waits at most ``args.timeout_s`` for every process
+    to join, saying so on stderr, then checks that all were started with the same flags (but
+    those of :data:`PER_PROCESS`).
+
+    Raises:
+        ValueError: bad flags; the others did not all join in time, or process 0 cannot take its
+            port (the cause where it is known, and the fix); a flag differs between processes.
     """
     check(args)
     if args.coordinator in (None, ""):
         return False
     import jax
+    from jax._src import distributed as state  # the runtime's client: its key-value store
 
     if jax.config.jax_platforms in (None, "", "cpu"):
         # CPU devices of different processes exchange data through gloo.
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
-    if args.coordinator == "auto":
-        jax.distributed.initialize()
-    else:
-        jax.distributed.initialize(
-            args.coordinator, num_processes=args.num_processes, process_id=args.process_id
-        )
+    # Only process 0 writes the compilation cache, and programs over a process's own devices
+    # differ between processes: with it, process 0 would start its first collective a whole
+    # compile ahead of the others, and gloo gives up on a peer after 30 s.
+    jax.config.update("jax_enable_compilation_cache", False)
+    # Its C++ SIGTERM handler would replace the scripts' own: a scheduler's SIGTERM, logged and
+    # ignored, would not stop the run.
+    jax.config.update("jax_enable_preemption_service", False)
+    auto, n, where = args.coordinator == "auto", args.num_processes, args.coordinator
+    spec = {"coordinator_address": where, "num_processes": n, "process_id": args.process_id}
+    if auto:
+        spec, where = {}, "the cluster's coordinator"
+    elif args.process_id == 0:  # a second process 0 would take the port over, and XLA abort
+        try:
+            socket.create_server(("", int(where.rpartition(":")[2]))).close()
+        except OSError as err:
+            raise ValueError(
+                f"cannot host the coordinator at {where}: {os.strerror(err.errno)} (another "
+                "process 0 or another program holds the port): give each process its own "
+                "--process-id, or choose another port"
+            ) from None
+    # XLA's own join timeout aborts the process (SIGABRT, a C++ trace): ours ends it first, and
+    # the join runs in a thread so that this one can report progress and take Ctrl-C meanwhile.
+    failed: list[Exception] = []
+
+    def join() -> None:
+        try:
+            jax.distributed.initialize(**spec, initialization_timeout=int(args.timeout_s) + 600)
+        except Exception as err:  # noqa: BLE001 (reported by the waiting thread)
+            failed.append(err)
+
+    joining = threading.Thread(target=join, daemon=True)
+    joining.start()
+    start, every = time.monotonic(), min(10.0, args.timeout_s / 2)
+    while joining.is_alive() and (left := args.timeout_s - (time.monotonic() - start)) > 0:
+        joining.join(min(every, left))
+        if joining.is_alive():
+            others = "the others" if auto else f"{n - 1} of {n} processes"
+            waited = f"{time.monotonic() - start:.0f} s of {args.timeout_s:g}"
+            print(f"waiting for {others} at {where} ({waited})", file=sys.stderr, flush=True)
+    if failed:
+        raise ValueError(f"could not join the run at {where}: {failed[0]}")
+    if joining.is_alive():
+        ABANDONED.append((state.global_state.client, state.global_state.service))
+        state.global_state.client = state.global_state.service = None
+        raise ValueError(_why_not_joined(args, where))
+    _agree(args, state.global_state)
     return True
+
+
+def _why_not_joined(args: argparse.Namespace, where: str) -> str:
+    """The one line for a join that timed out: the cause where this process can see it."""
+    if args.coordinator != "auto" and args.process_id != 0:
+        host, _, port = args.coordinator.rpartition(":")
+        try:
+            socket.create_connection((host.strip("[]"), int(port)), timeout=5).close()
+        except OSError as err:
+            return (
+                f"no coordinator answers at {where} ({os.strerror(err.errno) if err.errno else err}"
+                f" after {args.timeout_s:g} s): start process 0 (it hosts the coordinator), or "
+                "fix --coordinator"
+            )
+    return (
+        f"not every process joined at {where} within {args.timeout_s:g} s: start all "
+        f"{args.num_processes or ''} processes with the same --coordinator and --num-processes, "
+        "each with its own --process-id (0 hosts the coordinator), or allow more --timeout-s"
+    )
+
+
+def _agree(args: argparse.Namespace, runtime) -> None:
+    """Every process publishes its flags and compares all: one line names those that differ."""
+    mine = {k: v for k, v in vars(args).items() if k not in PER_PROCESS}
+    runtime.client.key_value_set(f"jaxais/flags/{runtime.process_id}", json.dumps(mine))
+    runtime.client.wait_at_barrier("jaxais/flags", int(args.timeout_s * 1000))
+    for key, value in sorted(runtime.client.key_value_dir_get("jaxais/flags/")):
+        theirs = json.loads(value)
+        differ = sorted(k for k in set(mine) | set(theirs) if mine.get(k) != theirs.get(k))
+        if differ:
+            flags = [("--" + k.replace("_", "-"), theirs.get(k), mine.get(k)) for k in differ]
+            raise ValueError(
+                f"process {key.rsplit('/', 1)[1]} was started with "
+                + ", ".join(f"{flag} {there}" for flag, there, _ in flags)
+                + f" and this one ({runtime.process_id}) with "
+                + ", ".join(f"{flag} {here}" for flag, _, here in flags)
+                + ": start every process with the same flags"
+            )
 
 
 def batch_sharding(devices=None):

@@ -18,7 +18,7 @@ import sys
 from jaxais import distributed
 from jaxais.cli import ArgumentParser, UserError, main_wrapper, run_script
 from jaxais.experiments import protocol
-from jaxais.experiments.reproduction import LTLRunError, headline, reproduce
+from jaxais.experiments.reproduction import LTLRunError, check_reproduce, headline, reproduce
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -53,22 +53,20 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 @main_wrapper("reproduce.py", extra=(LTLRunError,))
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
+    kw = dict(trials=args.trials, seed=args.seed, seeds=args.seeds, evolve=args.evolve,
+              generations=args.generations, worlds=args.worlds, tau_cap=args.tau_cap,
+              collision_cap=args.collision_cap)  # fmt: skip
+    check_reproduce(args.out, **kw)  # a bad flag answers before JAX loads
     distributed.check(args)
     if args.evolve and args.coordinator:
         raise UserError("--evolve runs on one process; evolve first, then pass --seeds DIR")
+    from jaxais import _speed  # its importlib.metadata: after the signal handlers are ours
 
-    def setup() -> None:  # before JAX computes anything
-        from jaxais import _speed
-
-        _speed.setup(cpu_device_per_core=True)
-        distributed.initialize(args)
-
+    _speed.setup(cpu_device_per_core=True)
+    distributed.initialize(args)  # before JAX computes anything
     result = reproduce(
-        args.out, trials=args.trials, seed=args.seed, seeds=args.seeds, evolve=args.evolve,
-        generations=args.generations, baseline=False if args.no_baseline else args.baseline or True,
-        worlds=args.worlds, tau_cap=args.tau_cap, collision_cap=args.collision_cap,
-        command="reproduce.py " + " ".join(sys.argv[1:] if argv is None else argv),
-        before_jax=setup,
+        args.out, baseline=False if args.no_baseline else args.baseline or True,
+        command="reproduce.py " + " ".join(sys.argv[1:] if argv is None else argv), **kw,
     )  # fmt: skip
     if result is not None:  # the writing process
         print(headline(result))

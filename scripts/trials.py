@@ -19,7 +19,7 @@ import time
 from jaxais import distributed
 from jaxais.cli import ArgumentParser, main_wrapper, run_script
 from jaxais.experiments import protocol
-from jaxais.experiments.one_system import trials
+from jaxais.experiments.one_system import check_trials, trials
 from jaxais.labels import RANDOM_SETS, SYSTEMS
 
 
@@ -48,20 +48,18 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 @main_wrapper("trials.py")
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
+    kw = dict(world=args.world, trials=args.trials, seed=args.seed, random_set=args.random_set,
+              seeds=args.seeds, tau_cap=args.tau_cap, collision_cap=args.collision_cap,
+              plot=args.plot)  # fmt: skip
+    check_trials(args.system, args.out, **kw)  # a bad flag answers before JAX loads
     distributed.check(args)
+    from jaxais import _speed  # its importlib.metadata: after the signal handlers are ours
 
-    def setup() -> None:  # before JAX computes anything
-        from jaxais import _speed
-
-        _speed.setup(cpu_device_per_core=True)
-        distributed.initialize(args)
-
+    _speed.setup(cpu_device_per_core=True)
+    distributed.initialize(args)  # before JAX computes anything
     command = "trials.py " + " ".join(sys.argv[1:] if argv is None else argv)
     start = time.perf_counter()
-    doc = trials(args.system, args.out, world=args.world, trials=args.trials, seed=args.seed,
-                 random_set=args.random_set, seeds=args.seeds, tau_cap=args.tau_cap,
-                 collision_cap=args.collision_cap, plot=args.plot, command=command,
-                 before_jax=setup)  # fmt: skip
+    doc = trials(args.system, args.out, command=command, **kw)
     if doc is None:  # not the writing process
         return
     s, rate = doc["summary"], doc["summary"]["idiotypic_difference_rate"]

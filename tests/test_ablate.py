@@ -290,6 +290,7 @@ def test_a_variant_runs_as_its_system_run_alone(ran):
     assert got["hdc_tracks=True"]["SIE"] is got["ours"]["SIE"]
 
 
+@pytest.mark.slow
 def test_script_writes_its_files(ran, tmp_path: Path):
     seeds = F.write_seed(tmp_path / "seed", seed=0)
     out = tmp_path / "out"

@@ -619,6 +619,7 @@ def _first(fire: np.ndarray) -> np.ndarray:
     return np.where(fire.any(1), fire.argmax(1) * DT, np.inf)
 
 
+@pytest.mark.slow
 def test_threshold_hover_is_penalised_by_encounters_not_by_iterations():
     """SPEC 6's trap: 310 robots parked (wheels at 0) facing the empty arena's south wall,
     head-on or 10 or 25 degrees off, at gaps within 0.6 mm of the one where their largest IR

@@ -57,6 +57,7 @@ def saved(tmp_path: Path) -> Path:
     return tmp_path / "ck"
 
 
+@pytest.mark.slow
 def test_tree_round_trip_is_exact():
     state = tiny_run()
     tree = state_to_tree(state)

@@ -57,6 +57,7 @@ def assert_same_trials(got: list[dict], want: list[dict]) -> None:
             assert g[k] == pytest.approx(w[k], rel=1e-6), k
 
 
+@pytest.mark.slow
 def test_make_trials_gives_run_trials_trials():
     sie = F.systems()["SIE"]
     got = as_records(stl_run()(jax.random.key(0), sie))
@@ -66,6 +67,7 @@ def test_make_trials_gives_run_trials_trials():
         assert g["replaced"] == w["replaced"]
 
 
+@pytest.mark.slow
 def test_vmap_over_seeds_and_a_parameter_grid_equals_a_loop():
     sie = F.systems()["SIE"]
     k1 = jnp.array([0.5, 1.5], jnp.float32)  # a two-point grid of eq (7)'s k1

@@ -111,6 +111,7 @@ def full_run(tmp_path_factory) -> Path:
 # ------------------------------------------------------------------------------- outputs
 
 
+@pytest.mark.slow
 def test_outputs(full_run: Path):
     summary = json.loads((full_run / "summary.json").read_text())
     assert summary["config"]["populations"] == 2 and summary["generations_run"] == 3
@@ -146,6 +147,7 @@ def test_flag_defaults_are_the_ga_defaults():
     assert args.crossing_starts == ga.CROSSING_STARTS
 
 
+@pytest.mark.slow
 def test_check_seed_measures_the_recorded_rates(full_run: Path, capsys):
     """``--check-seed`` with the run's settings measures exactly what the run recorded, and
     writes nothing."""
@@ -159,6 +161,7 @@ def test_check_seed_measures_the_recorded_rates(full_run: Path, capsys):
     assert _digest(full_run) == before
 
 
+@pytest.mark.slow
 def test_run_as_a_user_runs_it(tmp_path: Path, full_run: Path):
     """The script as a process, with its XLA flags (jaxais._speed): status 0, the same seed as the
     in-process run (whose JAX started without them), nothing on stderr but the progress bar."""
@@ -173,6 +176,7 @@ def test_run_as_a_user_runs_it(tmp_path: Path, full_run: Path):
     assert_same_arrays(seed_arrays(out / "seed"), seed_arrays(full_run / "seed"))
 
 
+@pytest.mark.slow
 def test_same_seed_same_files(tmp_path: Path, monkeypatch, full_run: Path):
     # The same command line (relative --out) twice: identical seed.json and seed arrays.
     monkeypatch.chdir(tmp_path)
@@ -190,6 +194,7 @@ def test_same_seed_same_files(tmp_path: Path, monkeypatch, full_run: Path):
     assert_same_arrays(seed_arrays(a / "seed"), seed_arrays(full_run / "seed"))
 
 
+@pytest.mark.slow
 def test_resume_equals_uninterrupted(tmp_path: Path, full_run: Path):
     out = tmp_path / "run"
     run_main("--generations", "1", "--out", str(out))
@@ -204,6 +209,7 @@ def test_resume_equals_uninterrupted(tmp_path: Path, full_run: Path):
     assert_same_state(a, b)
 
 
+@pytest.mark.slow
 def test_interrupted_run_resumes_exactly(tmp_path: Path, full_run: Path):
     """A real SIGTERM during generation 1 (after checkpoint 1) ends the script process at once
     with its one line and status 143, leaving no seed or summary; resuming then gives the
@@ -236,6 +242,7 @@ run_script(evolve.main)
 # ------------------------------------------------------------------------------- errors
 
 
+@pytest.mark.slow
 def test_resume_refusals(tmp_path: Path, capsys, full_run: Path):
     last = expect_exit(capsys, "--out", str(tmp_path / "none"), "--resume")
     assert "no complete checkpoint" in last
@@ -338,6 +345,7 @@ def test_bad_flags(tmp_path: Path, capsys, case: list[str]):
     assert _digest(keep) == before
 
 
+@pytest.mark.slow
 def test_check_seed_and_out_refusals(tmp_path: Path, capsys, full_run: Path):
     last = expect_exit(capsys, "--check-seed", str(full_run / "seed"), "--out", str(tmp_path))
     assert "--check-seed" in last and "--out" in last

@@ -599,6 +599,7 @@ def test_compare_diversity_reports_both_tests():
         compare_diversity([0], TINY, maze())
 
 
+@pytest.mark.slow
 def test_rollout_programs_per_world(tmp_path):
     # With a constant world (the GA's way), the task loop bakes the world into its programs: a
     # world with the same shapes but other values must get programs of its own, and the same

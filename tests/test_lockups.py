@@ -72,6 +72,7 @@ def outcome(period: int, first_at: int, with_choices: bool = True) -> dict[str, 
     return jax.device_get(run(with_choices)(jax.random.key(3), params))
 
 
+@pytest.mark.slow
 def test_a_robot_parked_against_a_wall_is_trapped_and_locked():
     out = outcome(period=0, first_at=0)
     assert np.all(out["tau"] == CONFIG.tau_cap)
@@ -103,6 +104,7 @@ def test_a_choice_held_longer_than_the_window_locks_part_of_the_stay():
     assert np.all(out["locked_s"] > 0) and np.all(out["locked_s"] < out["trapped_s"])
 
 
+@pytest.mark.slow
 def test_a_controller_without_choices_is_never_locked():
     out = outcome(period=0, first_at=0, with_choices=False)
     np.testing.assert_array_equal(out["trapped_s"], outcome(0, 0)["trapped_s"])

@@ -218,21 +218,25 @@ def crossings(runs) -> dict[str, float]:
     return dict(zip(SETS, map(float, rates), strict=True))
 
 
+@pytest.mark.slow
 def test_tracking_the_doors_crosses_the_maze(crossings):
     assert crossings["tracker"] >= 0.75, crossings
 
 
+@pytest.mark.slow
 def test_wandering_instead_of_tracking_crosses_far_less_often(crossings):
     assert crossings["wanderer"] <= 0.5, crossings
     assert crossings["tracker"] - crossings["wanderer"] >= 0.4, crossings
 
 
+@pytest.mark.slow
 def test_turning_on_the_spot_or_circling_instead_of_searching_rarely_crosses(crossings):
     """Without a search the target is never seen from the pocket (100 starts, measured: 0 % and
     2 %); leaving it takes a behaviour that covers ground."""
     assert crossings["spinner"] <= 0.2 and crossings["circler"] <= 0.2, crossings
 
 
+@pytest.mark.slow
 def test_rl_scores_reward_the_spinner_for_searching_longer(runs, crossings):
     """Why the GA's crossover is uniform by default (jaxais.ga.GAConfig.crossover): Table 2 pays
     +0.05 for every iteration of "target unseen", so L_0 grows with the time a robot goes without

@@ -98,6 +98,7 @@ def test_policy_in_order_is_the_mlp():
     np.testing.assert_allclose(got, jax.vmap(policy, in_axes=(None, 0))(params, x), atol=1e-6)
 
 
+@pytest.mark.slow
 def test_a_trial_is_the_same_run_in_the_pool_and_in_one_batch():
     """30 full-length trials of the shipped weights in world1 are the same runs bit for bit
     whether one batch plays them or the refilling pool does (with the policy's dots left to XLA,
@@ -189,6 +190,7 @@ def test_config_rejects_bad_values():
 # ---------------------------------------------------------------------------------- controller
 
 
+@pytest.mark.slow
 def test_controller_runs_under_make_trials():
     params = tiny_train()(jax.random.key(0)).params
     config = TrialsConfig(

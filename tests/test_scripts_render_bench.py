@@ -161,6 +161,7 @@ def test_render_bad_flag_is_one_line():
 # ---------------------------------------------------------------------------------- bench.py
 
 
+@pytest.mark.slow
 def test_bench_quick_json(tmp_path):
     out = tmp_path / "bench.json"
     proc = run_script(

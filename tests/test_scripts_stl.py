@@ -139,6 +139,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
 # ---------------------------------------------------------------------------------- trials.py
 
 
+@pytest.mark.slow
 def test_trials_script_writes_results_json(runs):
     proc = runs["first"]
     doc = json.loads((runs["trials_dir"] / "first.json").read_text())
@@ -164,6 +165,7 @@ def test_trials_script_writes_results_json(runs):
     assert "HDC in world1: 3 trials" in proc.stdout
 
 
+@pytest.mark.slow
 def test_trials_script_same_arguments_same_bytes(runs):
     _ok(runs["second"])
     first = (runs["trials_dir"] / "first.json").read_bytes()
@@ -171,6 +173,7 @@ def test_trials_script_same_arguments_same_bytes(runs):
     assert first == second
 
 
+@pytest.mark.slow
 def test_trials_script_same_results_on_one_and_two_devices(runs):
     # Sharded over 2 CPU devices (padded from 3 runs to 4) or on one: the same numbers.
     _ok(runs["one_device"])
@@ -181,12 +184,14 @@ def test_trials_script_same_results_on_one_and_two_devices(runs):
     assert len(single["trials"]) == 3
 
 
+@pytest.mark.slow
 def test_trials_script_fills_its_compilation_cache(runs):
     # JAXAIS_CACHE_DIR: the first run stored its task-loop programs, which the second one loaded
     # (and, above, gave the same bytes with).
     assert {"jit__start", "jit__advance"} <= set(runs["cached"])
 
 
+@pytest.mark.slow
 def test_trials_script_plot_is_a_png(runs):
     for name in ("first.png", "plot.png"):
         data = (runs["trials_dir"] / name).read_bytes()
@@ -266,6 +271,7 @@ def test_library_calls_check_their_arguments_before_jax_starts(tmp_path: Path):
 # ---------------------------------------------------------------------------------- reproduce.py
 
 
+@pytest.mark.slow
 def test_reproduce_end_to_end(runs):
     proc, out = runs["reproduce"], runs["reproduce_dir"]
     _ok(proc)
@@ -313,6 +319,7 @@ def test_reproduce_end_to_end(runs):
     assert "Report:" in proc.stdout
 
 
+@pytest.mark.slow
 def test_reproduce_user_errors(tmp_path: Path):
     out = tmp_path / "rep"
     cases = [

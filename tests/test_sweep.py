@@ -251,6 +251,7 @@ def test_sweep_script_bad_input_is_one_line(args, message, tmp_path):
     assert len(lines) == 1 and lines[0].startswith("sweep.py: error:") and message in lines[0]
 
 
+@pytest.mark.slow
 def test_sweep_script_writes_its_json_and_figure(tmp_path):
     out_dir = tmp_path / "sw"
     out = _sweep_script(

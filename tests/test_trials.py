@@ -386,6 +386,7 @@ def test_results_do_not_depend_on_batch_mates():
     assert not np.array_equal(alone["SIE"].trajectories[2][0], alone["SIE"].trajectories[0][0])
 
 
+@pytest.mark.slow
 def test_a_batch_compiles_only_the_parts_of_the_network_its_systems_use(monkeypatch):
     """SIE and HDC never replace antibodies; HDC and SRL are not idiotypic; HDC does not learn.
     Each batch runs the smallest controller for its systems (stl_for), the full one once UIE-R1

@@ -78,6 +78,7 @@ def test_console_scripts_are_the_packages_scripts():
         assert (ROOT / "scripts" / f"{module.rsplit('.', 1)[1]}.py").is_file()
 
 
+@pytest.mark.slow
 def test_the_wheels_console_scripts_run_outside_the_checkout(installed, tmp_path):
     # All at once: the tiny run's JAX start-up and compile take the time.
     trials = installed / "jaxais-trials"

@@ -5,14 +5,14 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any
 
 from jaxais.experiments import protocol
 from jaxais.io import atomic_write_json, check_output_file
 from jaxais.labels import RANDOM_SETS, SYSTEMS, label
 
-__all__ = ["command_line", "trials"]
+__all__ = ["check_trials", "command_line", "trials"]
 
 
 def command_line(prog: str, flags: Mapping[str, Any]) -> str:
@@ -27,7 +27,7 @@ def command_line(prog: str, flags: Mapping[str, Any]) -> str:
     return " ".join(words)
 
 
-def trials(
+def check_trials(
     system: str,
     out: str | os.PathLike[str] | None = None,
     *,
@@ -39,23 +39,9 @@ def trials(
     tau_cap: float | None = None,
     collision_cap: int | None = None,
     plot: str | os.PathLike[str] | None = None,
-    progress: bool = True,
-    command: str | None = None,
-    before_jax: Callable[[], object] | None = None,
-) -> dict[str, Any] | None:
-    """Run ``trials`` STL trials of ``system`` in ``world`` (a name or ``.toml``) and return the
-    results document (``config``, one record per trial, ``summary``), written to ``out`` if given;
-    None on processes other than 0 of a multi-process run.
-
-    ``plot`` also draws every trajectory to a PNG (the trials then run as one batch); ``command``
-    is recorded (default: the ``trials.py`` line these arguments stand for); ``before_jax`` runs
-    once the arguments are checked (the scripts' XLA settings). Defaults are the paper's.
-    """
-    if command is None:
-        flags = {"--system": system, "--world": world, "--trials": trials, "--seed": seed or None,
-                 "--random-set": random_set, "--seeds": seeds, "--tau-cap": tau_cap,
-                 "--collision-cap": collision_cap, "--out": out, "--plot": plot}  # fmt: skip
-        command = command_line("trials.py", flags)
+) -> tuple[str | os.PathLike[str], int, float, int]:
+    """Check :func:`trials`'s arguments without loading JAX (one-line ``ValueError``\\ s naming
+    the script's flags); returns the world, the trial count and the two caps, defaults filled in."""
     world = protocol.WORLDS[0] if world is None else world
     n = protocol.SIMULATED_TRIALS if trials is None else trials
     tau_cap = float(protocol.TAU_CAP if tau_cap is None else tau_cap)  # 10 and 10.0: one record
@@ -76,9 +62,40 @@ def trials(
         check_output_file(out, (".json",))
     if plot:
         check_output_file(plot, (".png",))
+    return world, n, tau_cap, collision_cap
 
-    if before_jax is not None:
-        before_jax()
+
+def trials(
+    system: str,
+    out: str | os.PathLike[str] | None = None,
+    *,
+    world: str | os.PathLike[str] | None = None,
+    trials: int | None = None,
+    seed: int = 0,
+    random_set: str | None = None,
+    seeds: str | os.PathLike[str] | None = None,
+    tau_cap: float | None = None,
+    collision_cap: int | None = None,
+    plot: str | os.PathLike[str] | None = None,
+    progress: bool = True,
+    command: str | None = None,
+) -> dict[str, Any] | None:
+    """Run ``trials`` STL trials of ``system`` in ``world`` (a name or ``.toml``) and return the
+    results document (``config``, one record per trial, ``summary``), written to ``out`` if given;
+    None on processes other than 0 of a multi-process run.
+
+    ``plot`` also draws every trajectory to a PNG (the trials then run as one batch); ``command``
+    is recorded (default: the ``trials.py`` line these arguments stand for). Defaults are the
+    paper's.
+    """
+    if command is None:
+        flags = {"--system": system, "--world": world, "--trials": trials, "--seed": seed or None,
+                 "--random-set": random_set, "--seeds": seeds, "--tau-cap": tau_cap,
+                 "--collision-cap": collision_cap, "--out": out, "--plot": plot}  # fmt: skip
+        command = command_line("trials.py", flags)
+    world, n, tau_cap, collision_cap = check_trials(
+        system, out, world=world, trials=trials, seed=seed, random_set=random_set, seeds=seeds,
+        tau_cap=tau_cap, collision_cap=collision_cap, plot=plot)  # fmt: skip
     # Imported after the arguments are checked: a bad one answers at once, without loading JAX.
     import jax
     from tqdm import tqdm

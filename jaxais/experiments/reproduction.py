@@ -28,7 +28,7 @@ import shlex
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +36,7 @@ from jaxais.experiments import protocol
 from jaxais.experiments.one_system import command_line
 from jaxais.io import atomic_write_json
 
-__all__ = ["LTLRunError", "headline", "reproduce", "run_ltl"]
+__all__ = ["LTLRunError", "check_reproduce", "headline", "reproduce", "run_ltl"]
 
 CALIBRATED = "SIE@hold=1"
 """SIE with a selection every iteration, on the plain label's worlds and random streams."""
@@ -97,7 +97,7 @@ def _check_fresh_ltl_dir(ltl_dir: Path, seed: int, generations: int | None) -> N
     )
 
 
-def reproduce(
+def check_reproduce(
     out: str | os.PathLike[str],
     *,
     trials: int | None = None,
@@ -105,50 +105,17 @@ def reproduce(
     seeds: str | os.PathLike[str] | None = None,
     evolve: bool = False,
     generations: int | None = None,
-    baseline: str | os.PathLike[str] | bool = True,
     worlds: str | Sequence[str] | None = None,
     tau_cap: float | None = None,
     collision_cap: int | None = None,
-    progress: bool = True,
-    command: str | None = None,
-    before_jax: Callable[[], object] | None = None,
-) -> dict[str, Any] | None:
-    """Run the paper's experiments and write the tables, claims, report and every trial to ``out``.
-
-    Args:
-        out: the output folder (created if missing).
-        trials: trials per system and world (default: the paper's, 30; 20 in ``real``).
-        seed: the trials' PRNG seed, in [0, 2**32) (and the GA's with ``evolve``).
-        seeds: the LTL seed folder (default: the shipped ``checkpoints/default``).
-        evolve: run the LTL first (:func:`run_ltl`, into ``out/ltl``) and use its seed.
-        generations: the LTL's generation cap with ``evolve`` (default: evolve.py's).
-        baseline: the trained neural controller run beside SIE and HDC: True for the shipped
-            ``checkpoints/neural``, a folder for other weights, False for none.
-        worlds: a subset of the protocol's worlds (names, or one comma-separated string).
-        tau_cap, collision_cap: the caps (default: the paper's).
-        progress: show a progress bar per world on stderr.
-        command: the command recorded in ``run.json`` and the report (default: the
-            ``reproduce.py`` command line these arguments stand for).
-        before_jax: called once the arguments are checked, before JAX computes anything (the
-            scripts' XLA and multi-process settings, :mod:`jaxais._speed`).
+) -> tuple[Path, list[str], float, int]:
+    """Check :func:`reproduce`'s arguments as it does and make ``out``, without loading JAX
+    (one-line ``ValueError``\\ s naming the script's flags): a script's check before its slow
+    start.
 
     Returns:
-        On the writing process, ``{"tables", "claims", "run", "report"}``: the documents of
-        ``tables.json``, ``claims.json`` and ``run.json``, and the report's path; None on the
-        other processes of a multi-process run.
-
-    Raises:
-        ValueError: a bad argument, or a seed or weights that cannot be read (before any trial).
-        LTLRunError: the LTL run failed.
+        The output folder, the worlds and the two caps, defaults filled in.
     """
-    if command is None:
-        flags = {"--out": out, "--trials": trials, "--seeds": seeds, "--evolve": evolve,
-                 "--seed": seed or None, "--baseline": None if isinstance(baseline, bool)
-                 else baseline, "--no-baseline": baseline is False,
-                 "--worlds": worlds if isinstance(worlds, str | None) else ",".join(worlds),
-                 "--tau-cap": tau_cap, "--collision-cap": collision_cap,
-                 "--generations": generations}  # fmt: skip
-        command = command_line("reproduce.py", flags)
     names = protocol.WORLDS if worlds is None else worlds
     names = [w for w in names.split(",") if w] if isinstance(names, str) else list(names)
     tau_cap = float(protocol.TAU_CAP if tau_cap is None else tau_cap)  # 10 and 10.0: one record
@@ -174,8 +141,61 @@ def reproduce(
     out.mkdir(parents=True, exist_ok=True)
     if not os.access(out, os.W_OK | os.X_OK):
         raise ValueError(f"{out}: directory is not writable")
-    if before_jax is not None:
-        before_jax()
+    return out, names, tau_cap, collision_cap
+
+
+def reproduce(
+    out: str | os.PathLike[str],
+    *,
+    trials: int | None = None,
+    seed: int = 0,
+    seeds: str | os.PathLike[str] | None = None,
+    evolve: bool = False,
+    generations: int | None = None,
+    baseline: str | os.PathLike[str] | bool = True,
+    worlds: str | Sequence[str] | None = None,
+    tau_cap: float | None = None,
+    collision_cap: int | None = None,
+    progress: bool = True,
+    command: str | None = None,
+) -> dict[str, Any] | None:
+    """Run the paper's experiments and write the tables, claims, report and every trial to ``out``.
+
+    Args:
+        out: the output folder (created if missing).
+        trials: trials per system and world (default: the paper's, 30; 20 in ``real``).
+        seed: the trials' PRNG seed, in [0, 2**32) (and the GA's with ``evolve``).
+        seeds: the LTL seed folder (default: the shipped ``checkpoints/default``).
+        evolve: run the LTL first (:func:`run_ltl`, into ``out/ltl``) and use its seed.
+        generations: the LTL's generation cap with ``evolve`` (default: evolve.py's).
+        baseline: the trained neural controller run beside SIE and HDC: True for the shipped
+            ``checkpoints/neural``, a folder for other weights, False for none.
+        worlds: a subset of the protocol's worlds (names, or one comma-separated string).
+        tau_cap, collision_cap: the caps (default: the paper's).
+        progress: show a progress bar per world on stderr.
+        command: the command recorded in ``run.json`` and the report (default: the
+            ``reproduce.py`` command line these arguments stand for).
+
+    Returns:
+        On the writing process, ``{"tables", "claims", "run", "report"}``: the documents of
+        ``tables.json``, ``claims.json`` and ``run.json``, and the report's path; None on the
+        other processes of a multi-process run.
+
+    Raises:
+        ValueError: a bad argument, or a seed or weights that cannot be read (before any trial).
+        LTLRunError: the LTL run failed.
+    """
+    if command is None:
+        flags = {"--out": out, "--trials": trials, "--seeds": seeds, "--evolve": evolve,
+                 "--seed": seed or None, "--baseline": None if isinstance(baseline, bool)
+                 else baseline, "--no-baseline": baseline is False,
+                 "--worlds": worlds if isinstance(worlds, str | None) else ",".join(worlds),
+                 "--tau-cap": tau_cap, "--collision-cap": collision_cap,
+                 "--generations": generations}  # fmt: skip
+        command = command_line("reproduce.py", flags)
+    out, names, tau_cap, collision_cap = check_reproduce(
+        out, trials=trials, seed=seed, seeds=seeds, evolve=evolve, generations=generations,
+        worlds=worlds, tau_cap=tau_cap, collision_cap=collision_cap)  # fmt: skip
 
     started = time.perf_counter()
     timings: dict[str, float] = {}

@@ -243,6 +243,13 @@ def test_library_calls_check_their_arguments_before_jax_starts(tmp_path: Path):
         ("reproduce", (out,), {"trials": 1}, "--trials must be >= 2"),
         ("reproduce", (out,), {"tau_cap": 0}, "--tau-cap must be > 0"),
         ("reproduce", (out,), {"evolve": True, "seeds": "s"}, "exclude each other"),
+        # Silently run before: a world twice, an LTL generation cap with no LTL run.
+        ("reproduce", (out,), {"worlds": "real,real"}, "--worlds names a world twice: real,real"),
+        ("reproduce", (out,), {"generations": 3}, "--generations caps the LTL run of --evolve"),
+        # Grew until the kernel killed them, with no message.
+        ("trials", ("HDC", out / "r.json"), {"trials": 10**8}, "--trials 100000000 needs about"),
+        ("trials", ("HDC",), {"trials": 10**5, "plot": "p.png"}, "--trials 100000 needs about"),
+        ("reproduce", (out,), {"trials": 10**8}, "--trials 100000000 needs about"),
     ]
     code = (
         "import sys\n"

@@ -224,7 +224,7 @@ def _run(out: Path, worlds: list[str], n_trials: int | None, seed: int,
 
     # Every process runs every trial's share (and gets every number); process 0 writes.
     lead = jax.process_index() == 0
-    seeds_dir = Path(seeds) if seeds else default_seed_dir()
+    seeds_dir = Path(seeds) if seeds is not None else default_seed_dir()
     # Read once, and early: a missing or corrupt seed (or baseline) fails before any trial runs.
     loaded = load_ltl_seed(seeds_dir)
     if baseline is not False:

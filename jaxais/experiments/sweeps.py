@@ -429,7 +429,8 @@ def sweep(
 
     if (grid is None) == (noise is None):
         raise ValueError("give one of grid (parameter axes) and noise (noise scales)")
-    world = world or (protocol.REAL_WORLD if noise is not None else protocol.WORLDS[0])
+    if world is None:  # "" is a world the loader refuses, not the default
+        world = protocol.REAL_WORLD if noise is not None else protocol.WORLDS[0]
     trials = protocol.trials_for_world(world) if trials is None else trials
     if not 0 <= seed < 2**32:
         raise ValueError(f"--seed must be in [0, 2**32), got {seed}")
@@ -437,7 +438,8 @@ def sweep(
         raise ValueError(f"--trials must be >= 1, got {trials}")
     if slots < 1:
         raise ValueError(f"--slots must be >= 1, got {slots}")
-    names = (system or ("SIE" if grid is not None else "SIE,SRL,HDC")).split(",")
+    system = ("SIE" if grid is not None else "SIE,SRL,HDC") if system is None else system
+    names = system.split(",")
     for name in names:
         if name not in SYSTEMS:
             raise ValueError(f"--system: unknown system {name!r} (one of {', '.join(SYSTEMS)})")

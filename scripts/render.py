@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 
 from jaxais.cli import ArgumentParser, UserError, check_output_file, main_wrapper, run_script
+from jaxais.io import check_memory
 
 PROG = "render.py"
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg")
@@ -44,6 +45,8 @@ def main(argv: list[str] | None = None) -> None:
         check_output_file(args.gif, (".gif",))
     elif animation:
         raise UserError(f"--{next(iter(animation))} applies to --gif only")
+    # Every robot's every pose is kept (3 float32), on the host and the device, and copied.
+    check_memory(args.robots * args.steps, 48, "--robots x --steps")
     from jaxais import _speed
 
     _speed.setup()

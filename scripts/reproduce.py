@@ -65,8 +65,9 @@ def main(argv: list[str] | None = None) -> None:
 
     result = reproduce(
         args.out, trials=args.trials, seed=args.seed, seeds=args.seeds, evolve=args.evolve,
-        generations=args.generations, baseline=False if args.no_baseline else args.baseline or True,
-        worlds=args.worlds, tau_cap=args.tau_cap, collision_cap=args.collision_cap,
+        generations=args.generations, worlds=args.worlds, tau_cap=args.tau_cap,
+        baseline=not args.no_baseline if args.baseline is None else args.baseline,
+        collision_cap=args.collision_cap,
         command="reproduce.py " + " ".join(sys.argv[1:] if argv is None else argv),
         before_jax=setup,
     )  # fmt: skip

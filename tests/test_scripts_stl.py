@@ -327,6 +327,7 @@ def test_reproduce_user_errors(tmp_path: Path):
         (["--trials", "1"], ["--trials"]),
         (["--tau-cap", "0"], ["--tau-cap"]),
         (["--baseline", tmp_path / "none", "--worlds", "world1"], ["--baseline", "none"]),
+        (["--baseline", "", "--worlds", "world1"], ["--baseline: .: not a trained"]),  # not NN
     ]
     procs = [_start("reproduce.py", *args, "--out", out) for args, _ in cases]
     for (_, words), proc in zip(cases, procs, strict=True):

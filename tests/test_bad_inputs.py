@@ -305,3 +305,12 @@ def test_a_run_beyond_memory_is_refused_with_the_estimate(monkeypatch):
         "--trials 100000000 needs about 819 GB of memory; this machine has 17 GB; "
         "use --trials <= 1048576"
     )
+
+
+def test_a_collision_cap_beyond_the_int32_counters_is_refused():
+    """``trials.py --collision-cap 99999999999`` ended in JAX's OverflowError (a traceback)."""
+    from jaxais.loop import EpisodeConfig
+
+    EpisodeConfig(collision_cap=2**31 - 1)
+    with pytest.raises(ValueError, match=r"collision_cap must be below 2\*\*31, got 99999999999"):
+        EpisodeConfig(collision_cap=99999999999)

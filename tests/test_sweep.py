@@ -149,6 +149,7 @@ SWEEP_ERRORS = [
     (dict(grid=["k1=1"], trials=10**8), "--trials 100000000 needs about"),
     (dict(grid=["k1=1"], noise_kinds="ir"), "--noise-kinds applies to --noise only"),
     (dict(noise=[1.0, 1.0]), "--noise names a scale twice"),
+    (dict(noise=[1.0], trials=10**8), "--trials 100000000 needs about"),
     (dict(noise=[1.0], noise_kinds="ir,ir"), "one or more of ir, camera, wheel, each once"),
     (dict(noise=[1.0], noise_kinds=""), "one or more of ir, camera, wheel, each once"),
     (dict(noise=[1.0], system="SIE,SIE"), "--system names a system twice"),

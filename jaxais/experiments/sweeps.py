@@ -462,7 +462,6 @@ def sweep(
                 raise ValueError(f"--grid {name}: {code} does not use it (only {users} do)")
         points = math.prod(len(v) for _, v in axes)
         check_memory(points, RUN_BYTES, "--grid points")  # before the points are listed
-        check_memory(trials, points * RUN_BYTES, "--trials")
     elif not all(0 <= s < math.inf for s in noise):
         raise ValueError(f"--noise scales must be finite and >= 0, got {list(noise)}")
     elif len(set(noise)) < len(noise):
@@ -473,6 +472,8 @@ def sweep(
         raise ValueError("--noise-kinds applies to --noise only")
     if not kinds or len(set(kinds)) < len(kinds) or set(kinds) - set(NOISE_KINDS):
         raise ValueError(f"--noise-kinds: one or more of {', '.join(NOISE_KINDS)}, each once")
+    pool = points if grid is not None else len(names)  # runs per trial index in one pool
+    check_memory(trials, pool * RUN_BYTES, "--trials")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     tempfile.TemporaryFile(dir=out).close()  # writable: fail now, not after the runs

@@ -23,7 +23,6 @@ import itertools
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +32,6 @@ from scipy import stats as sps
 
 from jaxais import envs
 from jaxais.controllers import System, stl_for
-from jaxais.immune.readings import Readings
 from jaxais.immune.readings import readings as make_readings
 from jaxais.loop import EpisodeConfig
 from jaxais.runner import run_pool, segment_length
@@ -54,10 +52,9 @@ PARAMETERS: dict[str, tuple[str, type]] = {
     "alpha_on_self": ("readings", bool),
 }
 """Sweepable parameters: name -> (the System field that holds it, its type)."""
-_IDIOTYPIC = ("SIE", "UIE")
+_IDIOTYPIC = ("k1", "k2", "k3", "b", "Phi", "initial_clones", "penalty_idiotypic", "alpha_on_self")
 USED_BY: dict[str, tuple[str, ...]] = {
-    **dict.fromkeys(("k1", "k2", "k3", "b", "Phi", "initial_clones"), _IDIOTYPIC),
-    **dict.fromkeys(("penalty_idiotypic", "alpha_on_self"), _IDIOTYPIC),
+    **dict.fromkeys(_IDIOTYPIC, ("SIE", "UIE")),
     "penalty_non_idiotypic": ("SRL", "URL"),
     "sigma0_floor": ("SIE", "SRL", "UIE", "URL"),  # eq (4): the learning systems
 }
@@ -146,7 +143,7 @@ def point_systems(base: System, points: Sequence[dict[str, Any]]) -> System:
     for point in points:
         network = {k: v for k, v in point.items() if PARAMETERS[k][0] == "network"}
         readings = {k: v for k, v in point.items() if PARAMETERS[k][0] == "readings"}
-        ours = {f.name: np.asarray(getattr(base.readings, f.name)).item() for f in fields(Readings)}
+        ours = {name: np.asarray(v).item() for name, v in vars(base.readings).items()}
         system = base.replace(
             network=base.network.replace(**network).validate(),
             readings=make_readings(**(ours | readings)),  # its checks, hold >= 1 ...

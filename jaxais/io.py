@@ -88,6 +88,24 @@ def atomic_write_json(path: str | os.PathLike[str], obj: Any, indent: int | None
     return atomic_write_text(path, text)
 
 
+def read_json_object(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """The JSON object (a dict) in ``path``.
+
+    Raises:
+        UserError: one line naming the file: missing, unreadable, not JSON, or not an object.
+    """
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except OSError as err:
+        raise UserError(f"{p}: {err.strerror or err}") from None
+    except ValueError as err:  # UnicodeDecodeError is one
+        raise UserError(f"{p}: not JSON ({str(err).splitlines()[0][:100]})") from None
+    if not isinstance(doc, dict):
+        raise UserError(f"{p}: holds a JSON {type(doc).__name__}, expected an object {{...}}")
+    return doc
+
+
 def check_writable_dir(path: str | os.PathLike[str]) -> Path:
     """Check that ``path`` is an existing directory this process can create files in.
 
@@ -108,6 +126,27 @@ def check_writable_dir(path: str | os.PathLike[str]) -> Path:
     if not os.access(d, os.W_OK | os.X_OK):
         raise UserError(f"{d}: directory is not writable")
     return d
+
+
+RUN_BYTES = 8192
+"""Host memory a run of the pool keeps until its call ends, about: its parameters (a System,
+1.4 kB, held twice while assembled), keys, outcome and trial record with its JSON (measured)."""
+
+
+def check_memory(count: int, each: int, flag: str) -> None:
+    """Refuse, before any work, ``count`` items of ``each`` bytes beyond half this machine's
+    memory (a run killed by the kernel says nothing and loses everything).
+
+    Raises:
+        UserError: ``"{flag} {count} needs about N GB of memory; this machine has M GB; use
+            {flag} <= K"``.
+    """
+    total = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    if count * each > total // 2:
+        raise UserError(
+            f"{flag} {count} needs about {count * each / 1e9:.3g} GB of memory; this machine has "
+            f"{total / 1e9:.0f} GB; use {flag} <= {total // 2 // each}"
+        )
 
 
 def check_output_file(

@@ -79,6 +79,8 @@ class EpisodeConfig:
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
         if self.tau_cap > 1e6:  # iteration counters are int32
             raise ValueError(f"tau_cap must be at most 1e6 s, got {self.tau_cap!r}")
+        if self.collision_cap > 2**31 - 1:  # and collision counters
+            raise ValueError(f"collision_cap must be below 2**31, got {self.collision_cap!r}")
         if self.finish_pixels < 0:
             raise ValueError(f"finish_pixels must be >= 0, got {self.finish_pixels!r}")
 

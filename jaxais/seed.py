@@ -194,8 +194,10 @@ def load_seed(path: str | Path | None = None) -> tuple[Seed, dict[str, Any]]:
             f"{path}: not a seed directory, {SEED_JSON} or {ARRAYS_DIR}/ missing ({hint})"
         )
     forget_abandoned_reads()  # a failed read must end with our one-line error alone
+    part = SEED_JSON  # which part is damaged, for the message
     try:
         meta = json.loads((path / SEED_JSON).read_text())
+        part = f"{ARRAYS_DIR}/"
         with ocp.StandardCheckpointer() as ckpt:
             arrays = ckpt.restore((path / ARRAYS_DIR).absolute())
         arrays = {k: np.asarray(v) for k, v in arrays.items()}
@@ -205,7 +207,7 @@ def load_seed(path: str | Path | None = None) -> tuple[Seed, dict[str, Any]]:
         )
     except Exception as err:  # noqa: BLE001 (any failure to read is a corrupt seed)
         msg = str(err).splitlines()[0] if str(err) else type(err).__name__
-        raise SeedError(f"{path}: corrupt seed ({msg[:200]}); {hint}") from None
+        raise SeedError(f"{path}: corrupt seed ({part}: {msg[:160]}); {hint}") from None
     fmt = meta.get("format") if isinstance(meta, dict) else None
     if fmt != SEED_FORMAT:
         raise SeedError(

@@ -12,15 +12,13 @@ import sys
 from jaxais.cli import ArgumentParser, UserError, main_wrapper, run_script
 from jaxais.ga.config import CROSSING_STARTS, ConfigError, GAConfig
 
-PROG = "evolve.py"
-
 
 def fraction_or_none(text: str) -> float | None:
     return None if text.strip().lower() in ("none", "off") else float(text)
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    p = ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0])
+    p = ArgumentParser(prog="evolve.py", description=__doc__.split("\n\n")[0])
     p.add_argument("--world", default="ga_maze", help="world name or .toml path")
     types = {"target_f": float, "success_rate": fraction_or_none}
     for f in dataclasses.fields(GAConfig):  # defaults, types and help: GAConfig's
@@ -33,15 +31,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     add("--out", help="output directory (created if missing)")
     add("--resume", action="store_true", help="continue from DIR/checkpoints")
     add("--diversity", action="store_true", help="compare 5 x 10 with 1 x 50")
-    add("--diversity-seeds", type=int, default=3, help="GA seeds per arm (>= 2)")
+    add("--diversity-seeds", type=int, default=argparse.SUPPRESS, help="GA seeds per arm (3)")
     add("--check-seed", metavar="DIR", help="measure the seed in DIR and exit (no GA, no --out)")
     args = p.parse_args(argv)
-    fields = dataclasses.fields(GAConfig)
-    args.config = GAConfig(**{f.name: getattr(args, f.name) for f in fields})  # validates
+    if "diversity_seeds" in args and not args.diversity:
+        p.error("--diversity-seeds applies with --diversity only")
+    args.config = GAConfig(**{f.name: getattr(args, f.name) for f in dataclasses.fields(GAConfig)})
     return args
 
 
-@main_wrapper(PROG)
+@main_wrapper("evolve.py")
 def run(argv: list[str] | None = None) -> dict:
     try:
         return _run(parse_args(argv), argv)
@@ -66,7 +65,7 @@ def _run(args: argparse.Namespace, argv: list[str] | None) -> dict:
         result = evolution.check_seed(args.check_seed, **given)
     else:
         given |= dict(resume=args.resume, argv=sys.argv[1:] if argv is None else list(argv))
-        seeds = args.diversity_seeds if args.diversity else None
+        seeds = getattr(args, "diversity_seeds", 3) if args.diversity else None
         result = evolution.evolve(args.out, **given, diversity_seeds=seeds)
     print(evolution.report(result, args.check_seed or args.out))
     return result

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import argparse
 
-from jaxais.cli import ArgumentParser, check_output_file, main_wrapper, run_script
+from jaxais.cli import ArgumentParser, UserError, check_output_file, main_wrapper, run_script
+from jaxais.io import check_memory
 
 PROG = "render.py"
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg")
@@ -29,8 +30,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--robots", type=int, default=3, help="number of robots (separate runs)")
     p.add_argument("--seed", type=int, default=0, help="PRNG seed")
     p.add_argument("--gif", default=None, help="also write an animation to this .gif")
-    p.add_argument("--every", type=int, default=10, help="GIF frame every N iterations")
-    p.add_argument("--fps", type=float, default=25.0, help="GIF frames per second")
+    gif = dict(default=argparse.SUPPRESS)  # given without --gif, refused
+    p.add_argument("--every", type=int, help="GIF frame every N iterations (10)", **gif)
+    p.add_argument("--fps", type=float, help="GIF frames per second (25)", **gif)
     return p.parse_args(argv)
 
 
@@ -38,8 +40,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     check_output_file(args.out, FIGURE_SUFFIXES)
+    animation = {k: v for k, v in vars(args).items() if k in ("every", "fps")}
     if args.gif is not None:
         check_output_file(args.gif, (".gif",))
+    elif animation:
+        raise UserError(f"--{next(iter(animation))} applies to --gif only")
+    # Every robot's every pose is kept (3 float32), on the host and the device, and copied.
+    check_memory(args.robots * args.steps, 48, "--robots x --steps")
     from jaxais import _speed
 
     _speed.setup()
@@ -47,7 +54,7 @@ def main(argv: list[str] | None = None) -> None:
 
     world, frames = render(
         args.out, world=args.world, steps=args.steps, robots=args.robots, seed=args.seed,
-        gif=args.gif, every=args.every, fps=args.fps,
+        gif=args.gif, **animation,
     )  # fmt: skip
     written = f"wrote {args.out} ({args.robots} robot(s) x {args.steps} steps on {world})"
     if frames is not None:

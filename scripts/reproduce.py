@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> None:
     _speed.setup(cpu_device_per_core=True)
     distributed.initialize(args)  # before JAX computes anything
     result = reproduce(
-        args.out, baseline=False if args.no_baseline else args.baseline or True,
+        args.out, baseline=not args.no_baseline if args.baseline is None else args.baseline,
         command="reproduce.py " + " ".join(sys.argv[1:] if argv is None else argv), **kw,
     )  # fmt: skip
     if result is not None:  # the writing process

@@ -27,7 +27,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                       help="an axis (repeat for more), e.g. k1=0:2:11 or hold=1,10,31")
     what.add_argument("--noise", metavar="S1,S2,...",
                       help="scales of the world's noise (1 = its own levels), e.g. 0,0.5,1,2")
-    p.add_argument("--noise-kinds", default="ir,camera,wheel", help="which noise --noise scales")
+    p.add_argument("--noise-kinds", help="which noise --noise scales (default: ir,camera,wheel)")
     p.add_argument("--system", help=f"one (--grid; default SIE) or more (--noise; default "
                    f"SIE,SRL,HDC) of {', '.join(SYSTEMS)}")
     p.add_argument("--random-set", choices=tuple(RANDOM_SETS), default=None)
@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> None:
 
     command = "sweep.py " + " ".join(sys.argv[1:] if argv is None else argv)
     doc = sweep(
-        args.out, grid=args.grid, noise=noise, noise_kinds=args.noise_kinds.split(","),
+        args.out, grid=args.grid, noise=noise, noise_kinds=args.noise_kinds,
         system=args.system, random_set=args.random_set, world=args.world, trials=args.trials,
         seed=args.seed, seeds=args.seeds, tau_cap=args.tau_cap,
         collision_cap=args.collision_cap, slots=args.slots, command=command,

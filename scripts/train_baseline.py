@@ -55,8 +55,8 @@ def main(argv: list[str] | None = None) -> None:
         config = TrainConfig(**{f.name: getattr(args, f.name) for f in fields(TrainConfig)})
     except ValueError as err:
         raise UserError(f"--{str(err).replace('_', '-')}") from err
-    if args.eval_only and args.no_eval:
-        raise UserError("--eval-only and --no-eval exclude each other")
+    if args.eval_only and args.no_eval or args.weights and not args.eval_only:
+        raise UserError("--weights goes with --eval-only, which excludes --no-eval")
     out = args.out or datetime.datetime.now().strftime("runs/baseline-%Y%m%d-%H%M%S")
     command = "train_baseline.py " + " ".join(sys.argv[1:] if argv is None else argv)
     _speed.setup()  # after the flags are checked: a bad flag answers without loading JAX

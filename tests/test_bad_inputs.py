@@ -306,3 +306,31 @@ def test_reproduce_evolve_into_an_earlier_ltl_folder_says_what_to_do(tmp_path: P
     )
     assert "--resume" not in proc.stderr.replace("--generations 1 --resume'", "")
     assert _tree(tmp_path) == before
+
+
+# ---------------------------------------------------------------------------------- memory
+
+
+def test_a_run_beyond_memory_is_refused_with_the_estimate(monkeypatch):
+    """A run whose host arrays would pass half the machine's memory is refused before any work
+    (``trials.py --trials 100000000`` grew to 24 GB and was killed with no message)."""
+    from jaxais import io
+
+    pages = {"SC_PHYS_PAGES": 4 * 2**20, "SC_PAGE_SIZE": 4096}  # 16 GiB
+    monkeypatch.setattr(io.os, "sysconf", pages.__getitem__)
+    io.check_memory(10**6, io.RUN_BYTES, "--trials")  # 8.2 of 17.2 GB: fits
+    with pytest.raises(io.UserError) as info:
+        io.check_memory(10**8, io.RUN_BYTES, "--trials")
+    assert str(info.value) == (
+        "--trials 100000000 needs about 819 GB of memory; this machine has 17 GB; "
+        "use --trials <= 1048576"
+    )
+
+
+def test_a_collision_cap_beyond_the_int32_counters_is_refused():
+    """``trials.py --collision-cap 99999999999`` ended in JAX's OverflowError (a traceback)."""
+    from jaxais.loop import EpisodeConfig
+
+    EpisodeConfig(collision_cap=2**31 - 1)
+    with pytest.raises(ValueError, match=r"collision_cap must be below 2\*\*31, got 99999999999"):
+        EpisodeConfig(collision_cap=99999999999)

@@ -323,6 +323,7 @@ def test_bad_flags_subprocess(tmp_path: Path):
         ["--robots", "many"],
         ["--no-such-flag"],
         ["--diversity", "--diversity-seeds", "1"],
+        ["--diversity-seeds", "4"],  # without --diversity: ignored before
         ["--starts", "0"],
         ["--success-starts", "-1"],
         ["--success-starts", "0"],  # the default success rate needs checks

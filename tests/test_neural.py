@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import json
 from pathlib import Path
 
 import jax
@@ -219,6 +220,73 @@ def test_weights_round_trip(tmp_path):
         load_params(tmp_path)
 
 
+def _damage_params(d: Path, how: str) -> None:
+    path = d / "params.npz"
+    if how == "truncated":
+        path.write_bytes(path.read_bytes()[:300])
+    elif how == "a .npy":
+        with open(path, "wb") as f:
+            np.save(f, np.zeros(3))
+    elif how == "random bytes":
+        path.write_bytes(np.random.default_rng(0).bytes(2000))
+    elif how == "no w2":
+        with open(path, "wb") as f:
+            np.savez(f, w1=np.zeros((10, 2)), b1=np.zeros(2), b2=np.zeros(2))
+    else:
+        (d / "config.json").write_text("[1, 2]")
+
+
+@pytest.mark.parametrize(
+    ("how", "words"),
+    [
+        ("truncated", "params.npz: not a trained neural controller's weights (not an .npz"),
+        ("a .npy", "params.npz: not a trained neural controller's weights (not an .npz"),
+        ("random bytes", "params.npz: not a trained neural controller's weights (not an .npz"),
+        ("no w2", "params.npz: not a trained neural controller's weights ("),
+        ("config.json a list", "config.json: holds a JSON list, expected an object"),
+    ],
+)
+def test_damaged_weights_are_one_line_naming_the_file(tmp_path, how, words):
+    """A UserError (a ValueError: the scripts print it as one line) naming the file, never
+    zipfile's, pickle's or numpy's own words."""
+    from jaxais.io import UserError
+
+    save_params(tmp_path, init_mlp(jax.random.key(3), 2), {"seed": 3})
+    _damage_params(tmp_path, how)
+    with pytest.raises(UserError) as info:
+        load_params(tmp_path)
+    msg = str(info.value)
+    assert msg.startswith(str(tmp_path)) and words in msg and "\n" not in msg, msg
+    assert "pickle" not in msg
+
+
+def test_collect_refuses_damaged_evaluations_naming_the_file(tmp_path):
+    from jaxais.experiments.baseline import collect_baselines
+    from jaxais.io import UserError
+
+    good = {"fitness": 1.0, "failed": False}
+    systems = {k: {"trials": [good]} for k in ("SIE", "HDC", "NN")}
+    cases = {
+        "a list": ([], {}, "evaluation.json: holds a JSON list"),
+        "empty": ({}, {}, "evaluation.json: no entry worlds"),
+        "no HDC": ({"worlds": {"w": {"systems": {"SIE": systems["SIE"]}}}}, {}, "systems/HDC"),
+        "bad trial": (
+            {"worlds": {"w": {"systems": systems | {"NN": {"trials": [{"fitness": "x"}]}}}}},
+            {},
+            "w NN holds no trials with fitness and failed",
+        ),
+        "config a list": ({"worlds": {"w": {"systems": systems}}}, [], "config.json: holds a"),
+    }
+    for name, (evaluation, config, words) in cases.items():
+        d = tmp_path / name
+        d.mkdir()
+        (d / "evaluation.json").write_text(json.dumps(evaluation))
+        (d / "config.json").write_text(json.dumps(config))
+        with pytest.raises(UserError) as info:
+            collect_baselines([d])
+        assert str(info.value).startswith(str(d)) and words in str(info.value), (name, info)
+
+
 def test_shipped_weights_load():
     params, info = load_params()
     assert isinstance(params, MLPParams)
@@ -237,7 +305,8 @@ SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "train_baseline.py
         (["--pairs", "0"], "--pairs must be a positive integer"),
         (["--learning-rate", "-1"], "--learning-rate must be a positive number"),
         (["--world", "nowhere"], "no built-in world or file 'nowhere'"),
-        (["--eval-only", "--no-eval"], "exclude each other"),
+        (["--eval-only", "--no-eval"], "--eval-only, which excludes --no-eval"),
+        (["--weights", "w"], "--weights goes with --eval-only"),
     ],
 )
 def test_script_bad_flags_are_one_line_errors_without_jax(flags, message, tmp_path):
@@ -256,7 +325,6 @@ def test_script_bad_flags_are_one_line_errors_without_jax(flags, message, tmp_pa
 
 def test_script_collects_runs_into_one_table(tmp_path):
     """--collect: one row per run, SIE and HDC from the first, and the runs pooled."""
-    import json
 
     def trials(fs, failed=()):
         return [{"fitness": f, "failed": i in failed} for i, f in enumerate(fs)]

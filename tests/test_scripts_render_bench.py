@@ -139,6 +139,8 @@ def test_render_world_just_within_the_surface_limit(tmp_path):
         (("--steps", 0), "--steps"),
         (("--robots", -2), "--robots"),
         (("--every", 0, "--gif", "x.gif"), "--every"),
+        (("--fps", 5), "--fps applies to --gif only"),  # ignored before
+        (("--robots", 10**9), "--robots x --steps 5000000000 needs about"),  # grew, unbounded
         (("--out", "no/such/dir/w.png"), "does not exist"),
         (("--out", "w.txt"), ".png"),
         (("--gif", "w.mp4"), ".gif"),

@@ -248,6 +248,13 @@ def test_library_calls_check_their_arguments_before_jax_starts(tmp_path: Path):
         ("reproduce", (out,), {"trials": 1}, "--trials must be >= 2"),
         ("reproduce", (out,), {"tau_cap": 0}, "--tau-cap must be > 0"),
         ("reproduce", (out,), {"evolve": True, "seeds": "s"}, "exclude each other"),
+        # Silently run before: a world twice, an LTL generation cap with no LTL run.
+        ("reproduce", (out,), {"worlds": "real,real"}, "--worlds names a world twice: real,real"),
+        ("reproduce", (out,), {"generations": 3}, "--generations caps the LTL run of --evolve"),
+        # Grew until the kernel killed them, with no message.
+        ("trials", ("HDC", out / "r.json"), {"trials": 10**8}, "--trials 100000000 needs about"),
+        ("trials", ("HDC",), {"trials": 10**5, "plot": "p.png"}, "--trials 100000 needs about"),
+        ("reproduce", (out,), {"trials": 10**8}, "--trials 100000000 needs about"),
     ]
     code = (
         "import sys\n"
@@ -327,6 +334,7 @@ def test_reproduce_user_errors(tmp_path: Path):
         (["--trials", "1"], ["--trials"]),
         (["--tau-cap", "0"], ["--tau-cap"]),
         (["--baseline", tmp_path / "none", "--worlds", "world1"], ["--baseline", "none"]),
+        (["--baseline", "", "--worlds", "world1"], ["--baseline: .: not a trained"]),  # not NN
     ]
     procs = [_start("reproduce.py", *args, "--out", out) for args, _ in cases]
     for (_, words), proc in zip(cases, procs, strict=True):

@@ -164,14 +164,17 @@ CASES = {
         lambda p: (p / ARRAYS_DIR / "_METADATA").unlink(),
         "corrupt seed",
     ),
-    "truncated arrays/_METADATA": (_truncate("_METADATA"), "corrupt seed"),
+    "truncated arrays/_METADATA": (_truncate("_METADATA"), "corrupt seed (arrays/: "),
     "truncated manifest": (_truncate("manifest.ocdbt"), "corrupt seed"),
     "truncated data file": (_truncate("d/*"), "corrupt seed"),
     "deleted data files": (
         lambda p: [f.unlink() for f in (p / ARRAYS_DIR / "d").iterdir()],
         "corrupt seed",
     ),
-    "seed.json not JSON": (lambda p: (p / SEED_JSON).write_text("{not json"), "corrupt seed"),
+    "seed.json not JSON": (
+        lambda p: (p / SEED_JSON).write_text("{not json"),
+        "corrupt seed (seed.json: ",
+    ),
     "seed.json malformed": (
         _edit_json(lambda d: d["sets"][0].update(antibodies=[{"type": "fly"}])),
         "malformed",

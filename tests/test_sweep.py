@@ -98,7 +98,10 @@ def test_parse_axis_forms():
         ("k1", "NAME=START:STOP:COUNT"),
         ("k1=", "NAME=START:STOP:COUNT"),
         ("k1=0:2", "NAME=START:STOP:COUNT"),
-        ("k1=0:2:0", "COUNT >= 1"),
+        ("k1=0:2:0", "1 <= COUNT <= 1e[+]06"),
+        ("k1=0:1:10000000000", "1 <= COUNT <= 1e[+]06"),  # not 80 GB of linspace
+        ("k1=0.5,1,0.5", "a value twice"),
+        ("hold=1:1:3", "a value twice"),
         ("k1=a,b", "NAME=START:STOP:COUNT"),
         ("k1=0,inf", "finite"),
         ("kk1=0:1:2", "unknown parameter"),
@@ -131,6 +134,39 @@ def test_point_systems_set_each_value_and_keep_dtypes():
     np.testing.assert_array_equal(grid.paratopes[1], np.asarray(sie.paratopes))
     with pytest.raises(ValueError, match="k1 must be >= 0"):
         sweep.point_systems(sie, [{"k1": -1.0}])
+    # Our readings' own checks (jaxais.immune.readings.readings), as the network's.
+    for point, words in (({"hold": 0}, "hold must be an int >= 1"),
+                         ({"encounter_gap": 0}, "encounter_gap must be an int >= 1"),
+                         ({"sigma0_floor": 2.0}, "sigma0_floor must lie in")):  # fmt: skip
+        with pytest.raises(ValueError, match=words):
+            sweep.point_systems(sie, [{"hold": 3}, point])
+
+
+SWEEP_ERRORS = [
+    (dict(grid=["k1=0.5,1"], system="HDC"), "--grid k1: HDC does not use it (only SIE, UIE do)"),
+    (dict(grid=["penalty_non_idiotypic=1"]), "penalty_non_idiotypic: SIE does not use it"),
+    (dict(grid=["k1=0:1:100000", "k2=0:1:100000"]), "--grid points 10000000000 needs about"),
+    (dict(grid=["k1=1"], trials=10**8), "--trials 100000000 needs about"),
+    (dict(grid=["k1=1"], noise_kinds="ir"), "--noise-kinds applies to --noise only"),
+    (dict(noise=[1.0, 1.0]), "--noise names a scale twice"),
+    (dict(noise=[1.0], trials=10**8), "--trials 100000000 needs about"),
+    (dict(noise=[1.0], noise_kinds="ir,ir"), "one or more of ir, camera, wheel, each once"),
+    (dict(noise=[1.0], noise_kinds=""), "one or more of ir, camera, wheel, each once"),
+    (dict(noise=[1.0], system="SIE,SIE"), "--system names a system twice"),
+    (dict(noise=[1.0], system=""), "unknown system ''"),
+    (dict(noise=[1.0], world=""), "no such world file"),
+]
+
+
+def test_sweep_refuses_what_it_would_run_wrongly_or_not_at_all(tmp_path):
+    """Each is refused before any run (with tiny caps, the old code ran them, or grew until
+    the kernel killed it); nothing is written."""
+    for i, (kw, words) in enumerate(SWEEP_ERRORS):
+        out = tmp_path / str(i)
+        with pytest.raises(ValueError) as info:
+            sweep.sweep(out, **{"trials": 1, "tau_cap": 1.0, "slots": 2, **kw})
+        assert words in str(info.value), (kw, str(info.value))
+        assert not (out / "sweep.json").exists() and not (out / "reality_gap.json").exists()
 
 
 def test_sweep_points_are_plain_trials_with_the_points_constants():

@@ -37,8 +37,9 @@ from __future__ import annotations
 
 import dataclasses
 import io
-import json
 import math
+import zipfile
+import zlib
 from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
@@ -56,7 +57,7 @@ from jaxais.controllers import Controller, Percept
 from jaxais.envs.gymnax import IR_FULL_SCALE, OBS_NAMES, PIXELS
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.immune.behaviours import MAX_WHEEL_SPEED
-from jaxais.io import atomic_write, atomic_write_json
+from jaxais.io import UserError, atomic_write, atomic_write_json, read_json_object
 
 __all__ = [
     "CONFIG_FILE",
@@ -457,20 +458,29 @@ def load_params(directory: str | Path | None = None) -> tuple[MLPParams, dict[st
     """The weights and the training record from ``directory`` (default: the shipped ones).
 
     Raises:
-        ValueError: a file is missing, or the arrays are not an MLP's (names, shapes, finite).
+        UserError: (a ValueError) one line naming the file: missing, damaged, or arrays that
+            are not an MLP's (names, shapes, finite).
     """
     d = default_params_dir() if directory is None else Path(directory)
+    path, hint = d / PARAMS_FILE, "train one with scripts/train_baseline.py"
+    if not path.is_file():
+        raise UserError(f"{d}: not a trained neural controller (no {PARAMS_FILE}; {hint})")
+    # np.load would take a .npy, or random bytes as a pickle: only an .npz archive is weights.
     try:
-        with np.load(d / PARAMS_FILE) as z:
+        if not zipfile.is_zipfile(path):
+            raise ValueError("not an .npz archive")
+        with np.load(path) as z:
             arrays = {f.name: np.asarray(z[f.name], np.float32) for f in _fields()}
-        info = json.loads((d / CONFIG_FILE).read_text())
-    except (OSError, KeyError, ValueError) as err:
-        raise ValueError(f"{d}: not a trained neural controller ({err})") from err
+    except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as err:
+        raise UserError(
+            f"{path}: not a trained neural controller's weights ({str(err)[:100]}); {hint}"
+        ) from None
+    info = read_json_object(d / CONFIG_FILE)
     h = arrays["b1"].shape[0] if arrays["b1"].ndim == 1 else -1
     shapes = {"w1": (N_FEATURES, h), "b1": (h,), "w2": (h, 2), "b2": (2,)}
     for name, shape in shapes.items():
         if arrays[name].shape != shape or not np.all(np.isfinite(arrays[name])):
-            raise ValueError(f"{d / PARAMS_FILE}: {name} must be finite with shape {shape}")
+            raise UserError(f"{path}: {name} must be finite with shape {shape}")
     return MLPParams(**arrays), info
 
 

@@ -7,7 +7,6 @@ Free of JAX at import (it loads on the first call). Never writes into the shippe
 from __future__ import annotations
 
 import dataclasses
-import json
 import sys
 import tempfile
 import time
@@ -18,7 +17,7 @@ from typing import Any
 
 from jaxais.baselines.config import NN_LABEL, TrainConfig
 from jaxais.experiments import protocol
-from jaxais.io import atomic_write_json, atomic_write_text
+from jaxais.io import UserError, atomic_write_json, atomic_write_text, read_json_object
 
 REFERENCE = ("SIE", "HDC")
 """The paper's systems it runs beside."""
@@ -267,6 +266,16 @@ def _table(doc: dict[str, Any], info: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _entry(doc: Any, path: Path, *keys: str) -> Any:
+    """``doc[keys[0]][keys[1]]...``, or a UserError naming the first missing entry."""
+    for i, key in enumerate(keys):
+        if not isinstance(doc, dict) or key not in doc:
+            where = "/".join(keys[: i + 1])
+            raise UserError(f"{path}: no entry {where} (not a train_baseline.py evaluation)")
+        doc = doc[key]
+    return doc
+
+
 def collect_baselines(dirs: Sequence[str | Path]) -> str:
     """One markdown table of several evaluated runs (``evaluation.json`` and ``config.json`` in
     each directory): mean f and failure rate per world, SIE and HDC from the first run, and
@@ -275,15 +284,23 @@ def collect_baselines(dirs: Sequence[str | Path]) -> str:
 
     from jaxais.experiments import stats
 
-    runs = []
+    ok = lambda t: (
+        isinstance(t, dict)
+        and isinstance(t.get("failed"), bool)
+        and isinstance(t.get("fitness"), int | float)
+    )
+    runs, worlds = [], None
     for d in dirs:
-        try:
-            ev = json.loads((Path(d) / "evaluation.json").read_text())
-            info = json.loads((Path(d) / "config.json").read_text())
-        except (OSError, ValueError) as err:
-            raise ValueError(f"{d}: no evaluated run ({err})") from err
+        path = Path(d) / "evaluation.json"
+        ev, info = read_json_object(path), read_json_object(Path(d) / "config.json")
+        worlds = list(_entry(ev, path, "worlds")) if worlds is None else worlds
+        if not worlds:
+            raise UserError(f"{path}: evaluated in no world")
+        for w, label in ((w, label) for w in worlds for label in (*REFERENCE, NN_LABEL)):
+            trials = _entry(ev, path, "worlds", w, "systems", label, "trials")
+            if not isinstance(trials, list) or not trials or not all(map(ok, trials)):
+                raise UserError(f"{path}: {w} {label} holds no trials with fitness and failed")
         runs.append((ev, info))
-    worlds = list(runs[0][0]["worlds"])
     head = "| System | training seed | maze fitness | " + " | ".join(
         f"{w} f (failed %)" for w in worlds
     )
@@ -298,7 +315,7 @@ def collect_baselines(dirs: Sequence[str | Path]) -> str:
         lines.append(f"| {label} | – | – | " + " | ".join(row) + " |")
     pooled: dict[str, list[dict]] = {w: [] for w in worlds}
     for ev, info in runs:
-        final = info.get("final", {})
+        final = info.get("final") if isinstance(info.get("final"), dict) else {}
         maze = next((v for k, v in final.items() if k.startswith("center_fitness_last")), None)
         row = []
         for w in worlds:

@@ -9,7 +9,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from jaxais.experiments import protocol
-from jaxais.io import atomic_write_json, check_output_file
+from jaxais.io import RUN_BYTES, atomic_write_json, check_memory, check_output_file
 from jaxais.labels import RANDOM_SETS, SYSTEMS, label
 
 __all__ = ["check_trials", "command_line", "trials"]
@@ -58,6 +58,8 @@ def check_trials(
         raise ValueError(f"unknown random set {random_set!r} (one of {', '.join(RANDOM_SETS)})")
     if seeds and system not in ("SIE", "SRL"):
         raise ValueError(f"--seeds applies to the seeded systems SIE and SRL, not {system}")
+    # A plot keeps every trajectory: a pose (3 float32) per 0.8 s, to 4000 s, held thrice.
+    check_memory(n, RUN_BYTES + (180_000 if plot else 0), "--trials")
     if out is not None:
         check_output_file(out, (".json",))
     if plot:

@@ -34,7 +34,7 @@ from typing import Any
 
 from jaxais.experiments import protocol
 from jaxais.experiments.one_system import command_line
-from jaxais.io import atomic_write_json
+from jaxais.io import RUN_BYTES, atomic_write_json, check_memory
 
 __all__ = ["LTLRunError", "check_reproduce", "headline", "reproduce", "run_ltl"]
 
@@ -125,12 +125,19 @@ def check_reproduce(
         raise ValueError(
             f"--worlds: unknown world(s) {unknown} (choose from {', '.join(protocol.WORLDS)})"
         )
+    if len(set(names)) < len(names):
+        raise ValueError(f"--worlds names a world twice: {','.join(names)}")
     if not 0 <= seed < 2**32:
         raise ValueError(f"--seed must be in [0, 2**32), got {seed}")
     if trials is not None and trials < 2:
         raise ValueError(f"--trials must be >= 2 (t-tests need two per group), got {trials}")
+    if trials is not None:  # a world's systems, SIE at hold=1 and the baseline: one pool
+        runs = max(len(protocol.systems_for_world(w)) for w in names) + 2
+        check_memory(trials, runs * RUN_BYTES, "--trials")
     if tau_cap <= 0 or collision_cap < 1:
         raise ValueError("--tau-cap must be > 0 and --collision-cap >= 1")
+    if generations is not None and not evolve:
+        raise ValueError("--generations caps the LTL run of --evolve: give both, or neither")
     if generations is not None and generations < 1:
         raise ValueError(f"--generations must be >= 1, got {generations}")
     if evolve and seeds is not None:
@@ -237,7 +244,7 @@ def _run(out: Path, worlds: list[str], n_trials: int | None, seed: int,
 
     # Every process runs every trial's share (and gets every number); process 0 writes.
     lead = jax.process_index() == 0
-    seeds_dir = Path(seeds) if seeds else default_seed_dir()
+    seeds_dir = Path(seeds) if seeds is not None else default_seed_dir()
     # Read once, and early: a missing or corrupt seed (or baseline) fails before any trial runs.
     loaded = load_ltl_seed(seeds_dir)
     if baseline is not False:

@@ -32,6 +32,7 @@ from scipy import stats as sps
 
 from jaxais import envs
 from jaxais.controllers import System, stl_for
+from jaxais.immune.readings import readings as make_readings
 from jaxais.loop import EpisodeConfig
 from jaxais.runner import run_pool, segment_length
 from jaxais.trials import _keys, stream_id
@@ -51,6 +52,15 @@ PARAMETERS: dict[str, tuple[str, type]] = {
     "alpha_on_self": ("readings", bool),
 }
 """Sweepable parameters: name -> (the System field that holds it, its type)."""
+_IDIOTYPIC = ("k1", "k2", "k3", "b", "Phi", "initial_clones", "penalty_idiotypic", "alpha_on_self")
+USED_BY: dict[str, tuple[str, ...]] = {
+    **dict.fromkeys(_IDIOTYPIC, ("SIE", "UIE")),
+    "penalty_non_idiotypic": ("SRL", "URL"),
+    "sigma0_floor": ("SIE", "SRL", "UIE", "URL"),  # eq (4): the learning systems
+}
+"""The systems that use a parameter, where not all do (a penalty ends HDC's bout too)."""
+MAX_AXIS = 10**6
+"""The most values of one axis (the grid's size is bounded by the memory it needs)."""
 
 STATIC: dict[str, str] = {
     "idiotope_period": "NetworkParams.idiotope_period is a loop schedule, fixed when the "
@@ -89,17 +99,20 @@ def parse_axis(spec: str) -> tuple[str, np.ndarray]:
         if ":" in values:
             start, stop, count = values.split(":")
             n = int(count)
-            if n < 1:
+            if not 1 <= n <= MAX_AXIS:
                 raise ValueError
             grid = np.linspace(float(start), float(stop), n)
         else:
             grid = np.array([float(v) for v in values.split(",")])
     except ValueError:
         raise ValueError(
-            f"--grid {spec!r}: write NAME=START:STOP:COUNT (COUNT >= 1) or NAME=V1,V2,..."
+            f"--grid {spec!r}: write NAME=START:STOP:COUNT (1 <= COUNT <= {MAX_AXIS:.0e}) or "
+            "NAME=V1,V2,..."
         ) from None
     if not np.all(np.isfinite(grid)):
         raise ValueError(f"--grid {spec!r}: values must be finite")
+    if np.unique(grid).size < grid.size:
+        raise ValueError(f"--grid {spec!r}: a value twice (each point runs once)")
     if kind is int:
         if not np.all(grid == np.round(grid)):
             raise ValueError(f"--grid {name}: an integer parameter, got {values}")
@@ -124,15 +137,16 @@ def point_systems(base: System, points: Sequence[dict[str, Any]]) -> System:
     """``base`` once per point with the point's values, stacked along a leading axis [P].
 
     Raises:
-        ValueError: a value out of its parameter's range (the network's own checks).
+        ValueError: a value out of its parameter's range (the network's and readings' checks).
     """
     systems = []
     for point in points:
         network = {k: v for k, v in point.items() if PARAMETERS[k][0] == "network"}
         readings = {k: v for k, v in point.items() if PARAMETERS[k][0] == "readings"}
+        ours = {name: np.asarray(v).item() for name, v in vars(base.readings).items()}
         system = base.replace(
             network=base.network.replace(**network).validate(),
-            readings=base.readings.replace(**readings),
+            readings=make_readings(**(ours | readings)),  # its checks, hold >= 1 ...
         )
         systems.append(system)
     # Each value in its base leaf's dtype (an int32 hold stays int32: the same program).
@@ -372,7 +386,7 @@ def sweep(
     *,
     grid: Sequence[str] | None = None,
     noise: Sequence[float] | None = None,
-    noise_kinds: Sequence[str] = tuple(NOISE_KINDS),
+    noise_kinds: str | Sequence[str] | None = None,
     system: str | None = None,
     random_set: str | None = None,
     world: str | None = None,
@@ -389,9 +403,11 @@ def sweep(
 
     Writes sweep.json and (one or two axes) sweep.png, or reality_gap.json and reality_gap.png.
     ``system``: one label (grid; default SIE) or comma-separated labels (noise; default
-    SIE,SRL,HDC). ``world`` defaults to world1 (grid) or real (noise), ``trials`` to the paper's
-    count there, the caps to the paper's. Under ``jax.distributed`` (joined by the caller) every
-    process computes the same numbers and process 0 writes. Returns the document.
+    SIE,SRL,HDC); ``noise_kinds`` (noise only; names or one comma-separated string) default to
+    every kind of :data:`NOISE_KINDS`. ``world`` defaults to world1 (grid) or real (noise),
+    ``trials`` to the paper's count there, the caps to the paper's. Under ``jax.distributed``
+    (joined by the caller) every process computes the same numbers and process 0 writes.
+    Returns the document.
 
     Raises:
         ValueError: a bad argument (one line), before anything runs.
@@ -405,12 +421,13 @@ def sweep(
     from jaxais.experiments.records import build_systems, portable_command, run_config
     from jaxais.experiments.sweep_plots import save_noise_figure, save_sweep_figures
     from jaxais.immune.network import NetworkParams
-    from jaxais.io import atomic_write_json
-    from jaxais.labels import SYSTEMS, label
+    from jaxais.io import RUN_BYTES, atomic_write_json, check_memory
+    from jaxais.labels import SYSTEMS, label, parse_label
 
     if (grid is None) == (noise is None):
         raise ValueError("give one of grid (parameter axes) and noise (noise scales)")
-    world = world or (protocol.REAL_WORLD if noise is not None else protocol.WORLDS[0])
+    if world is None:  # "" is a world the loader refuses, not the default
+        world = protocol.REAL_WORLD if noise is not None else protocol.WORLDS[0]
     trials = protocol.trials_for_world(world) if trials is None else trials
     if not 0 <= seed < 2**32:
         raise ValueError(f"--seed must be in [0, 2**32), got {seed}")
@@ -418,10 +435,13 @@ def sweep(
         raise ValueError(f"--trials must be >= 1, got {trials}")
     if slots < 1:
         raise ValueError(f"--slots must be >= 1, got {slots}")
-    names = (system or ("SIE" if grid is not None else "SIE,SRL,HDC")).split(",")
+    system = ("SIE" if grid is not None else "SIE,SRL,HDC") if system is None else system
+    names = system.split(",")
     for name in names:
         if name not in SYSTEMS:
             raise ValueError(f"--system: unknown system {name!r} (one of {', '.join(SYSTEMS)})")
+    if len(set(names)) < len(names):
+        raise ValueError(f"--system names a system twice: {','.join(names)}")
     if grid is not None and len(names) != 1:
         raise ValueError("--grid sweeps one system: give --system NAME")
     if random_set and not {"UIE", "URL"} & set(names):
@@ -432,10 +452,25 @@ def sweep(
         axis_names = [name for name, _ in axes]
         if len(set(axis_names)) < len(axis_names):
             raise ValueError(f"--grid names a parameter twice: {', '.join(axis_names)}")
+        code = parse_label(names[0])[0]
+        for name in axis_names:
+            if code not in USED_BY.get(name, SYSTEMS):
+                users = ", ".join(USED_BY[name])
+                raise ValueError(f"--grid {name}: {code} does not use it (only {users} do)")
+        points = math.prod(len(v) for _, v in axes)
+        check_memory(points, RUN_BYTES, "--grid points")  # before the points are listed
     elif not all(0 <= s < math.inf for s in noise):
         raise ValueError(f"--noise scales must be finite and >= 0, got {list(noise)}")
-    elif set(noise_kinds) - set(NOISE_KINDS):
-        raise ValueError(f"--noise-kinds: one or more of {', '.join(NOISE_KINDS)}")
+    elif len(set(noise)) < len(noise):
+        raise ValueError(f"--noise names a scale twice: {list(noise)}")
+    kinds = noise_kinds.split(",") if isinstance(noise_kinds, str) else noise_kinds
+    kinds = tuple(NOISE_KINDS) if kinds is None else tuple(kinds)
+    if grid is not None and noise_kinds is not None:
+        raise ValueError("--noise-kinds applies to --noise only")
+    if not kinds or len(set(kinds)) < len(kinds) or set(kinds) - set(NOISE_KINDS):
+        raise ValueError(f"--noise-kinds: one or more of {', '.join(NOISE_KINDS)}, each once")
+    pool = points if grid is not None else len(names)  # runs per trial index in one pool
+    check_memory(trials, pool * RUN_BYTES, "--trials")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     tempfile.TemporaryFile(dir=out).close()  # writable: fail now, not after the runs
@@ -466,7 +501,7 @@ def sweep(
             )  # fmt: skip
         else:
             doc = run_noise_sweep(
-                loaded, systems, noise, trials, seed, config, params, noise_kinds, bar.update
+                loaded, systems, noise, trials, seed, config, params, kinds, bar.update
             )
     doc["wall_s_total"] = time.perf_counter() - start
     doc |= {"system": ",".join(names), "world": loaded.name, "seed": seed, "trials": trials}

@@ -31,6 +31,7 @@ from jaxais.immune.network import (
     NetworkParams,
     idiotopes,
     idiotypic_select,
+    initial_clones,
     rescale_paratopes,
     select_alpha,
 )
@@ -85,6 +86,18 @@ class Controller(NamedTuple):
     act: Callable[..., Any]
     stats: Callable[..., dict[str, Any]] | None = None
     choices: Callable[..., jnp.ndarray] | None = None
+
+
+def no_state(key, params):
+    """A stateless controller's ``init``: a scalar keeps the loop's pytrees non-empty."""
+    del key, params
+    return jnp.int32(0)
+
+
+def no_learning(key, state, percept, params):
+    """A controller's ``learn`` that learns nothing."""
+    del key, percept, params
+    return state
 
 
 # --------------------------------------------------------------- the immune controllers' bouts
@@ -257,7 +270,7 @@ def stl_controller(
             # Eq (4)'s targets, floored so that no column is pinned at 0 (jaxais.immune.readings).
             sigma0=jnp.maximum(jnp.mean(P, axis=0), system.readings.sigma0_floor),
             I=idiotopes(key, P),
-            N=jnp.full(P.shape, system.network.initial_clones, jnp.float32),
+            N=initial_clones(*P.shape, system.network.initial_clones),
             counters=init_counters(),
             acting=jnp.int32(0),
             bout=_init_bout(),
@@ -400,14 +413,6 @@ def braitenberg_controller() -> Controller:
     weights = np.array([1.0, 0.7, 0.3, 0.0, 0.0, 0.3, 0.7, 1.0], np.float32)  # ps0..ps7
     right_side = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0], np.float32)
 
-    def init(key, params):
-        del key, params
-        return jnp.int32(0)  # no state; a scalar keeps the loop's pytrees non-empty
-
-    def learn(key, state, pc: Percept, params):
-        del key, pc, params
-        return state
-
     def act(key, state, pc: Percept, params: BraitenbergParams):
         del key
         p = _proximity(pc.ir) * weights
@@ -421,7 +426,7 @@ def braitenberg_controller() -> Controller:
         wheels = jnp.stack([forward + params.speed * turn, forward - params.speed * turn])
         return state, jnp.clip(wheels, -MAX_WHEEL_SPEED, MAX_WHEEL_SPEED)
 
-    return Controller(init=init, learn=learn, act=act)
+    return Controller(init=no_state, learn=no_learning, act=act)
 
 
 BRAITENBERG = braitenberg_controller()

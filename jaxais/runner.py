@@ -303,8 +303,3 @@ def run_pool(
             idx, live = idx[keep], live[keep]
     counts = {name: got.pop(name) for name in ("t", "status", "collisions", "trapped", "locked")}
     return outcome(types.SimpleNamespace(**counts), config, float(sim_params.dt)) | got
-
-
-def useful_iterations(result: dict[str, np.ndarray]) -> int:
-    """Robot-iterations the runs needed."""
-    return int(np.sum(result["iterations"], dtype=np.int64))

@@ -28,7 +28,7 @@ from jax.flatten_util import ravel_pytree
 
 from jaxais import distributed, envs
 from jaxais.baselines.config import TrainConfig
-from jaxais.controllers import Controller, Percept
+from jaxais.controllers import Controller, Percept, no_learning, no_state
 from jaxais.envs.gymnax import IR_FULL_SCALE, PIXELS
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.immune.behaviours import MAX_WHEEL_SPEED
@@ -110,14 +110,6 @@ def neural_controller() -> Controller:
     """The MLP as a :class:`~jaxais.controllers.Controller` (params: :class:`MLPParams`); its
     ``stats`` are the STL's keys with "does not apply" values, so its records read alike."""
 
-    def init(key, params):
-        del key, params
-        return jnp.int32(0)
-
-    def learn(key, state, pc: Percept, params):
-        del key, pc, params
-        return state
-
     def act(key, state, pc: Percept, params: MLPParams):
         del key
         return state, policy_in_order(params, percept_features(pc)) * MAX_WHEEL_SPEED
@@ -126,7 +118,7 @@ def neural_controller() -> Controller:
         del state, params
         return {"idiotypic_difference_rate": jnp.float32(jnp.nan), "replaced": jnp.int32(0)}
 
-    return Controller(init=init, learn=learn, act=act, stats=stats)
+    return Controller(init=no_state, learn=no_learning, act=act, stats=stats)
 
 
 NEURAL = neural_controller()

@@ -149,10 +149,8 @@ def integrate_pose(pose: jnp.ndarray, v: jnp.ndarray, w: jnp.ndarray, dt) -> jnp
 
 def _move(pose, wheels, scene, params):
     v, w = wheel_to_body(wheels, params)
-    # The barrier computes the candidate pose once per robot. Without it XLA's CPU backend fuses
-    # the arc (four sines and cosines and a division) into every surface's collision test and
-    # recomputes it there, more slowly (docs/performance.md), and with positions an ulp apart
-    # where the fused copies round differently.
+    # The barrier computes the arc once per robot: XLA fused it into every surface's collision
+    # test, slower and with copies an ulp apart.
     cand = jax.lax.optimization_barrier(integrate_pose(pose, v, w, params.dt))
     xy = resolve_disc(pose[:2], cand[:2], params.body_radius, scene)
     return jnp.concatenate([xy, cand[2:]])
@@ -234,9 +232,8 @@ def sense(state: State, noise: StepNoise, world: World, params: SimParams) -> Ob
     pix = params.camera_fov / CAMERA_COLUMNS
     cols = jnp.arange(CAMERA_COLUMNS)
     cam_offsets = 0.5 * params.camera_fov - (cols + 0.5) * pix
-    # cast_rays pads the 23 rays to fill the CPU's vector lanes (to 24); padding here instead,
-    # with copies of the last camera ray (dropped below) before the rays are rotated per robot,
-    # spares it a copy of every robot's rays (the same numbers).
+    # Padded here to the vector lanes (copies of the last ray, dropped below), before the
+    # rotation, cast_rays copies no robot's rays.
     n_rays = N_IR + CAMERA_COLUMNS
     pad = ray_padding(n_rays)
     units = _unit(jnp.concatenate([params.ir_bearings, cam_offsets]))
@@ -322,9 +319,8 @@ def step_with_noise(
         wheels = wheels * (1.0 + world.wheel_noise * noise.wheel)
     pose = _move(state.pose, wheels, build_scene(state, world, params, exclude=0), params)
     state = state.replace(pose=pose)
-    # Wanderers move one after another against everyone's latest position, so none can step
-    # into a robot that has already moved (see geometry.resolve_disc). Rows are collected and
-    # stacked rather than written with .at[k].set: a batched scatter is slow on CPU.
+    # Wanderers move one after another against everyone's latest position, so none steps into a
+    # robot that already moved; rows are stacked, not scattered (slow on CPU).
     poses = [state.wanderers[k] for k in range(world.n_wanderers)]
     timers, dirs = [], []
     for k in range(world.n_wanderers):

@@ -1,8 +1,6 @@
-"""Ray casting and disc collision against a 2D scene of segments, boxes and circles.
-
-Everything is written for one robot (one set of rays or one disc); batch with ``vmap``.
-Boxes are axis-aligned rectangles; circles are pillars, robots and the goal ball.
-"""
+"""Ray casting and disc collision for one robot against a 2D scene of segments, axis-aligned
+boxes and circles (pillars, robots, the goal ball); batch with ``vmap``. The CPU-speed choices
+here are measured in docs/performance.md."""
 
 from __future__ import annotations
 
@@ -17,13 +15,9 @@ _EPS = 1e-12
 
 @pytree_dataclass
 class Scene:
-    """Every surface one robot can see or touch, with fixed shapes.
-
-    Attributes:
-        seg: [S, 4] (x1, y1, x2, y2); seg_material, seg_height, seg_valid: [S].
-        box: [B, 4] bounds (xmin, ymin, xmax, ymax); box_material, box_height, box_valid: [B].
-        circ: [C, 3] (x, y, r); circ_material, circ_height, circ_valid: [C].
-    """
+    """Every surface one robot can see or touch: seg [S, 4] (x1, y1, x2, y2), box [B, 4]
+    (xmin, ymin, xmax, ymax), circ [C, 3] (x, y, r), each with [S]/[B]/[C] material, height and
+    valid."""
 
     seg: jnp.ndarray
     seg_material: jnp.ndarray
@@ -39,9 +33,8 @@ class Scene:
     circ_valid: jnp.ndarray
 
 
-# The intersection tables below are laid out [surfaces, rays]: the rays (23 per robot) are the
-# minor axis that XLA's CPU backend vectorises, and the nearest-surface reduction runs over the
-# major axis as elementwise minima. The transposed layout runs slower (docs/performance.md).
+# Tables are [surfaces, rays]: XLA's CPU backend vectorises the rays, the minor axis, and the
+# nearest-surface reduction is elementwise minima over the major one (faster than transposed).
 
 
 def _ray_segments(o: jnp.ndarray, d: jnp.ndarray, seg: jnp.ndarray) -> jnp.ndarray:
@@ -59,10 +52,7 @@ def _ray_segments(o: jnp.ndarray, d: jnp.ndarray, seg: jnp.ndarray) -> jnp.ndarr
 
 
 def _ray_boxes(o: jnp.ndarray, inv_d: jnp.ndarray, box: jnp.ndarray) -> jnp.ndarray:
-    """Hit distance [B, R] of rays on axis-aligned boxes (slab method); 0 if o is inside.
-
-    ``inv_d`` [R, 2] is 1 / direction, computed once per ray rather than once per box.
-    """
+    """Hit distance [B, R] of rays (``inv_d`` [R, 2] = 1 / direction) on boxes; 0 inside."""
     ox, oy, ix, iy = o[:, 0], o[:, 1], inv_d[:, 0], inv_d[:, 1]
     tx1, tx2 = (box[:, 0:1] - ox) * ix, (box[:, 2:3] - ox) * ix
     ty1, ty2 = (box[:, 1:2] - oy) * iy, (box[:, 3:4] - oy) * iy
@@ -108,30 +98,20 @@ def ray_padding(n_rays: int) -> int:
 def cast_rays(
     origins: jnp.ndarray, dirs: jnp.ndarray, scene: Scene
 ) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
-    """First surface along each ray, with its material and height.
-
-    Args:
-        origins: [R, 2] ray origins. dirs: [R, 2] unit directions.
-        scene: the surfaces (at most 64 in all).
-
-    Returns:
-        (t [R] distance, inf when nothing is hit; material [R] int (0 on a miss);
-         height [R] of that surface).
-    """
+    """The first of <= 64 surfaces along rays ``origins``, ``dirs`` [R, 2]: distance [R] (inf on
+    a miss), its material [R] (0 on a miss) and height [R]."""
     n_s, n_b, n_c = scene.seg.shape[0], scene.box.shape[0], scene.circ.shape[0]
     assert n_s + n_b + n_c <= _INDEX_MASK + 1, "cast_rays handles at most 64 surfaces"
-    # Rays are the minor axis of every table below, and XLA's CPU backend vectorises it in
-    # 8-lane (AVX2) chunks: 23 rays leave a scalar remainder loop that halves the speed of the
-    # whole cast, so the ray count is padded with copies of the last ray (dropped at the end).
+    # XLA vectorises the rays in 8-lane (AVX2) chunks: 23 rays would leave a scalar remainder
+    # loop that halves the cast's speed, so copies of the last ray pad them (dropped at the end).
     n_r = origins.shape[0]
     pad = ray_padding(n_r)
     if pad:
         origins = jnp.concatenate([origins, jnp.broadcast_to(origins[-1:], (pad, 2))])
         dirs = jnp.concatenate([dirs, jnp.broadcast_to(dirs[-1:], (pad, 2))])
-    # Which surface is nearest is found with one integer min per kind: a non-negative float's bit
-    # pattern orders like the float, so the surface's index goes into the low mantissa bits (a
-    # relative error below 1e-5 on t). argmin + gather, or masked reductions, make XLA's CPU
-    # backend recompute the intersection tests several times over (docs/performance.md).
+    # The nearest surface is one integer min per kind: a non-negative float's bits order like the
+    # float, so the index goes into the low mantissa bits (relative error < 1e-5 on t); argmin +
+    # gather made XLA recompute the intersection tests several times over.
     key = None
     for hits, offset in zip(_per_kind_hits(origins, dirs, scene), (0, n_s, n_s + n_b), strict=True):
         bits = jax.lax.bitcast_convert_type(hits, jnp.int32)
@@ -148,30 +128,17 @@ def cast_rays(
 
 
 def reduce_pair(a, b, op_a, op_b, init_a, init_b) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """Two reductions of two [N] vectors in one pass: (op_a over a, op_b over b), as scalars.
-
-    XLA's CPU backend fuses a plain reduction into each consumer and evaluates it once per
-    element of that consumer's output: a reduction feeding an (x, y) pair, or anything stacked
-    with one, is computed once per component, and so are the per-surface terms it reads. A
-    reduction with two outputs is not fused into its consumers (jax 0.10): it runs once, in a
-    kernel of its own, computing those terms once. XLA compiles its arithmetic differently from
-    a plain ``jnp.sum`` (e.g. where it fuses a multiply into an add), so a sum can differ in the
-    last bit.
-
-    Args:
-        a, b: [N] arrays. op_a, op_b: associative binary ops (e.g. ``jnp.add``).
-        init_a, init_b: their identities (e.g. 0.0, False).
-    """
+    """(op_a over a, op_b over b) of two [N] vectors in one two-output reduction (identities
+    ``init_a``, ``init_b``): XLA's CPU backend fuses a plain reduction into each consumer, so one
+    feeding an (x, y) pair ran once per component; this runs once (a sum may differ in the last
+    bit from ``jnp.sum``)."""
     init = (jnp.asarray(init_a, a.dtype), jnp.asarray(init_b, b.dtype))
     return jax.lax.reduce((a, b), init, lambda x, y: (op_a(x[0], y[0]), op_b(x[1], y[1])), (0,))
 
 
 def kind_gaps(p: jnp.ndarray, radius: jnp.ndarray, scene: Scene):
-    """Per kind of surface: (gap [P] = surface distance minus radius, inf where invalid;
-    nx [P], ny [P]: the unit vector from the surface's closest point towards p).
-
-    Written in x/y components: reductions over a length-2 axis are very slow on XLA's CPU backend.
-    """
+    """Per kind of surface: gap [P] (distance less radius, inf where invalid) and the unit
+    vector nx, ny [P] towards p, in x/y components (a length-2 axis is slow on XLA's CPU)."""
     px, py = p[0], p[1]
     # Segments: closest point on each.
     ax, ay = scene.seg[:, 0], scene.seg[:, 1]
@@ -201,15 +168,8 @@ def kind_gaps(p: jnp.ndarray, radius: jnp.ndarray, scene: Scene):
 
 
 def disc_gaps(p: jnp.ndarray, radius: jnp.ndarray, scene: Scene):
-    """Clearance between a disc and every surface, with the outward normals.
-
-    Args:
-        p: [2] disc centre. radius: disc radius.
-
-    Returns:
-        (gap [P] = surface distance minus radius, +inf for invalid entries;
-         normal [P, 2] unit vector from the surface towards p), P = S + B + C in that order.
-    """
+    """Gaps [S + B + C] between the disc (p [2], radius) and every surface (inf where invalid),
+    and the unit normals [S + B + C, 2] towards p."""
     kinds = kind_gaps(p, radius, scene)
     return (
         jnp.concatenate([g for g, _, _ in kinds]),
@@ -237,21 +197,11 @@ def resolve_disc(
     iters: int = 1,
     skin: float = 2e-5,
 ) -> jnp.ndarray:
-    """Move a disc from ``p_old`` to ``p_new`` without overlapping anything.
+    """The centre [2] of a disc moved from ``p_old`` to ``p_new`` without overlap.
 
-    Each pass pushes the disc out of every surface it penetrates along that surface's normal,
-    to ``skin`` metres of clearance, so a disc driven into a wall stays in contact and slides along
-    it; in a corner the pushes from both walls add up. If overlap remains after ``iters`` passes
-    (a tight pocket) the disc keeps ``p_old``, which was clear; so no overlap ever arises from a
-    clear start. One pass suffices for the worlds' walls, boxes and pillars (a step moves at most
-    4.5 mm); more passes cost compile and run time in every step.
-
-    Each kind's pushes along x and y are summed in one two-output reduction
-    (:func:`reduce_pair`): with two plain sums XLA's CPU backend computed every push twice
-    (docs/performance.md).
-
-    Returns:
-        [2] the resolved centre.
+    Each pass pushes it out of every surface it penetrates, along the normal to ``skin`` m of
+    clearance, so it slides along walls; overlap left after ``iters`` passes keeps the clear
+    ``p_old``. One pass suffices for a step of at most 4.5 mm.
     """
     p = p_new
     for _ in range(iters):

@@ -1,12 +1,8 @@
-"""The e-puck world as pure functions: ``reset``, ``observe`` and ``step`` for one robot.
+"""The e-puck world as pure functions of one robot: ``reset``, ``observe`` and ``step``.
 
-A robot's ``State`` carries everything that varies between runs of one world: its pose, the
-wandering e-pucks, and the goal and box positions drawn at reset. The random draws of a step are
-made in :func:`sample_step_noise` and applied by the deterministic :func:`step_with_noise`, so the
-NumPy reference (``reference.py``) can replay exactly the same step.
-
-Batch with ``jax.vmap(step, in_axes=(0, 0, 0, None, None))``: the world and the parameters are
-shared, keys, states and wheel speeds carry the batch axis.
+A step's draws (:func:`sample_step_noise`) are apart from the deterministic
+:func:`step_with_noise`, so a NumPy reference (tests/reference_sim.py) replays the same step.
+Batch with ``jax.vmap(step, in_axes=(0, 0, 0, None, None))``.
 """
 
 from __future__ import annotations
@@ -28,34 +24,20 @@ from .params import CAMERA_COLUMNS, CAMERA_ROWS, GOAL, MARKER, N_IR, WALL, SimPa
 from .struct import pytree_dataclass
 from .world import World
 
-ROBOT_HEIGHT = 0.05
-"""Height of an e-puck body as the camera sees it, m [ours]."""
-WANDER_SPEED = 300.0
-"""Cruise wheel speed of a wandering e-puck, speed units [ours]."""
-WANDER_TURN_PROB = 0.02
-"""Chance per iteration that a cruising wanderer starts a random turn [ours]."""
-WANDER_TURN_STEPS = (10, 50)
-"""Range of a random turn's length, iterations [ours]."""
-WANDER_AVOID_GAP = 0.03
-"""A wanderer spins away when a surface ahead is closer than this, m [ours]."""
-PLACEMENT_TRIES = 32
-"""Candidates drawn per object when placing things at reset (first clear one is used)."""
-PLACEMENT_CLEARANCE = 0.01
-"""Minimum gap between objects placed at reset, m [ours]."""
+ROBOT_HEIGHT = 0.05  # an e-puck body as the camera sees it, m [ours]
+WANDER_SPEED = 300.0  # a wandering e-puck's cruise wheel speed [ours]
+WANDER_TURN_PROB = 0.02  # chance per iteration that a cruising wanderer starts a turn [ours]
+WANDER_TURN_STEPS = (10, 50)  # a random turn's length range, iterations [ours]
+WANDER_AVOID_GAP = 0.03  # a wanderer spins away from a surface closer ahead, m [ours]
+PLACEMENT_TRIES = 32  # candidates per object placed at reset (the first clear one is used)
+PLACEMENT_CLEARANCE = 0.01  # minimum gap between objects placed at reset, m [ours]
 
 
 @pytree_dataclass
 class State:
-    """Everything about one run that changes (shapes: W wanderers, B boxes).
-
-    Attributes:
-        pose: [3] robot (x, y, heading).
-        wanderers: [W, 3] wandering e-puck poses.
-        wander_timer: [W] int, iterations left in a random turn (0 = cruising).
-        wander_dir: [W] +1 turn left, -1 turn right.
-        goal: [2] goal centre. boxes: [B, 2] box centres.
-        t: int, iterations since reset.
-    """
+    """Everything about one run that changes: pose [3] (x, y, heading), wanderers [W, 3],
+    wander_timer [W] (iterations left in a turn; 0 cruising), wander_dir [W] (+1 left), goal [2],
+    boxes [B, 2] (centres drawn at reset), t (iterations since reset)."""
 
     pose: jnp.ndarray
     wanderers: jnp.ndarray
@@ -68,18 +50,10 @@ class State:
 
 @pytree_dataclass
 class Observation:
-    """What the robot's sensors report after a step.
-
-    Attributes:
-        ir: [8] IR readings (ps0..ps7), 0..4095.
-        vm: maximum IR reading.
-        blue: [3, 15] bool, blue (marker or goal) pixels after camera noise; row 0 is the top.
-        blue_pixels: int, number of blue pixels.
-        goal_pixels: int, blue pixels in columns that see the goal.
-        blue_centroid: mean column (0..14, 0 = leftmost) of blue pixels; 7.0 when none.
-        materials: [15] int, material of the first surface per column within camera range.
-        depth: [15] distance of that surface, m (inf when nothing is in range).
-    """
+    """The sensors after a step: ir [8] (ps0..ps7, 0..4095) and their maximum vm; blue [3, 15]
+    (marker or goal pixels after camera noise, row 0 the top), blue_pixels, goal_pixels (in
+    columns seeing the goal), blue_centroid (mean column, 0 leftmost; 7 when none); materials
+    [15] and depth [15] (m, inf out of range) of each column's first surface."""
 
     ir: jnp.ndarray
     vm: jnp.ndarray
@@ -93,14 +67,8 @@ class Observation:
 
 @pytree_dataclass
 class StepNoise:
-    """The random draws of one step (see :func:`sample_step_noise`).
-
-    Attributes:
-        wheel: [2] standard normals for the executed wheel speeds.
-        ir: [8] standard normals for the IR readings (drawn in every world: SPEC 2).
-        camera: [2] uniforms in [0, 1): is the blob missed?, is it shifted (and which way)?
-        wander: [W, 3] uniforms: start a turn?, its length, its direction.
-    """
+    """One step's draws: normals wheel [2] and ir [8] (every world, SPEC 2); uniforms camera
+    [2] (blob missed?, shifted which way?) and wander [W, 3] (turn?, length, direction)."""
 
     wheel: jnp.ndarray
     ir: jnp.ndarray
@@ -116,11 +84,8 @@ def _bounds(centre: jnp.ndarray, half: jnp.ndarray) -> jnp.ndarray:
 
 
 def build_scene(state: State, world: World, params: SimParams, exclude: int = -1) -> Scene:
-    """The scene around robot ``exclude`` (0 = the robot, 1.. = wanderers; -1 = none).
-
-    Robots (the robot and the wanderers) are circles of material ``wall``; the goal is a box or
-    a circle of material ``goal`` per the world.
-    """
+    """The scene seen by robot ``exclude`` (0 the robot, 1.. wanderers; -1 none): robots are
+    circles of material wall, the goal a box or circle of material goal."""
     robots = jnp.concatenate([state.pose[None, :2], state.wanderers[:, :2]], axis=0)
     if exclude >= 0:  # a robot never sees itself: drop it (statically, so no work is wasted)
         robots = jnp.concatenate([robots[:exclude], robots[exclude + 1 :]], axis=0)
@@ -184,10 +149,8 @@ def integrate_pose(pose: jnp.ndarray, v: jnp.ndarray, w: jnp.ndarray, dt) -> jnp
 
 def _move(pose, wheels, scene, params):
     v, w = wheel_to_body(wheels, params)
-    # The barrier computes the candidate pose once per robot. Without it XLA's CPU backend fuses
-    # the arc (four sines and cosines and a division) into every surface's collision test and
-    # recomputes it there, more slowly (docs/performance.md), and with positions an ulp apart
-    # where the fused copies round differently.
+    # The barrier computes the arc once per robot: XLA fused it into every surface's collision
+    # test, slower and with copies an ulp apart.
     cand = jax.lax.optimization_barrier(integrate_pose(pose, v, w, params.dt))
     xy = resolve_disc(pose[:2], cand[:2], params.body_radius, scene)
     return jnp.concatenate([xy, cand[2:]])
@@ -269,9 +232,8 @@ def sense(state: State, noise: StepNoise, world: World, params: SimParams) -> Ob
     pix = params.camera_fov / CAMERA_COLUMNS
     cols = jnp.arange(CAMERA_COLUMNS)
     cam_offsets = 0.5 * params.camera_fov - (cols + 0.5) * pix
-    # cast_rays pads the 23 rays to fill the CPU's vector lanes (to 24); padding here instead,
-    # with copies of the last camera ray (dropped below) before the rays are rotated per robot,
-    # spares it a copy of every robot's rays (the same numbers).
+    # Padded here to the vector lanes (copies of the last ray, dropped below), before the
+    # rotation, cast_rays copies no robot's rays.
     n_rays = N_IR + CAMERA_COLUMNS
     pad = ray_padding(n_rays)
     units = _unit(jnp.concatenate([params.ir_bearings, cam_offsets]))
@@ -330,12 +292,8 @@ def sense(state: State, noise: StepNoise, world: World, params: SimParams) -> Ob
 
 
 def sample_step_noise(key: jax.Array, world: World) -> StepNoise:
-    """Every random number one step uses; noise a world turns off is not drawn (zeros).
-
-    One uniform draw is sliced into the fields, its last values made standard normals (IR noise
-    is on in every world): every draw or split is a threefry hash, which runs as a loop of its
-    own on CPU, so a step draws once.
-    """
+    """Every random number of a step (zeros for noise the world turns off), sliced from one
+    uniform draw: each threefry hash is a loop of its own on CPU."""
     n_w = world.n_wanderers
     noisy_camera = world.camera_miss > 0 or world.camera_shift > 0
     n_u = 3 * n_w + (2 if noisy_camera else 0)
@@ -361,9 +319,8 @@ def step_with_noise(
         wheels = wheels * (1.0 + world.wheel_noise * noise.wheel)
     pose = _move(state.pose, wheels, build_scene(state, world, params, exclude=0), params)
     state = state.replace(pose=pose)
-    # Wanderers move one after another against everyone's latest position, so none can step
-    # into a robot that has already moved (see geometry.resolve_disc). Rows are collected and
-    # stacked rather than written with .at[k].set: a batched scatter is slow on CPU.
+    # Wanderers move one after another against everyone's latest position, so none steps into a
+    # robot that already moved; rows are stacked, not scattered (slow on CPU).
     poses = [state.wanderers[k] for k in range(world.n_wanderers)]
     timers, dirs = [], []
     for k in range(world.n_wanderers):
@@ -382,22 +339,13 @@ def step_with_noise(
 def step(
     key: jax.Array, state: State, wheel_speeds: jnp.ndarray, world: World, params: SimParams
 ) -> tuple[State, Observation]:
-    """Advance one iteration: drive the robot, move the wanderers, read the sensors.
-
-    Args:
-        key: PRNG key for this step's noise and the wanderers' random walk.
-        state: the run's state.
-        wheel_speeds: [2] commanded (left, right) speeds, speed units (clipped to max_speed).
-        world, params: the world and robot constants.
-
-    Returns:
-        (new state, observation after the move).
-    """
+    """One iteration: the robot driven at ``wheel_speeds`` [2] (left, right; clipped), the
+    wanderers moved, the sensors read. Returns (state, observation)."""
     return step_with_noise(state, wheel_speeds, sample_step_noise(key, world), world, params)
 
 
 def observe(key: jax.Array, state: State, world: World, params: SimParams) -> Observation:
-    """Sensor readings in ``state`` (e.g. right after reset), with fresh noise from ``key``."""
+    """Sensor readings in ``state`` (e.g. after reset), with noise from ``key``."""
     return sense(state, sample_step_noise(key, world), world, params)
 
 
@@ -412,11 +360,8 @@ def _first_clear(cands: jnp.ndarray, clear: jnp.ndarray) -> jnp.ndarray:
 
 
 def reset(key: jax.Array, world: World, params: SimParams) -> State:
-    """A fresh run: boxes, goal, robot and wanderers placed at random in their regions.
-
-    Objects are placed in that order, each at the first of ``PLACEMENT_TRIES`` random
-    candidates that keeps ``PLACEMENT_CLEARANCE`` from everything placed before it.
-    """
+    """A fresh run: boxes, goal, robot, wanderers placed in that order, each at the first of
+    ``PLACEMENT_TRIES`` candidates in its region clear of those before."""
     n_b, n_w = world.box_half.shape[0], world.n_wanderers
     k_box, k_goal, k_pos, k_head, k_wand, k_wh = jax.random.split(key, 6)
     far = jnp.full((2,), -100.0)

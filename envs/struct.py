@@ -15,21 +15,14 @@ def static_field(**kwargs: Any) -> Any:
 
 
 def device_array(x: Any, dtype: Any = None) -> jax.Array:
-    """``x`` converted by NumPy (to ``dtype``), then put on the default device, uncommitted.
-
-    Outside a trace ``jnp.asarray(x, dtype)`` converts or copies on the device instead, with one
-    small XLA compilation per new shape and dtype (jax 0.10), and a world, the simulator's
-    constants and a seed took about twenty of them at a script's start (docs/performance.md).
-    """
+    """``x`` converted by NumPy, then put on the default device: ``jnp.asarray`` compiles once
+    per shape and dtype, about twenty times at a script's start (docs/performance.md)."""
     return jax.device_put(np.asarray(x, dtype))
 
 
 def pytree_dataclass(cls: type) -> type:
-    """Make ``cls`` a frozen dataclass and register it as a pytree.
-
-    Fields made with :func:`static_field` become pytree metadata (hashable, part of the
-    compiled function's identity); every other field is a leaf. ``obj.replace(**kw)`` is added.
-    """
+    """``cls`` as a frozen dataclass pytree with ``replace``; :func:`static_field` fields
+    are metadata (part of the compiled function's identity), the others leaves."""
     cls = dataclasses.dataclass(frozen=True)(cls)
     fields = dataclasses.fields(cls)
     meta = [f.name for f in fields if f.metadata.get("static", False)]

@@ -1,10 +1,8 @@
 """Worlds as data: TOML files loaded into fixed-shape padded arrays (SPEC section 3).
 
-A world file declares the arena, static walls (line segments), rectangular boxes and cylindrical
-pillars (each with a material and a height), the goal (a block or a ball) with the region its
-centre is drawn from, the robot's start region, the wandering e-pucks and the noise model. Boxes
-may be fixed (``center``) or placed at random each run (``region``). See ``worlds/world1.toml``
-for a commented example.
+A world file (``worlds/world1.toml`` is a commented example) declares the arena, walls, boxes
+(fixed or drawn each run) and pillars, the goal and its region, the start region, the wandering
+e-pucks and the noise.
 """
 
 from __future__ import annotations
@@ -26,17 +24,10 @@ from .struct import device_array, pytree_dataclass, static_field
 
 BUILTIN_WORLDS = ("ga_maze", "world1", "world2", "real")
 
-MAX_SURFACES = geometry._INDEX_MASK + 1
-"""Surfaces the ray caster tells apart (``geometry.cast_rays``): a robot's camera and IR rays
-meet the walls (the 4 outer ones included), the boxes, the pillars, the goal and the wandering
-e-pucks, counted with the padding of a :class:`Capacity`. A world with more is refused."""
-MAX_ARENA_SIDE = 100.0
-"""Largest arena side, m [ours]: far beyond the paper's arenas (1.5 m), and float32 positions
-still resolve 8 um there."""
-MAX_HEIGHT = 10.0
-"""Largest height of a wall, box, pillar or goal, m."""
-MAX_HEADING = 2.0 * math.pi
-"""Largest magnitude of a start heading bound, rad."""
+MAX_SURFACES = geometry._INDEX_MASK + 1  # what the ray caster tells apart, padding included
+MAX_ARENA_SIDE = 100.0  # m [ours]: float32 positions still resolve 8 um there
+MAX_HEIGHT = 10.0  # of a wall, box, pillar or goal, m
+MAX_HEADING = 2.0 * math.pi  # magnitude of a start heading bound, rad
 
 _KEYS: dict[str, tuple[str, ...]] = {
     "": ("name", "arena", "robot", "goal", "walls", "boxes", "pillars", "wanderers", "noise"),
@@ -49,8 +40,7 @@ _KEYS: dict[str, tuple[str, ...]] = {
     "wanderers": ("region",),
     "noise": ("ir_relative_std", "camera_miss_prob", "camera_shift_prob", "wheel_relative_std"),
 }
-"""The world format (``worlds/world1.toml`` documents it): the keys of each table, by path
-(``""`` is the top level; ``walls`` etc. are arrays of tables)."""
+"""The world format's keys, by table path (``""`` the top level)."""
 
 
 class WorldError(ValueError):
@@ -59,25 +49,17 @@ class WorldError(ValueError):
 
 @pytree_dataclass
 class World:
-    """One world, padded to fixed shapes. Leaves are float32/int32/bool arrays.
-
-    Shapes: S segments, B boxes, C pillars, W wanderers (S, B, C >= 1; padding has valid=False).
+    """One world padded to S segments, B boxes, C pillars (>= 1 each; padding not valid).
 
     Attributes:
-        arena: [4] (xmin, ymin, xmax, ymax) of the outer walls, m.
-        seg: [S, 4] (x1, y1, x2, y2); seg_material [S] int; seg_height [S] m; seg_valid [S].
-        box_half: [B, 2] half extents; box_region [B, 4] region of the box centre (a point for a
-            fixed box); box_material [B]; box_height [B]; box_valid [B].
-        pillar: [C, 3] (x, y, radius); pillar_material [C]; pillar_height [C]; pillar_valid [C].
-        goal_half: [2] half extents of a goal block, or (radius, radius) of a goal ball.
-        goal_height: scalar m. goal_region: [4] region of the goal centre.
-        start_region: [4] region of the robot's start position; start_heading: [2] (min, max) rad.
-        wanderer_region: [W, 4] start region of each wandering e-puck.
-        name: the world's name (static). goal_shape: "box" or "ball" (static).
-        ir_noise: relative std of IR readings on top of the simulator's own (SimParams.ir_noise);
-            camera_miss: probability that the camera misses the blue blob in an iteration;
-            camera_shift: probability that the blob appears one column left or right;
-            wheel_noise: relative std of executed wheel speeds (static floats; 0 = off).
+        arena: [4] (xmin, ymin, xmax, ymax), m. seg: [S, 4] (x1, y1, x2, y2).
+        box_half: [B, 2]; box_region: [B, 4] where its centre is drawn (a point when fixed).
+        pillar: [C, 3] (x, y, radius). Each kind has [S]/[B]/[C] material, height, valid.
+        goal_half: [2] (a ball's: radius twice); goal_region, start_region: [4];
+            start_heading: [2] (min, max) rad; wanderer_region: [W, 4].
+        name, goal_shape ("box" or "ball"), and the static noise levels: ir_noise (relative,
+            on top of the simulator's), camera_miss, camera_shift (probabilities per
+            iteration), wheel_noise (relative).
     """
 
     arena: jnp.ndarray
@@ -116,13 +98,8 @@ class World:
 
 @dataclass(frozen=True)
 class Capacity:
-    """Minimum padded sizes.
-
-    Worlds loaded with one Capacity have arrays of equal shapes. Functions jitted with the world
-    as an argument (``reset``, ``step``) are then shared when their static fields match too: the
-    name (``world.replace(name=...)``), the goal shape and the noise levels. (A program compiled
-    with the world's values built in, as jaxais's GA does, serves that one world only.)
-    """
+    """Minimum padded sizes: worlds loaded with one Capacity share array shapes, so jitted
+    functions taking the world share programs where the static fields match too."""
 
     segments: int = 1
     boxes: int = 1
@@ -271,9 +248,8 @@ def _pad(rows: list, n: int, width: int | None, fill: float = 0.0) -> np.ndarray
 
 
 def _region_has_room(region, radius, segs, pillars, boxes, n: int = 24) -> bool:
-    """Whether some point of an n x n grid over ``region`` has ``radius`` of clearance from the
-    static surfaces (segments, pillars, fixed boxes as (cx, cy, (hx, hy))). Reset draws random
-    candidates and would otherwise fall back to an overlapping start without a word."""
+    """Whether a point of an n x n grid over ``region`` keeps ``radius`` from the static
+    surfaces (boxes as (cx, cy, (hx, hy))): else reset would overlap without a word."""
     xs = np.linspace(region[0], region[2], n)
     ys = np.linspace(region[1], region[3], n)
     p = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2)
@@ -291,11 +267,8 @@ def _region_has_room(region, radius, segs, pillars, boxes, n: int = 24) -> bool:
 
 
 def _check_surface_count(src, name, segs, boxes, pillars, wanderers, padded: int) -> None:
-    """Refuse a world whose robot would see more than :data:`MAX_SURFACES` surfaces.
-
-    A robot's rays meet the segments, boxes and pillars (``padded`` of them, with the padding of
-    the world's :class:`Capacity`), the goal and every wanderer (``sim.sense``).
-    """
+    """Refuse a world whose rays would meet more than :data:`MAX_SURFACES` surfaces: ``padded``
+    segments, boxes and pillars, the goal and the wanderers."""
     total = padded + len(wanderers) + 1
     if total <= MAX_SURFACES:
         return
@@ -303,8 +276,6 @@ def _check_surface_count(src, name, segs, boxes, pillars, wanderers, padded: int
     parts = [
         count(len(segs), "wall", "walls") + " with the 4 outer ones",
         count(len(boxes), "box", "boxes"),
-    ]
-    parts += [
         count(len(pillars), "pillar", "pillars"),
         count(len(wanderers), "wanderer", "wanderers"),
         "the goal",
@@ -320,14 +291,8 @@ def _check_surface_count(src, name, segs, boxes, pillars, wanderers, padded: int
 
 
 def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radius: float = 0.037):
-    """Build a :class:`World` from a parsed TOML document; ``src`` names it in errors.
-
-    Raises:
-        WorldError: one line naming ``src`` and the offending field: a missing, unknown or
-            mistyped key, a size out of its range (arena sides in (0, 100] m, heights in
-            (0, 10] m, half sizes and radii up to half the arena's shorter side), an object off
-            the arena, or more surfaces than :data:`MAX_SURFACES`.
-    """
+    """A :class:`World` from a parsed TOML document; a WorldError names ``src`` and the field
+    (missing, unknown or mistyped, out of range, off the arena, or too many surfaces)."""
     rd = _Reader(src)
     rd.known(doc, "")
     name = rd.get(doc, "name", "", "str")
@@ -503,11 +468,7 @@ def world_path(name: str) -> Path:
 
 
 def load_world(name_or_path: str | Path, capacity: Capacity = Capacity()) -> World:
-    """Load a built-in world by name (``world1``) or a world file by path.
-
-    Raises:
-        WorldError: one line naming the file and the offending field.
-    """
+    """A built-in world by name (``world1``) or a world file by path (WorldError: one line)."""
     text = str(name_or_path)
     if text in BUILTIN_WORLDS:
         path = world_path(text)

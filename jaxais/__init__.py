@@ -7,15 +7,10 @@ stays free of JAX and a script can still set ``XLA_FLAGS`` before JAX starts)::
     world = envs.load_world("world1")
     results = run_trials(world, {"SIE": make_system("SIE", load_seed()[0])}, 30, seed=0)
 
-Submodules: ``envs`` (the simulator); ``immune``, the paper's immune network: ``immune.antigens``,
-``immune.antibodies``, ``immune.behaviours``, ``immune.reinforcement``, ``immune.network`` (eqs
-1-10), ``immune.readings`` (our readings of the paper's open points); ``controllers`` (the
-controller protocol and the controllers), ``loop`` (the task loop), ``runner`` (its driver), ``ga``
-(LTL), ``checkpointing``, ``seed``, ``labels`` (the systems' names), ``systems``, ``trials``; and
-``experiments``, the paper's experiments on top of them: ``experiments.protocol`` (its worlds,
-systems, trial counts and comparisons), ``experiments.records``, ``experiments.stats``,
-``experiments.claims`` (the paper's 32 claims), ``experiments.report``, ``experiments.ablation``,
-``experiments.plotting``."""
+Submodules: ``envs`` (the simulator), ``immune`` (the paper's network, eqs 1-10), ``controllers``,
+``loop`` (the task loop), ``runner`` (its driver), ``ga`` (LTL), ``checkpointing``, ``seed``,
+``labels``, ``systems``, ``trials``, and ``experiments`` (the paper's protocol, records, stats,
+claims, report, ablation, plotting and drivers)."""
 
 from __future__ import annotations
 

@@ -1,12 +1,10 @@
 """GA checkpoints with orbax-checkpoint: save after every generation, resume exactly.
 
-A checkpoint directory holds ``run.json`` (the run's identity, whatever the caller passes; a
-resume with another is refused) and one orbax checkpoint ``<generation>/`` per saved generation:
-``state`` (every array of :class:`jaxais.ga.core.GAState`, the PRNG key as its key data) and
-``meta`` (JSON: key implementation, GA settings, the caller's extra data). Orbax writes into a
-temporary directory renamed when complete; saves run in the background, at most one in flight,
-and the last ``max_to_keep`` (>= 2) are kept, so an interruption at any moment leaves the last
-complete checkpoint valid. Every failure is a one-line :class:`CheckpointError`.
+A directory holds ``run.json`` (the run's identity: a resume with another is refused) and an orbax
+checkpoint ``<generation>/`` per generation: ``state`` (the GAState's arrays, the key as its data)
+and ``meta`` (JSON). Orbax renames a complete save into place and the last ``max_to_keep`` are
+kept, so an interruption leaves the last complete one valid. Every failure is a one-line
+:class:`CheckpointError`.
 """
 
 from __future__ import annotations
@@ -29,9 +27,7 @@ from jaxais.orbax_reads import forget_abandoned_reads
 __all__ = ["CheckpointError", "GACheckpointer", "abstract_tree", "state_from_tree", "state_to_tree"]
 
 RUN_JSON = "run.json"
-"""The run's identity, beside the numbered checkpoints."""
-FORMAT = "jaxais-ga-checkpoint/1"
-"""Format tag stored in ``run.json`` and in every checkpoint's meta."""
+FORMAT = "jaxais-ga-checkpoint/1"  # in run.json and every checkpoint's meta
 _SEP = "__"  # joins pytree path names into flat, filesystem-safe array names
 
 
@@ -53,8 +49,7 @@ def _flat(state: GAState) -> dict[str, Any]:
 
 
 def state_to_tree(state: GAState) -> dict[str, np.ndarray]:
-    """The state as a flat dict of NumPy arrays, typed keys as their key data (e.g.
-    ``"population__type"`` [P, R, 8], ``"key"`` [2] uint32)."""
+    """The state as flat NumPy arrays, keys as their data (``"population__type"``, ``"key"``)."""
     return {name: np.asarray(x) for name, x in _flat(state).items()}
 
 
@@ -104,16 +99,10 @@ def _describe_difference(stored: dict[str, Any], given: dict[str, Any], where: s
 
 
 class GACheckpointer:
-    """Saves and restores :class:`jaxais.ga.core.GAState` after each generation; a context
-    manager (leaving it waits for the last save and closes orbax's manager).
+    """Saves and restores the GA's state each generation; a context manager.
 
-    Args:
-        directory: the checkpoint directory (created if missing).
-        run_info: JSON-able identity of the run: what must match on resume (not, e.g., the
-            generation cap, which a resume may raise).
-        resume: continue an earlier run, which must exist with the same ``run_info``; else the
-            directory must hold no complete checkpoint (CheckpointError otherwise).
-        max_to_keep: complete checkpoints kept (>= 2).
+    ``run_info`` (JSON) must match on ``resume``, which needs a complete checkpoint; without
+    ``resume`` the directory must hold none.
     """
 
     def __init__(
@@ -208,8 +197,7 @@ class GACheckpointer:
         return self._manager.latest_step()
 
     def save(self, state: GAState, config: GAConfig, extra: dict[str, Any] | None = None) -> None:
-        """Save ``state`` as checkpoint ``state.generation``, with ``config`` and the JSON-able
-        ``extra``."""
+        """Save ``state`` as checkpoint ``state.generation``, with ``config`` and ``extra``."""
         ocp = self._ocp
         generation = int(state.generation)
         meta = {

@@ -1,30 +1,16 @@
 """Controllers: the protocol the task loop (:mod:`jaxais.loop`) runs, and the controllers.
 
-A controller is a :class:`Controller`, a tuple of pure functions of one robot, key first, like
-optax's ``(init, update)`` pairs: ``init`` makes its state, ``learn`` scores what acted last,
-``act`` picks wheel speeds, ``stats`` (optional) reads what a run records from the final state.
-Its ``params`` are a pytree of its own (antibodies, flags, constants), so a batch of robots can
-differ in data under one compiled program. The loop hands it a :class:`Percept` and never looks
-inside its state: a new controller plugs in without touching the loop
-(``jaxais.trials.make_trials``, ``run_trials(..., controller=...)``).
+A :class:`Controller` is a tuple of pure functions of one robot, key first (like optax's
+``(init, update)``); its params are its own pytree, so a batch of robots differs in data under one
+compiled program, and a new controller plugs in without touching the loop.
 
-- :func:`ltl_controller`: one antibody set acting alone with RL accumulating each antibody's
-  score L (the GA's evaluation, SPEC 10).
-- :func:`stl_controller`: the short-term learning network of SPEC 7 over five sets; a
-  :class:`System` (its params) says whether it learns, whether selection is idiotypic and whether
-  weak antibodies are replaced, so SIE, SRL, UIE, URL and HDC are one program with different data
-  and can share one compiled batch; :func:`stl_for` leaves out the parts a batch does not use.
-- :func:`braitenberg_controller`: a Braitenberg vehicle [ours, not in the paper], a reactive
-  baseline of a dozen lines: the IR readings push the wheels away from obstacles, the blue
-  centroid steers toward the target.
+- :func:`ltl_controller`: one set acting alone, RL accumulating each antibody's L (SPEC 10).
+- :func:`stl_controller`: the STL network of SPEC 7 over five sets; a :class:`System` says what
+  learns, so SIE, SRL, UIE, URL and HDC share one compiled batch.
+- :func:`braitenberg_controller`: a Braitenberg vehicle, a reactive baseline [ours].
 
-Every draw or split of a key is a threefry hash, which runs as a loop of its own on CPU, so the
-task loop's time goes with the number of draws per iteration, not their size. Learn and act
-therefore draw at most once per iteration each and slice the draw, relying on JAX's threefry
-numbering a draw's values by their index (a draw's first k values are the k-value draw from the
-same key). An act draws a new bout's two uniforms first, which are what
-:func:`~jaxais.immune.behaviours.wheel_speeds` draws from that key, then the selection's
-tie-breaks.
+On CPU each threefry draw is a loop of its own, so learn and act draw at most once per iteration
+and slice the draw (a draw's first k values are the k-value draw from the same key).
 """
 
 from __future__ import annotations
@@ -45,6 +31,7 @@ from jaxais.immune.network import (
     NetworkParams,
     idiotopes,
     idiotypic_select,
+    initial_clones,
     rescale_paratopes,
     select_alpha,
 )
@@ -63,17 +50,13 @@ from jaxais.immune.reinforcement import (
 
 @pytree_dataclass
 class Percept:
-    """What a controller sees at one iteration (scalars but ``ir``).
+    """What a controller sees at one iteration (scalars but ``ir`` [8]).
 
     Attributes:
-        m, m_prev: antigen now and at the previous iteration (m_prev = 0 at t = 0).
-        v, v_prev: Vm (maximum IR reading) now and before.
-        ir: [8] the IR readings ps0..ps7 (0..4095, ``envs.params.IR_BEARINGS_DEG``).
-        blue_pixels: number of blue pixels; centroid: their mean column (7 when none).
-        t: iterations since the start of the run.
-        tick: iterations since the batch started, the same for every run of a batch (it equals
-            t while a run is going), so a periodic step can be a ``lax.cond`` that stays a
-            branch under ``vmap`` instead of being computed every iteration and masked.
+        m, m_prev, v, v_prev: antigen and Vm now and before (m_prev = 0 at t = 0).
+        blue_pixels, centroid: blue pixels and their mean column (7 when none).
+        t: iterations of the run. tick: iterations of the batch, one for all its runs, so a
+            periodic step is a ``lax.cond`` that stays a branch under ``vmap``.
     """
 
     m: jnp.ndarray
@@ -88,23 +71,14 @@ class Percept:
 
 
 class Controller(NamedTuple):
-    """A controller as pure functions of one robot, key first.
+    """A controller as pure functions of one robot, key first; build each once (compiled
+    programs are cached by identity).
 
-    - ``init(key, params) -> state``
-    - ``learn(key, state, percept, params) -> state``: learning from the last action's outcome
-      (a controller that does not learn returns ``state``);
-    - ``act(key, state, percept, params) -> (state, wheels [2])``: left and right wheel speeds;
-    - ``stats(state, params) -> dict[str, scalar]`` (optional): what a finished run records
-      beyond the loop's own counts, e.g. the STL's idiotypic difference rate (NaN where it
-      does not apply).
-    - ``choices(state) -> [k] int32`` (optional): what the controller has chosen for each
-      situation it tells apart, -1 where it has not chosen yet (the STL: the set last selected
-      for each antigen). The loop measures lock-ups with it (:class:`jaxais.loop.Run`'s
-      ``locked``): a controller without it never counts as locked.
-
-    ``params`` is the controller's own pytree; every key is a typed PRNG key of its own (the
-    loop gives learn and act one each per iteration). Controllers are compared by identity when
-    compiled programs are cached, so build each once (a module constant or a cached factory).
+    - ``init(key, params) -> state``; ``learn(key, state, percept, params) -> state``;
+      ``act(key, state, percept, params) -> (state, wheels [2])``;
+    - ``stats(state, params) -> dict`` (optional): what a run records beyond the loop's counts;
+    - ``choices(state) -> [k] int32`` (optional): the choice per situation, -1 before any; the
+      loop measures lock-ups with it.
     """
 
     init: Callable[..., Any]
@@ -114,14 +88,23 @@ class Controller(NamedTuple):
     choices: Callable[..., jnp.ndarray] | None = None
 
 
+def no_state(key, params):
+    """A stateless controller's ``init``: a scalar keeps the loop's pytrees non-empty."""
+    del key, params
+    return jnp.int32(0)
+
+
+def no_learning(key, state, percept, params):
+    """A controller's ``learn`` that learns nothing."""
+    del key, percept, params
+    return state
+
+
 # --------------------------------------------------------------- the immune controllers' bouts
 
-L_MAX = 100.0
-"""Upper clip of an antibody's cumulative RL score L in the LTL [ours, consistent with φ = 20]."""
-REPLACE_BELOW = 0.1
-"""Unseeded systems replace antibodies whose paratope falls below this [paper]."""
-REPLACEMENT_P = (0.25, 0.75)
-"""Range of a replacement antibody's paratope [ours, as the unseeded initial P]."""
+L_MAX = 100.0  # upper clip of the LTL's cumulative score L [ours, consistent with φ = 20]
+REPLACE_BELOW = 0.1  # unseeded systems replace antibodies with a lower P [paper]
+REPLACEMENT_P = (0.25, 0.75)  # a replacement's P range [ours, as the unseeded initial P]
 
 
 def _scored(shape: tuple[int, ...], index: tuple[jnp.ndarray, ...]) -> jnp.ndarray:
@@ -141,27 +124,17 @@ def _level(m: jnp.ndarray) -> jnp.ndarray:
 
 
 def interrupts(m: jnp.ndarray, held: jnp.ndarray) -> jnp.ndarray:
-    """Does antigen ``m`` cut short the bout of the behaviour selected for antigen ``held``?
-
-    [ours] A more urgent situation (target seen while wandering, an obstacle, a collision), or
-    a new obstacle or collision on another side, gets a new selection at once; a calmer one
-    (the obstacle left behind) lets the bout run on, so a reverse turn backs all the way out.
-    """
+    """Does antigen ``m`` cut short the bout selected for antigen ``held``? [ours] A more urgent
+    level or an obstacle on another side does; a calmer one lets a reverse turn back out."""
     level, held_level = _level(m), _level(held)
     return (level > held_level) | ((level == held_level) & (level >= 2) & (m != held))
 
 
 @pytree_dataclass
 class Bout:
-    """The behaviour acting now (SPEC 5): it acts for ``Readings.hold`` iterations.
-
-    Attributes:
-        antigen: [] int32 the antigen it was selected for (its antibody column).
-        left: [] int32 iterations of the bout still to act after this one.
-        u: [2] the behaviour's uniforms, what :func:`~jaxais.immune.behaviours.wheel_speeds` draws
-            from the act key of the bout's selection: the behaviour acts on the same numbers all
-            bout, so a wander's turn decision holds for the bout and F % is the share of bouts, i.e.
-            of time, spent turning."""
+    """The behaviour acting now, for ``Readings.hold`` iterations (SPEC 5): selected for
+    ``antigen``, ``left`` iterations to go, its uniforms ``u`` [2] kept all bout (a wander's
+    turn decision holds)."""
 
     antigen: jnp.ndarray
     left: jnp.ndarray
@@ -174,10 +147,8 @@ def _init_bout() -> Bout:
 
 
 def _end_if(bout: Bout, penalised: jnp.ndarray) -> Bout:
-    """The bout ended by a penalty: the network selects again at once [ours]. Otherwise the
-    penalised antibody would act on, and the rewards of the rest of its bout (0 -> 0 scores
-    +0.05 per iteration) would undo the penalty before the next selection, which the paper's
-    penalties exist to force ("to break out of repeated behaviour cycles", section 4.4)."""
+    """The bout ended by a penalty, so the network selects again at once [ours]: the rest of the
+    bout's rewards would undo it (the penalties "break out of repeated behaviour cycles", 4.4)."""
     return bout.replace(left=jnp.where(penalised, 0, bout.left).astype(jnp.int32))
 
 
@@ -197,8 +168,7 @@ def _next_bout(bout: Bout, pc: Percept, u: jnp.ndarray, hold: jnp.ndarray):
 
 @pytree_dataclass
 class LTLState:
-    """A GA robot during its run: its set [8], the scores L [8], the penalty counters and the
-    behaviour acting now."""
+    """A GA robot during its run: its set [8], scores L [8], penalty counters, bout."""
 
     antibodies: Antibodies
     L: jnp.ndarray
@@ -207,15 +177,9 @@ class LTLState:
 
 
 def ltl_controller(readings: Readings = DEFAULT) -> Controller:
-    """One set, no idiotypic selection: the antibody for the antigen acts; RL accumulates L.
-
-    Params: an :class:`Antibodies` set [8]. The antibody selected for an antigen acts for a bout
-    (``readings.hold``, :class:`Bout`). L_ij is the cumulative RL score of antibody j, clipped
-    to [0, L_MAX] after every update; penalties subtract the non-idiotypic 1.0.
-
-    Args:
-        readings: our readings of the paper's open points (built in as constants).
-    """
+    """The LTL: params a set [8], whose antibody for the antigen acts for a bout; L is the
+    cumulative RL score clipped to [0, L_MAX], penalties subtract 1.0. ``readings`` are
+    compiled in."""
 
     def init(key, antibodies):
         del key  # the first act selects, from its own key
@@ -250,16 +214,12 @@ def ltl_controller(readings: Readings = DEFAULT) -> Controller:
 
 @pytree_dataclass
 class System:
-    """One STL system as data (see :mod:`jaxais.systems` for SIE, SRL, UIE, URL, HDC).
+    """One STL system as data (:mod:`jaxais.systems`: SIE, SRL, UIE, URL, HDC).
 
     Attributes:
-        antibodies: [x, y] the initial sets.
-        paratopes: [x, y] initial P.
-        learning: RL, eq (4) and penalties on (off for the hand-designed controller).
-        idiotypic: three-stage idiotypic selection (eqs 5-10) rather than stage 1 alone.
-        replacement: replace antibodies with P < 0.1 (unseeded systems).
-        network: the network constants.
-        readings: our readings of the paper's open points (:mod:`jaxais.immune.readings`).
+        antibodies, paratopes: [x, y] the initial sets and P.
+        learning: RL, eq (4) and penalties (off for HDC). idiotypic: stages 1-3 (eqs 5-10),
+            else stage 1 alone. replacement: replace antibodies with P < 0.1 (unseeded).
     """
 
     antibodies: Antibodies
@@ -273,18 +233,9 @@ class System:
 
 @pytree_dataclass
 class STLState:
-    """The network during a run.
-
-    Attributes:
-        antibodies: [x, y] current sets (replacement changes them).
-        P: [x, y] paratopes. sigma0: [y] initial column means (eq 4). I: [x, y] idiotopes.
-        N: [x, y] clone counts. counters: penalty runs.
-        acting: set index of the antibody acting now (scored at the next iteration); its
-            antigen column is ``bout.antigen``. bout: the behaviour acting now.
-        differences: selections with alpha != beta. selections: selections made (one per bout).
-        replaced: antibodies replaced so far.
-        chosen: [y] the set last selected for each antigen (-1: never selected yet).
-    """
+    """The network during a run: antibodies, P, I, N [x, y]; sigma0 [y] (eq 4); ``acting``,
+    the set acting now in column ``bout.antigen``; counts of ``differences`` (alpha != beta),
+    ``selections`` and ``replaced``; ``chosen`` [y], each antigen's last set (-1: none)."""
 
     antibodies: Antibodies
     P: jnp.ndarray
@@ -304,20 +255,11 @@ def stl_controller(
     replacement: bool = True, idiotypic: bool = True, learning: bool = True
 ) -> Controller:
     """The STL network: per iteration RL on the antibody that acted last, eq (4), penalties,
-    replacement (unseeded), the idiotope every ``idiotope_period`` iterations, then, when a bout
-    ends or is interrupted (:class:`Bout`), selection (stage 1, or stages 1-3 when idiotypic);
-    the selected antibody's behaviour acts for the bout.
+    replacement, the idiotope every period, and at a bout's end selection (stage 1, or 1-3).
 
-    Replacement [ours on the detail]: at most one antibody per iteration, the first (in set,
-    antigen order) whose P is below 0.1; any others follow on later iterations.
-
-    Args:
-        replacement, idiotypic, learning: build that part of the network in (default: all of
-            them, which runs every system). A batch in which no run uses a part (its
-            ``System`` flag False throughout) gives the same trials without it, from a smaller
-            and faster program (docs/performance.md); :func:`stl_for` picks the smallest
-            controller for a batch (tests/test_controllers.py checks that the trials are the
-            same).
+    Replacement [ours]: at most one per iteration, the first weak one in (set, antigen) order.
+    A part left out (``False``) gives the same trials for a batch that never uses it, from a
+    smaller program (:func:`stl_for`).
     """
 
     def init(key, system: System):
@@ -328,7 +270,7 @@ def stl_controller(
             # Eq (4)'s targets, floored so that no column is pinned at 0 (jaxais.immune.readings).
             sigma0=jnp.maximum(jnp.mean(P, axis=0), system.readings.sigma0_floor),
             I=idiotopes(key, P),
-            N=jnp.full(P.shape, system.network.initial_clones, jnp.float32),
+            N=initial_clones(*P.shape, system.network.initial_clones),
             counters=init_counters(),
             acting=jnp.int32(0),
             bout=_init_bout(),
@@ -358,8 +300,7 @@ def stl_controller(
                 weak = (P < REPLACE_BELOW) & system.replacement & on
                 first = _scored(P.shape, jnp.unravel_index(jnp.argmax(weak), P.shape))
                 first = first & jnp.any(weak)
-                # One draw: past the x * y values that the idiotope's redraw below draws from
-                # this key, the new antibody's seven values, then its paratope's.
+                # One draw: past the idiotope's x * y values, the antibody's seven and its P.
                 u = jax.random.uniform(key, (P.size + 1 + N_ATTRIBUTES + 1,))[P.size :]
                 fresh = from_uniforms(u[:-1])
                 antibodies = jax.tree.map(
@@ -369,10 +310,8 @@ def stl_controller(
                 P = jnp.where(first, lo + (hi - lo) * u[-1], P)
                 replaced = replaced + jnp.any(weak).astype(jnp.int32)
 
-        # The idiotope is redrawn every idiotope_period iterations of a run (not at t = 0). The
-        # test is on the batch's tick (unbatched), so under vmap this stays a branch taken once
-        # per period; a run that joins a batch at a tick that is a multiple of the period
-        # (jaxais.runner.run_pool's refills) keeps the same schedule.
+        # The idiotope's redraw every period (not at t = 0) tests the batch's tick, so under vmap
+        # it stays a branch (the pool's refills keep runs in phase).
         due = pc.tick % system.network.idiotope_period == 0
         I = jax.lax.cond(due, lambda: jnp.where(pc.t > 0, idiotopes(key, P), s.I), lambda: s.I)
         return s.replace(
@@ -425,8 +364,7 @@ def stl_controller(
     return Controller(init=init, learn=learn, act=act, stats=stats, choices=choices)
 
 
-LTL = ltl_controller()
-"""The GA's controller (one shared instance, so compiled programs are reused)."""
+LTL = ltl_controller()  # the GA's controller
 
 
 @functools.cache
@@ -436,14 +374,13 @@ def _stl(replacement: bool, idiotypic: bool, learning: bool) -> Controller:
 
 
 def stl_for(systems: System) -> Controller:
-    """The smallest STL controller that runs every system of a batch (flags [n]), shared."""
+    """The smallest (shared) STL controller that runs every system of a batch [n]."""
     return _stl(
         *(bool(np.any(f)) for f in (systems.replacement, systems.idiotypic, systems.learning))
     )
 
 
-STL = _stl(True, True, True)
-"""The STL network controller, every part built in (one shared instance)."""
+STL = _stl(True, True, True)  # every part built in
 
 
 # ---------------------------------------------------------------------------- a baseline
@@ -451,13 +388,8 @@ STL = _stl(True, True, True)
 
 @pytree_dataclass
 class BraitenbergParams:
-    """A Braitenberg vehicle's gains [ours; a baseline, not in the paper].
-
-    Attributes:
-        speed: cruising wheel speed, speed units (Table 1's behaviours run at 100-1000).
-        avoid: turn per unit of proximity (the nearer side's, 0 far to 1 touching).
-        steer: turn per unit of the blue centroid's offset from the image centre (-1..1).
-    """
+    """A Braitenberg vehicle's gains [ours]: cruising ``speed`` (speed units), turn per unit of
+    the nearer side's proximity (``avoid``) and of the blue centroid's offset (``steer``)."""
 
     speed: jnp.ndarray
     avoid: jnp.ndarray
@@ -465,36 +397,21 @@ class BraitenbergParams:
 
 
 def braitenberg_params(speed: float = 500.0, avoid: float = 1.0, steer: float = 0.5):
-    """:class:`BraitenbergParams` as float32 scalars (the defaults are ours, set by
-    ``tests/test_controllers.py``'s behaviour tests: it turns away from the nearer wall and
-    toward the blue, not by any STL result)."""
+    """:class:`BraitenbergParams` as float32 (defaults [ours], from its behaviour tests)."""
     f = lambda x: jnp.float32(x)
     return BraitenbergParams(speed=f(speed), avoid=f(avoid), steer=f(steer))
 
 
 def _proximity(ir: jnp.ndarray) -> jnp.ndarray:
-    """IR readings as proximity in [0, 1]: 0 beyond about 6 cm (reading 100), 1 from about
-    1.5 cm (reading 600; ``envs.params.IR_TABLE_VALUE``)."""
+    """IR readings as proximity in [0, 1]: 0 beyond about 6 cm, 1 from about 1.5 cm."""
     return jnp.clip((ir - 100.0) / 500.0, 0.0, 1.0)
 
 
 def braitenberg_controller() -> Controller:
-    """A reactive vehicle: no state, no learning, no randomness.
-
-    The front sensors' proximity on each side (ps0-ps2 right, ps5-ps7 left, weighted toward
-    the front) slows the robot and turns it away from the nearer side; with nothing near, a
-    blue centroid left or right of the image centre turns it toward the blue.
-    """
+    """A reactive vehicle (no state, learning or randomness): the nearer side's proximity slows
+    it and turns it away; with nothing near, it turns toward the blue centroid."""
     weights = np.array([1.0, 0.7, 0.3, 0.0, 0.0, 0.3, 0.7, 1.0], np.float32)  # ps0..ps7
     right_side = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0], np.float32)
-
-    def init(key, params):
-        del key, params
-        return jnp.int32(0)  # no state; a scalar keeps the loop's pytrees non-empty
-
-    def learn(key, state, pc: Percept, params):
-        del key, pc, params
-        return state
 
     def act(key, state, pc: Percept, params: BraitenbergParams):
         del key
@@ -509,8 +426,7 @@ def braitenberg_controller() -> Controller:
         wheels = jnp.stack([forward + params.speed * turn, forward - params.speed * turn])
         return state, jnp.clip(wheels, -MAX_WHEEL_SPEED, MAX_WHEEL_SPEED)
 
-    return Controller(init=init, learn=learn, act=act)
+    return Controller(init=no_state, learn=no_learning, act=act)
 
 
 BRAITENBERG = braitenberg_controller()
-"""The Braitenberg vehicle (one shared instance, so compiled programs are reused)."""

@@ -1,20 +1,13 @@
-"""The systems' names: the five system codes, the random sets and the labels of the paper's tables.
-
-JAX-free, unlike :mod:`jaxais.systems` (which builds the systems and re-exports these names), so
-that the scripts can check their flags against them before JAX starts.
-"""
+"""The systems' names: codes, random sets and table labels (JAX-free: scripts check flags)."""
 
 from __future__ import annotations
 
 __all__ = ["LABELS", "RANDOM_SETS", "SYSTEMS", "label", "parse_label"]
 
-SYSTEMS = ("SIE", "SRL", "UIE", "URL", "HDC")
-"""The five system codes (SPEC 8)."""
-RANDOM_SETS = {"R1": 1, "R2": 2}
-"""The fixed random initial sets R1 and R2: PRNG seeds of their draws [ours]."""
+SYSTEMS = ("SIE", "SRL", "UIE", "URL", "HDC")  # SPEC 8
+RANDOM_SETS = {"R1": 1, "R2": 2}  # the fixed random initial sets: their PRNG seeds [ours]
+# The paper's table order (a label's random stream comes from its name, not its place).
 LABELS = ("SIE", "SRL", "UIE-R1", "URL-R1", "UIE-R2", "URL-R2", "HDC")
-"""System labels as in the paper's tables, in its table order (a label's random stream comes
-from its name, :func:`jaxais.trials.stream_id`, not from its place here)."""
 
 
 def label(system: str, random_set: str | None = None) -> str:

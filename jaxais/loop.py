@@ -1,10 +1,8 @@
-"""The task loop: one robot, one run to the target (shared by the GA's LTL and the STL trials).
+"""The task loop: one robot, one run to the target (the GA's LTL and the STL trials).
 
-Each iteration: read the antigen from the last observation, count collisions, apply the finish
-rule and the caps, let the controller learn and act, step the simulator. Written for one run;
-:mod:`jaxais.runner` drives batches of runs. The loop runs any
-:class:`~jaxais.controllers.Controller` (the protocol is in :mod:`jaxais.controllers`): it knows
-nothing of antibodies or networks.
+Each iteration: antigen, collisions, finish rule and caps, the controller's learn and act, a
+simulator step. Any :class:`~jaxais.controllers.Controller` runs here; :mod:`jaxais.runner`
+drives batches.
 """
 
 from __future__ import annotations
@@ -22,9 +20,7 @@ from jaxais.controllers import Controller, Percept
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.immune.antigens import OBSTACLE_THRESHOLD, antigen, is_collision
 
-# Why a run ended (failed_by codes).
-RUNNING, FINISHED, FAILED_COLLISIONS, FAILED_TIME = 0, 1, 2, 3
-FAILED_BY_NAME = {FINISHED: None, FAILED_COLLISIONS: "collisions", FAILED_TIME: "time"}
+RUNNING, FINISHED, FAILED_COLLISIONS, FAILED_TIME = 0, 1, 2, 3  # Run.status
 
 
 @dataclass(frozen=True)
@@ -32,27 +28,19 @@ class EpisodeConfig:
     """Static settings of a run (they fix loop lengths and buffer shapes).
 
     Attributes:
-        tau_cap: time cap, simulated seconds [paper: 4000 s STL, ours: 500 s LTL].
-        collision_cap: collision cap [paper: 100]; a run with more collisions has failed.
-        stop_at_collision_cap: end a run when it reaches the collision cap. The paper's STL runs
-            did not stop there (its text speaks of failing robots with "thousands" of
-            collisions, and SPEC 9 reads its failure columns as overlapping), so this is off by
-            default; the GA's evaluation turns it on (its LTL caps, SPEC 10).
-        collision_rule: "episode" counts one collision per contact episode: the antigen enters
-            5-7 and the robot has been free of obstacles (Vm < 250) since the last counted one
-            [ours, SPEC 9]; "entry" counts every entry into 5-7 from another antigen (the
-            earlier reading, which also counts the chatter of one long contact).
-        finish_pixels: a run ends after more than this many goal pixels ... [paper: 40]
-        finish_streak: ... on this many consecutive iterations [paper: 3].
-        trap_radius, trap_window: a robot is trapped while it has stayed within ``trap_radius``
-            m of one point for at least ``trap_window`` s; the whole stay counts as trapped time
-            [ours: 0.1 m, under three body diameters; 10 s]. It is *locked* while it is trapped
-            and its controller's choices (``Controller.choices``: for the STL, the antibody
-            selected for each antigen) have not changed over the whole stay: the same antibody
-            keeps being selected for its antigen while the robot does not move away [ours].
-        chunk: iterations per inner loop; trajectories are sampled once per chunk.
-        segment: iterations per compiled call of :func:`jaxais.runner.rollout` (progress).
-        record: keep the trajectory (one pose per chunk).
+        tau_cap: time cap, simulated s [paper: 4000 s STL; ours: 500 s LTL].
+        collision_cap: a run with more collisions has failed [paper: 100].
+        stop_at_collision_cap: end a run at the cap: off for the STL (the paper's failures
+            overlap, SPEC 9), on in the GA (SPEC 10).
+        collision_rule: "episode": one per contact episode, antigen 5-7 after Vm < 250 since the
+            last [ours, SPEC 9]; "entry": every entry into 5-7 (the earlier reading).
+        finish_pixels, finish_streak: the run ends after more than 40 goal pixels on 3
+            consecutive iterations [paper].
+        trap_radius, trap_window: trapped while within 0.1 m of one point for >= 10 s, the whole
+            stay counted; locked while trapped with ``Controller.choices`` unchanged [ours].
+        chunk: iterations per inner loop (one trajectory pose each).
+        segment: iterations per compiled call (host checks between).
+        record: keep the trajectory.
     """
 
     tau_cap: float = 4000.0
@@ -85,31 +73,22 @@ class EpisodeConfig:
             raise ValueError(f"finish_pixels must be >= 0, got {self.finish_pixels!r}")
 
     def max_iterations(self, dt: float) -> int:
-        """Iterations until the time cap."""
         return int(math.ceil(self.tau_cap / dt - 1e-9))
 
     def trap_iterations(self, dt: float) -> int:
-        """Iterations within the trap disc after which a robot counts as trapped."""
         return max(1, round(self.trap_window / dt))
 
 
 @pytree_dataclass
 class Run:
-    """One run in progress.
+    """One run in progress (scalars unless shaped).
 
     Attributes:
-        sim: simulator state. obs: last observation. ctrl: controller state.
-        key: the run's PRNG key; iteration t draws from ``fold_in(key, t)``
-            (:func:`jaxais.runner.advance`).
-        m_prev, v_prev: previous antigen and Vm. collisions: collisions so far (uncapped).
-        free: Vm has been under 250 (clear of obstacles) since the last counted collision, so
-            the next collision antigen starts a new contact episode (the episode rule).
-        streak: consecutive iterations with more than finish_pixels goal pixels.
-        anchor: [2] centre of the current trap disc. still: iterations spent within it.
-        trapped: iterations counted as trapped (EpisodeConfig.trap_radius, trap_window).
-        unchanged: iterations spent within the disc with the controller's choices unchanged.
-        locked: iterations counted as locked (trapped with unchanged choices, EpisodeConfig).
-        t: iterations so far. status: RUNNING, FINISHED, FAILED_COLLISIONS or FAILED_TIME.
+        key: iteration t draws from ``fold_in(key, t)``. m_prev, v_prev: last antigen and Vm.
+        collisions: uncapped. free: Vm < 250 since the last counted collision (episode rule).
+        streak: iterations in a row past finish_pixels. anchor [2], still: the trap disc's
+            centre and the iterations within it; unchanged: those with choices unchanged.
+        trapped, locked: iterations counted so (:class:`EpisodeConfig`). status: RUNNING, ...
     """
 
     sim: envs.State
@@ -131,7 +110,7 @@ class Run:
 
 
 def _carried(obs: envs.Observation) -> envs.Observation:
-    """The part of an observation the loop reads next iteration (the pixel maps are dropped)."""
+    """The observation without the pixel maps the loop never reads."""
     return obs.replace(blue=None, materials=None, depth=None)
 
 
@@ -148,54 +127,33 @@ def start(
     sim = envs.reset(reset_key, world, sim_params)
     obs = _carried(envs.observe(k_obs, sim, world, sim_params))
     ctrl = controller.init(k_ctrl, ctrl_params)
+    counts = ("m_prev", "collisions", "streak", "still", "trapped", "unchanged", "locked", "t")
     return Run(
         sim=sim,
         obs=obs,
         ctrl=ctrl,
         key=k_run,
-        m_prev=jnp.int32(0),
         v_prev=jnp.float32(0.0),
-        collisions=jnp.int32(0),
         free=jnp.bool_(True),
-        streak=jnp.int32(0),
         anchor=sim.pose[:2],
-        still=jnp.int32(0),
-        trapped=jnp.int32(0),
-        unchanged=jnp.int32(0),
-        locked=jnp.int32(0),
-        t=jnp.int32(0),
         status=jnp.int32(RUNNING),
+        **dict.fromkeys(counts, jnp.int32(0)),
     )
 
 
-def iterate(
-    key: jax.Array,
-    run: Run,
-    tick: jnp.ndarray,
-    world: envs.World,
-    sim_params: envs.SimParams,
-    controller: Controller,
-    ctrl_params: Any,
-    config: EpisodeConfig,
-) -> Run:
-    """One iteration of one run; a run that has ended is unchanged.
-
-    Args:
-        key: this iteration's PRNG key, split between learn, act and the simulator step.
-        tick: iterations since the batch started (unbatched; see :class:`Percept`).
-    """
-    draws = _draws(key, world)
-    return _iterate(draws, run, tick, world, sim_params, controller, ctrl_params, config)
+Draws = tuple[jax.Array, jax.Array, envs.StepNoise]
+"""An iteration's randomness: (learn's key, act's key, the simulator step's noise)."""
 
 
-def _draws(key: jax.Array, world: envs.World) -> tuple[jax.Array, jax.Array, envs.StepNoise]:
-    """An iteration's randomness from its key: (learn's key, act's key, the step's noise)."""
+def draws(key: jax.Array, world: envs.World) -> Draws:
+    """An iteration's randomness from its key (the runner makes a chunk's at once: each draw is
+    a threefry hash, a loop of its own on CPU)."""
     k_learn, k_act, k_sim = jax.random.split(key, 3)
     return k_learn, k_act, envs.sample_step_noise(k_sim, world)
 
 
-def _iterate(
-    draws: tuple[jax.Array, jax.Array, envs.StepNoise],
+def iterate(
+    rand: Draws,
     run: Run,
     tick: jnp.ndarray,
     world: envs.World,
@@ -204,8 +162,11 @@ def _iterate(
     ctrl_params: Any,
     config: EpisodeConfig,
 ) -> Run:
-    """:func:`iterate` given its randomness, ``_draws(key, world)``."""
-    k_learn, k_act, sim_noise = draws
+    """One iteration of one run given its randomness, :func:`draws`; an ended run is unchanged.
+
+    ``tick``: iterations since the batch started (unbatched; see :class:`Percept`).
+    """
+    k_learn, k_act, sim_noise = rand
     obs = run.obs
     m = antigen(obs.ir, obs.blue_pixels)
     if config.collision_rule == "episode":  # one per contact episode (EpisodeConfig)
@@ -241,8 +202,6 @@ def _iterate(
     ctrl, wheels = controller.act(k_act, ctrl, percept, ctrl_params)
     sim, new_obs = envs.step_with_noise(run.sim, wheels, sim_noise, world, sim_params)
     new_obs = _carried(new_obs)
-    # Trapped time: a stay within trap_radius of the anchor counts, whole, once it lasts the
-    # window (at the window all of it is added, then one iteration at a time).
     pos = sim.pose[:2]
     away = jnp.sum((pos - run.anchor) ** 2) > config.trap_radius**2
     still = jnp.where(away, 0, run.still + 1)
@@ -282,24 +241,16 @@ def _iterate(
 
 
 def _stay_counted(stay: jnp.ndarray, window: int) -> jnp.ndarray:
-    """Iterations a stay adds to its count: none before the window, all of it at the window,
-    then one per iteration."""
+    """A stay's increment: 0 before the window, all of it at the window, then 1."""
     return jnp.where(stay == window, window, (stay > window).astype(jnp.int32))
 
 
 def outcome(runs: Run, config: EpisodeConfig, dt: float, xp: Any = np) -> dict[str, Any]:
-    """Per-run τ (s, capped), collisions (raw and capped), f = (ρc + τ)/2 with ρ = 8 and the
-    capped c (SPEC 9), the failures, trapped and locked time and the status.
+    """Per-run results of ``runs`` (anything with t, status, collisions, trapped, locked).
 
-    Args:
-        runs: a :class:`Run` (or anything with its t, status, collisions, trapped, locked).
-        xp: ``numpy`` (default: on the host, τ in float64) or ``jax.numpy`` (inside a traced
-            function, :func:`jaxais.trials.make_trials`).
-
-    Returns:
-        Arrays [n]: tau, collisions (raw), collisions_capped, fitness, failed_collisions
-        (c > cap), failed_time (the time cap reached), trapped_s, locked_s, status,
-        iterations.
+    ``xp``: ``numpy`` (on the host, τ in float64) or ``jax.numpy`` (traced). Returns arrays [n]:
+    tau (s, capped), collisions (raw), collisions_capped, fitness (SPEC 9), failed_collisions
+    (c > cap), failed_time, trapped_s, locked_s, status, iterations.
     """
     status = xp.asarray(runs.status)
     t = xp.asarray(runs.t)

@@ -1,16 +1,9 @@
 """A quiet end to an orbax restore that failed (the seed and GA checkpoint readers use it).
 
-orbax reads a checkpoint's arrays concurrently, on an event loop of its own, and closes that loop
-as soon as one read fails. The other reads end a moment later, and Python then reports them in
-two ways, both after the caller has already said what is wrong (a script's one-line error about
-a corrupt checkpoint):
-
-- tensorstore's completion callbacks find the loop closed: each is an unraisable
-  ``RuntimeError('Event loop is closed')``, printed with a traceback;
-- the failed reads' futures are garbage-collected with their errors unread: asyncio logs
-  "Future (or Task) exception was never retrieved" with tensorstore's error.
-
-:func:`forget_abandoned_reads` drops exactly those reports and lets everything else through.
+orbax reads arrays concurrently on an event loop it closes at the first failure; the other reads
+then end with reports printed after the caller's one-line error: unraisable ``RuntimeError('Event
+loop is closed')`` tracebacks and asyncio's "exception was never retrieved" logs.
+:func:`forget_abandoned_reads` drops exactly those and lets everything else through.
 """
 
 from __future__ import annotations
@@ -21,8 +14,7 @@ from typing import Any
 
 _LOOP_CLOSED = "Event loop is closed"
 _NEVER_RETRIEVED = ("Future exception was never retrieved", "Task exception was never retrieved")
-_READ_ERRORS = ('"zarr" driver', "OCDBT database")
-"""Words of tensorstore's errors for a checkpoint's arrays (zarr arrays in an OCDBT store)."""
+_READ_ERRORS = ('"zarr" driver', "OCDBT database")  # tensorstore's words for a checkpoint read
 
 
 def _is_late_callback(unraisable: Any) -> bool:
@@ -44,12 +36,8 @@ def _mentions_a_read(error: BaseException) -> bool:
 
 
 def forget_abandoned_reads() -> None:
-    """Drop the abandoned reads' reports from now on; let every other report through.
-
-    Call it before a restore (after a failure the first late report can come at once).
-    Installed once per process: over whatever ``sys.unraisablehook`` was there before, and as a
-    filter of the ``asyncio`` logger.
-    """
+    """Drop the abandoned reads' reports from now on (call before a restore); installed once
+    per process, over the previous ``sys.unraisablehook`` and as an ``asyncio`` log filter."""
     if not getattr(sys.unraisablehook, "_drops_abandoned_reads", False):
         previous = sys.unraisablehook
 

@@ -1,26 +1,14 @@
 """The one driver of the task loop (:mod:`jaxais.loop`): batches of runs, sharded over devices.
 
-A batch of runs advances in lockstep, ``vmap`` inside a ``while_loop`` (:func:`advance`), in
-segments between which the host reads every run's counts. Two drivers share those programs:
+A batch advances in lockstep (``vmap`` in a ``while_loop``, :func:`advance`) in segments, between
+which the host reads every run's counts. :func:`rollout` runs one batch to its end (the GA,
+recorded trials); :func:`run_pool` refills the slots of ended runs from a queue (trials, sweeps).
 
-- :func:`rollout`: one batch to its end (every run's final state, and trajectories when
-  recorded): the GA's evaluations, recorded trials.
-- :func:`run_pool`: many more runs than one batch holds: the runs that ended in a segment are read
-  out and their slots start the next runs of the queue, so in runs of unequal length the ended
-  ones stop costing (trials, sweeps).
-
-Iteration t of a run draws from ``fold_in(run.key, t)`` alone, so a run's numbers depend neither
-on the chunk and segment sizes nor on the other runs of its batch, its slot, or when it started
-(slots are refilled at batch ticks that are multiples of the segment, which keeps a controller's
-periodic steps in phase: the STL's idiotope reads the batch tick). Bit for bit that holds for
-controllers whose arithmetic XLA compiles alike in every program: the STL network and the
-neural baseline (tested). A controller with dot products can round differently in another
-program, since XLA picks a dot's summation order per program, and over thousands of steps a few
-runs then take other paths: the same distribution, not the same bits (the neural baseline's MLP
-did, until it summed in a fixed order, :func:`jaxais.baselines.neural.policy_in_order`).
-
-The programs are ``jax.jit``'s, compiled once per controller, config, batch shape and device set;
-worlds, simulator constants and parameters are their arguments.
+Iteration t of a run draws from ``fold_in(run.key, t)`` alone, and slots refill at ticks that are
+multiples of the segment, so a run's numbers depend neither on chunk or segment sizes nor on its
+batch, slot or start: bit for bit for controllers that XLA compiles alike in every program (the
+STL, the neural baseline: see :func:`jaxais.baselines.neural.policy_in_order`). The programs are
+``jax.jit``'s, compiled once per controller, config, batch shape and device set.
 """
 
 from __future__ import annotations
@@ -39,18 +27,13 @@ import numpy as np
 from jaxais import distributed, envs
 from jaxais.controllers import Controller
 from jaxais.envs.struct import pytree_dataclass
-from jaxais.loop import RUNNING, EpisodeConfig, Run, _draws, _iterate, outcome, start
+from jaxais.loop import RUNNING, EpisodeConfig, Run, draws, iterate, outcome, start
 
 
 @pytree_dataclass
 class Batch:
-    """A batch of runs advanced together, with the optional trajectory buffer.
-
-    Attributes:
-        runs: Run with a leading batch axis [n].
-        poses: [n, K, 3] poses sampled once per chunk (K = 1 when not recording).
-        chunks: number of chunks done (the trajectory's fill level).
-    """
+    """Runs [n] advanced together, their poses [n, K, 3] once per chunk (K = 1 unrecorded)
+    and the chunks done."""
 
     runs: Run
     poses: jnp.ndarray
@@ -84,29 +67,26 @@ def advance(
     ctrl_params: Any,
     config: EpisodeConfig,
 ) -> Batch:
-    """Advance every run by up to ``config.segment`` iterations, stopping early once all ended.
-
-    Iteration t of a run is :func:`jaxais.loop.iterate` with the key ``fold_in(run.key, t)``.
-    """
-    step_all = jax.vmap(_iterate, in_axes=(0, 0, None, None, None, None, 0, None))
+    """Every run on by up to ``config.segment`` iterations (fewer once all ended); iteration t
+    draws from ``fold_in(run.key, t)``."""
+    step_all = jax.vmap(iterate, in_axes=(0, 0, None, None, None, None, 0, None))
     n_chunks = max(1, config.segment // config.chunk)
 
     def chunk_draws(runs: Run):
-        """Every iteration's draws of the chunk, [chunk, n, ...]: each derivation and draw is a
-        threefry hash, a loop of its own on CPU whatever its size, so they are made once for
-        the chunk, over flat [chunk * n] keys. A run that ends within the chunk stops counting
-        t, but then its iterations change nothing, so those draws are unused."""
+        """Every iteration's draws of the chunk, [chunk, n, ...], made at once over flat keys
+        (each threefry hash is a loop of its own on CPU, whatever its size). A run that ends
+        within the chunk leaves its later draws unused."""
         n = runs.t.shape[0]
         t = (runs.t[None, :] + jnp.arange(config.chunk)[:, None]).reshape(-1)
         keys = jax.vmap(jax.random.fold_in)(jnp.tile(runs.key, config.chunk), t)
-        draws = jax.vmap(_draws, in_axes=(0, None))(keys, world)
-        return jax.tree.map(lambda a: a.reshape(config.chunk, n, *a.shape[1:]), draws)
+        flat = jax.vmap(draws, in_axes=(0, None))(keys, world)
+        return jax.tree.map(lambda a: a.reshape(config.chunk, n, *a.shape[1:]), flat)
 
     def chunk(batch: Batch) -> Batch:
-        draws = chunk_draws(batch.runs)
+        rand = chunk_draws(batch.runs)
 
         def body(i, r):
-            at_i = jax.tree.map(lambda a: a[i], draws)
+            at_i = jax.tree.map(lambda a: a[i], rand)
             tick = batch.chunks * config.chunk + i
             return step_all(at_i, r, tick, world, sim_params, controller, ctrl_params, config)
 
@@ -126,9 +106,8 @@ def advance(
 
 @jax.tree_util.register_static
 class _Constant:
-    """A world compiled into the programs as constants, which XLA folds (the GA's maze runs
-    several times faster so, and its numbers are those of this form): a static argument, equal
-    to another of the same values, so jax.jit compiles once per world."""
+    """A world compiled in as constants, which XLA folds (the GA's maze runs several times faster,
+    and its numbers are this form's): static, equal by value, so one compile per world."""
 
     def __init__(self, world: envs.World):
         self.world = world
@@ -211,21 +190,12 @@ def rollout(
     progress: Callable[[int], None] | None = None,
     constant_world: bool = False,
 ) -> Batch:
-    """Run a batch to the end: every run finished or stopped by a cap.
-
-    The batch is sharded over ``jax.local_devices()``, padded with copies of runs to a multiple
-    of their count (the copies are dropped from the result); every run's numbers are those of
-    one device.
+    """The final :class:`Batch` of n runs run to their ends, sharded over the local devices.
 
     Args:
-        reset_keys, run_keys: [n] PRNG keys (world placement; everything else).
-        ctrl_params: controller parameters with a leading batch axis [n].
-        progress: called with the iterations done after every segment (e.g. tqdm's update).
-        constant_world: compile ``world`` into the programs as constants (the GA's way; a world
-            of other values compiles programs of its own).
-
-    Returns:
-        The final :class:`Batch` of the n runs.
+        reset_keys, run_keys: [n] keys (world placement; everything else).
+        ctrl_params: batched [n]. progress: called with the iterations of each segment.
+        constant_world: compile ``world`` in as constants (the GA's way).
     """
     n = reset_keys.shape[0]
     sharding = distributed.batch_sharding(jax.local_devices())
@@ -247,16 +217,15 @@ def rollout(
 
 
 def segment_length(chunk: int, period: int = 1, about: int = 600) -> int:
-    """A pool's ``align``: the smallest multiple of ``chunk`` and of a controller's ``period``
-    (the STL's idiotope period) at or above ``about`` iterations (one host check each)."""
+    """A pool's ``align``: the least multiple of ``chunk`` and ``period`` (the idiotope's) at or
+    above ``about``."""
     align = math.lcm(chunk, period)
     return align * max(1, -(-about // align))
 
 
 SHRINK = 8
-"""Once the queue is empty, the batch shrinks by this factor whenever that many slots are idle
-per live run: the last long runs do not pay for a full batch of ended ones (each new size
-compiles the loop once)."""
+"""With the queue empty, the batch shrinks by this factor when that many slots idle per live run
+(each size compiles once)."""
 
 
 def run_pool(
@@ -271,23 +240,17 @@ def run_pool(
     align: int = 600,
     progress: Callable[[int], None] | None = None,
 ) -> dict[str, np.ndarray]:
-    """Run every run to its end, ``slots`` at a time, sharded over every process's devices.
+    """Every run to its end, ``slots`` at a time, sharded over every process's devices.
 
     Args:
-        reset_keys, run_keys: [n] PRNG keys of the runs (as in :func:`rollout`).
-        params: the controller's params with a leading axis [n] (one per run).
-        slots: runs live at once (the batch size of the compiled loop).
-        align: iterations per segment; slots are refilled between segments. A multiple of
-            ``config.chunk`` and of every period a controller keeps (600 = 24 chunks of 25 =
-            5 idiotope periods of 120).
-        progress: called after every segment with the number of runs that ended in it.
+        reset_keys, run_keys, params: [n] as :func:`rollout`'s.
+        align: iterations per segment, between refills: a multiple of ``config.chunk`` and of
+            every period a controller keeps (:func:`segment_length`).
+        progress: called with the runs that ended in each segment.
 
     Returns:
-        NumPy arrays [n]: :func:`jaxais.loop.outcome`'s, the controller's ``stats``, and where
-        each run's world put its boxes (``boxes`` [n, B, 2]) and goal (``goal`` [n, 2]).
-
-    Raises:
-        ValueError: ``align`` is not a multiple of ``config.chunk``, or ``slots`` < 1.
+        NumPy arrays [n]: :func:`jaxais.loop.outcome`'s, the controller's ``stats``, and each
+        run's ``boxes`` [n, B, 2] and ``goal`` [n, 2].
     """
     if align % config.chunk or align < config.chunk:
         raise ValueError(f"align must be a multiple of the chunk ({config.chunk}), got {align}")
@@ -340,8 +303,3 @@ def run_pool(
             idx, live = idx[keep], live[keep]
     counts = {name: got.pop(name) for name in ("t", "status", "collisions", "trapped", "locked")}
     return outcome(types.SimpleNamespace(**counts), config, float(sim_params.dt)) | got
-
-
-def useful_iterations(result: dict[str, np.ndarray]) -> int:
-    """Robot-iterations the runs needed (the pool's useful work)."""
-    return int(np.sum(result["iterations"], dtype=np.int64))

@@ -20,7 +20,7 @@ from jaxais.immune.antibodies import sample_antibodies
 from jaxais.immune.network import NetworkParams
 from jaxais.immune.readings import LITERAL, Readings
 from jaxais.immune.reinforcement import PenaltyCounters
-from jaxais.loop import EpisodeConfig, iterate, start
+from jaxais.loop import EpisodeConfig, draws, iterate, start
 from jaxais.seed import Seed, save_seed
 from jaxais.systems import make_system
 
@@ -236,17 +236,22 @@ def start_fn():
     return jit(jax.vmap(start, in_axes=(0, 0, None, None, None, 0)), static_argnums=(4,))
 
 
+def iterate_key(key, run, tick, world, sim_params, controller, params, config):
+    """``iterate`` with the randomness of ``key`` (as the runner draws it)."""
+    return iterate(draws(key, world), run, tick, world, sim_params, controller, params, config)
+
+
 @functools.cache
 def iterate_fn():
-    """Unbatched ``iterate`` (STL controller, :data:`CONFIG`), jitted once."""
-    return jit(iterate, static_argnums=(5, 7))
+    """Unbatched :func:`iterate_key` (STL controller, :data:`CONFIG`), jitted once."""
+    return jit(iterate_key, static_argnums=(5, 7))
 
 
 @functools.cache
 def iterate_batch_fn():
-    """``vmap(iterate)`` over BATCH runs (keys and runs batched), jitted once."""
+    """``vmap(iterate_key)`` over BATCH runs (keys and runs batched), jitted once."""
     return jit(
-        jax.vmap(iterate, in_axes=(0, 0, None, None, None, None, 0, None)),
+        jax.vmap(iterate_key, in_axes=(0, 0, None, None, None, None, 0, None)),
         static_argnums=(5, 7),
     )
 

@@ -13,9 +13,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import reference_sim as ref
 
 from jaxais import envs
-from jaxais.envs import reference as ref
 
 # Scripts keep a persistent compilation cache in the user's home by default; tests must not write
 # there (a test that wants a cache names its own directory).

@@ -116,7 +116,8 @@ def _start_batch(reset_keys, run_keys, poses, world, sim_params, robots):
 def _loop(runs, n_steps, world, sim_params, robots):
     """``n_steps`` iterations of every run; the trace holds, per iteration t, the pose, Vm and
     antigen the controller met at t (row 0: the start)."""
-    step_all = jax.vmap(loop.iterate, in_axes=(0, 0, None, None, None, None, 0, None))
+    keyed = lambda key, run, *rest: loop.iterate(loop.draws(key, rest[1]), run, *rest)
+    step_all = jax.vmap(keyed, in_axes=(0, 0, None, None, None, None, 0, None))
 
     def body(t, carry):
         runs, trace = carry

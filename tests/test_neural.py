@@ -45,7 +45,7 @@ TINY = TrainConfig(world="real", generations=3, pairs=4, episodes=2, steps=60, h
 
 
 def percept_of(ob: envs.Observation) -> Percept:
-    """The task loop's percept of an observation (as ``jaxais.loop._iterate`` builds it)."""
+    """The task loop's percept of an observation (as ``jaxais.loop.iterate`` builds it)."""
     zero = jnp.int32(0)
     return Percept(
         m=zero,

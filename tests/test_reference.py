@@ -1,4 +1,4 @@
-"""The JAX simulator against the plain NumPy reference (``jaxais.envs.reference``).
+"""The JAX simulator against the plain NumPy reference (``tests/reference_sim.py``).
 
 Both are fed the same start state, wheel commands and random draws (the step's ``StepNoise``),
 and must agree within float32 tolerance: each step from the JAX state, and over whole runs side
@@ -13,13 +13,13 @@ import math
 
 import numpy as np
 import pytest
+import reference_sim as ref
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxais import envs
 from jaxais.envs import geometry as env_geometry
 from jaxais.envs import params as env_params
-from jaxais.envs import reference as ref
 from jaxais.envs import sim as env_sim
 
 PARAMS_NP = ref.params_to_numpy(envs.default_params())

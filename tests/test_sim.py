@@ -12,12 +12,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import reference_sim as ref
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxais import envs
 from jaxais.envs import geometry
-from jaxais.envs import reference as ref
 
 K = 0.00683 * 0.0205
 """Wheel rim speed per speed unit, m/s (speed unit x wheel radius)."""

@@ -5,9 +5,9 @@ from __future__ import annotations
 import jax
 import numpy as np
 import pytest
+import reference_sim as ref
 
 from jaxais import envs
-from jaxais.envs import reference as ref
 from jaxais.envs.sim import PLACEMENT_CLEARANCE
 
 PARAMS_NP = ref.params_to_numpy(envs.default_params())

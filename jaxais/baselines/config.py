@@ -1,7 +1,4 @@
-"""The neural baseline's training settings (free of JAX: scripts check flags before JAX starts).
-
-See :mod:`jaxais.baselines.neural` for what they drive.
-"""
+"""The neural baseline's training settings (free of JAX: scripts check flags before JAX starts)."""
 
 from __future__ import annotations
 
@@ -9,35 +6,21 @@ import dataclasses
 import math
 from pathlib import Path
 
-BUILTIN_WORLDS = ("ga_maze", "world1", "world2", "real")
-"""The simulator's built-in worlds (``envs.BUILTIN_WORLDS``, named here without loading JAX)."""
-NN_LABEL = "NN"
-"""The trained controller's label in trial sets and reports (it names its trials' random
-stream, :func:`jaxais.trials.batch_keys`)."""
+BUILTIN_WORLDS = ("ga_maze", "world1", "world2", "real")  # envs.BUILTIN_WORLDS, without JAX
+NN_LABEL = "NN"  # the trained controller's label in records; it names its trials' random stream
 
 
 @dataclasses.dataclass(frozen=True)
 class TrainConfig:
-    """What :func:`make_train` compiles in (static: it fixes shapes and loop lengths).
-
-    Defaults [ours]: 156 M simulated robot-steps, 5-10 minutes on this project's shared 2-core
-    CPU (284-580 s measured, docs/baseline.md). A pilot run with these settings was the only
-    one evaluated in the test worlds before they were fixed; a second pilot with
-    ``collision_penalty=4`` stalled in the training world (the robots learnt to stand still)
-    and was stopped there.
+    """What :func:`~jaxais.baselines.neural.make_train` compiles in (static). Defaults [ours]:
+    156 M robot-steps, 5-10 min on a 2-core CPU (docs/baseline.md has the pilots).
 
     Attributes:
         world: the training world [ours: ga_maze, the paper's LTL world].
-        generations: ES updates.
-        pairs: antithetic pairs per generation (population 2 x pairs).
-        episodes: episodes per member per generation (shared by all members).
-        steps: steps per episode (32 ms each).
-        sigma: perturbation scale in weight space.
-        learning_rate: adam's step size.
-        hidden: hidden units of the MLP.
-        weight_decay: decoupled L2 decay of the weights per update (adamw).
-        collision_penalty: the environment's reward per collision (``EnvParams``; its
-            default is 1.0).
+        generations: ES updates. pairs: antithetic pairs (population 2 x pairs).
+        episodes: per member and generation (shared by all). steps: per episode (32 ms each).
+        sigma: perturbation scale. learning_rate: adam's. hidden: the MLP's hidden units.
+        weight_decay: adamw's decoupled decay. collision_penalty: reward per collision.
     """
 
     world: str = "ga_maze"

@@ -1,36 +1,12 @@
-"""A modern baseline [ours, not in the paper]: a small neural controller trained by OpenES.
+"""A modern baseline [ours]: a small neural controller trained by OpenES (docs/baseline.md).
 
-The question it answers: does the 2008 idiotypic network (SIE) still hold its own against a
-plain neural policy trained by a modern black-box optimiser on the same simulator?
-
-**Policy.** A one-hidden-layer MLP, tanh throughout, from the 10 features a robot's controllers
-see (:data:`FEATURE_NAMES`: the 8 IR readings / 4095, blue pixels / 45, the blue centroid in
-[-1, 1], 0 when no blue is seen; these are the first 10 entries of the gymnax environment's
-observation, :mod:`jaxais.envs.gymnax`, and never its goal pixels, which no controller of the
-paper sees) to the two wheel speeds in [-1, 1], x 1000 speed units. It has no memory and draws
-no random numbers: a reactive controller, like :func:`jaxais.controllers.braitenberg_controller`
-but learned. :data:`NEURAL` runs it under the task loop (``run_trials``, ``make_trials``) like
-SIE and HDC; its params are the weights, :class:`MLPParams`.
-
-**Training.** OpenES (Salimans et al. 2017; the shape of evosax's ``OpenES``): antithetic
-Gaussian perturbations of the flat weight vector, centred-rank fitness shaping, and the
-resulting gradient estimate fed to an optax optimiser (adam). **Fitness sign: LOWER is better**,
-as in the paper: a member's fitness is minus its mean return. Every member of a generation runs
-the same ``episodes`` episodes (the same start placements and noise: common random numbers, so
-a pair's difference measures the perturbation, not its luck), ``steps`` steps each, on
-``envs.make(world, auto_reset=False)``: fixed-length rollouts under ``vmap``, the reward summed
-up to and including the step that finds the target (the environment's documented reward:
-approach to the goal, -1 per collision, +10 on finding the target). The mean of the search
-distribution is evaluated on the same episodes each generation (the training curve) and is the
-trained policy. :func:`make_train` returns one jitted function, ``train(key) -> TrainResult``:
-initialisation and every generation (a ``lax.scan``) in one compiled program.
-
-**Where it trains.** In ``ga_maze``, the world the paper's LTL (the GA that makes SIE's seed)
-trains in: the environment supports it (it has a goal, and the Euclidean approach reward points
-through the maze's doorways, which step east towards the goal), and the test worlds (world1,
-world2, real) then stay unseen by both SIE's seed and this policy, which is the fair comparison.
-SIE still adapts online in the test world; the MLP cannot. How well a maze-trained policy
-transfers depends much on the training run (docs/baseline.md: five training seeds).
+Does the 2008 idiotypic network still hold its own against a plain neural policy trained by a
+modern black-box optimiser on the same simulator? The policy is a tanh MLP from the first 10
+entries of the gymnax observation (no goal pixels: no controller of the paper sees them) to the
+wheel speeds, reactive and deterministic; :data:`NEURAL` runs it under the task loop. Training is
+OpenES (antithetic pairs, centred ranks, adam; evosax's shape) with common random numbers across
+a generation, in ``ga_maze`` where the paper's LTL trains, so the test worlds stay unseen by both.
+**Fitness sign: LOWER is better**, as in the paper: minus the mean return.
 """
 
 from __future__ import annotations
@@ -53,46 +29,13 @@ from jax.flatten_util import ravel_pytree
 
 from jaxais import distributed, envs
 from jaxais.baselines.config import TrainConfig
-from jaxais.controllers import Controller, Percept
-from jaxais.envs.gymnax import IR_FULL_SCALE, OBS_NAMES, PIXELS
+from jaxais.controllers import Controller, Percept, no_learning, no_state
+from jaxais.envs.gymnax import IR_FULL_SCALE, PIXELS
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.immune.behaviours import MAX_WHEEL_SPEED
 from jaxais.io import UserError, atomic_write, atomic_write_json, read_json_object
 
-__all__ = [
-    "CONFIG_FILE",
-    "ESState",
-    "FEATURE_NAMES",
-    "LOWER_IS_BETTER",
-    "MLPParams",
-    "NEURAL",
-    "N_FEATURES",
-    "OpenES",
-    "PARAMS_FILE",
-    "TrainConfig",
-    "TrainResult",
-    "centered_ranks",
-    "default_params_dir",
-    "es_gradient",
-    "features",
-    "init_mlp",
-    "load_params",
-    "make_train",
-    "neural_controller",
-    "obs_features",
-    "openes",
-    "percept_features",
-    "policy",
-    "rollout",
-    "save_params",
-]
-
-LOWER_IS_BETTER = True
-"""ES fitness is minus the return: lower is better, as the paper's f."""
-N_FEATURES = 10
-"""Policy inputs: the gymnax observation less its goal pixels."""
-FEATURE_NAMES = OBS_NAMES[:N_FEATURES]
-"""ps0..ps7, blue, centroid."""
+N_FEATURES = 10  # the gymnax observation less its goal pixels
 _HALF_COLUMNS = (envs.CAMERA_COLUMNS - 1) / 2
 
 
@@ -100,15 +43,8 @@ _HALF_COLUMNS = (envs.CAMERA_COLUMNS - 1) / 2
 
 
 def features(ir: jnp.ndarray, blue_pixels: jnp.ndarray, centroid: jnp.ndarray) -> jnp.ndarray:
-    """The policy's inputs [10] from raw readings, scaled as the gymnax observation.
-
-    Args:
-        ir: [8] IR readings, 0..4095. blue_pixels: blue pixels seen, 0..45.
-        centroid: their mean column, 0..14 (any value when none is seen).
-
-    Returns:
-        float32 [10]: ir / 4095, blue_pixels / 45, (centroid - 7) / 7 (0 when no blue).
-    """
+    """The policy's inputs [10] as the gymnax observation's: ir [8] / 4095, blue_pixels / 45,
+    (centroid - 7) / 7 (0 when no blue)."""
     seen = blue_pixels > 0
     c = jnp.where(seen, (centroid - _HALF_COLUMNS) / _HALF_COLUMNS, 0.0)
     tail = jnp.stack([blue_pixels / PIXELS, c])
@@ -130,11 +66,7 @@ def obs_features(obs: jnp.ndarray) -> jnp.ndarray:
 
 @pytree_dataclass
 class MLPParams:
-    """The policy's weights.
-
-    Attributes:
-        w1: [10, H]. b1: [H]. w2: [H, 2]. b2: [2].
-    """
+    """The policy's weights: w1 [10, H], b1 [H], w2 [H, 2], b2 [2]."""
 
     w1: jnp.ndarray
     b1: jnp.ndarray
@@ -168,35 +100,16 @@ def _dense_in_order(x: jnp.ndarray, w: jnp.ndarray, b: jnp.ndarray) -> jnp.ndarr
 
 
 def policy_in_order(params: MLPParams, x: jnp.ndarray) -> jnp.ndarray:
-    """:func:`policy` with its sums in a fixed order: what the controller runs.
-
-    XLA picks a dot's summation order per compiled program, so ``policy``'s last bits differ
-    between the task loop's programs (one batch or the refilling pool, one device or two), and
-    over a run's thousands of steps a few runs then take other paths (2 of 30 in world1, between
-    the pool and one batch). As a fixed sequence of multiply-adds it compiles to the same
-    arithmetic in each of those programs, so a trial is the same run whichever plays it
-    (``tests/test_neural.py``; two devices against one checked by hand). Training keeps
-    ``policy``, so the shipped weights stay what their command makes.
-    """
+    """:func:`policy` summed in a fixed order, what the controller runs: XLA picks a dot's order
+    per program, and a trial must be the same run in a batch or the pool, on one device or two
+    (a few of 30 took other paths). Training keeps ``policy`` (the shipped weights)."""
     h = jnp.tanh(_dense_in_order(x, params.w1, params.b1))
     return jnp.tanh(_dense_in_order(h, params.w2, params.b2))
 
 
 def neural_controller() -> Controller:
-    """The MLP as a :class:`~jaxais.controllers.Controller` (params: :class:`MLPParams`).
-
-    No state (a dummy scalar keeps the loop's pytrees non-empty), no learning, no randomness.
-    Its ``stats`` are the STL's keys with "does not apply" values (an idiotypic difference
-    rate of NaN, nothing replaced), so its trial records read like every other system's.
-    """
-
-    def init(key, params):
-        del key, params
-        return jnp.int32(0)
-
-    def learn(key, state, pc: Percept, params):
-        del key, pc, params
-        return state
+    """The MLP as a :class:`~jaxais.controllers.Controller` (params: :class:`MLPParams`); its
+    ``stats`` are the STL's keys with "does not apply" values, so its records read alike."""
 
     def act(key, state, pc: Percept, params: MLPParams):
         del key
@@ -206,40 +119,25 @@ def neural_controller() -> Controller:
         del state, params
         return {"idiotypic_difference_rate": jnp.float32(jnp.nan), "replaced": jnp.int32(0)}
 
-    return Controller(init=init, learn=learn, act=act, stats=stats)
+    return Controller(init=no_state, learn=no_learning, act=act, stats=stats)
 
 
 NEURAL = neural_controller()
-"""The neural controller (one shared instance, so compiled programs are reused)."""
 
 
 # -------------------------------------------------------------------------------------- OpenES
 
 
 def centered_ranks(x: jnp.ndarray) -> jnp.ndarray:
-    """Ranks of ``x`` [n] mapped linearly onto [-0.5, 0.5] (ties broken by position).
-
-    The lowest value gets -0.5, the highest +0.5: the ES sees only the order of the fitnesses,
-    so one outlier episode cannot dominate an update.
-    """
+    """Ranks of ``x`` [n] mapped onto [-0.5, 0.5]: one outlier cannot dominate an update."""
     n = x.shape[0]
     ranks = jnp.zeros(n).at[jnp.argsort(x)].set(jnp.arange(n, dtype=jnp.float32))
     return ranks / (n - 1) - 0.5
 
 
 def es_gradient(eps: jnp.ndarray, fitness: jnp.ndarray, sigma: float) -> jnp.ndarray:
-    """OpenES's estimate of the gradient of the expected (shaped) fitness at the mean.
-
-    Args:
-        eps: [p, d] the standard normal perturbations; member j is mean + sigma eps_j and
-            member p + j is mean - sigma eps_j (antithetic pairs).
-        fitness: [2p] the members' fitness (lower is better).
-        sigma: the perturbations' scale.
-
-    Returns:
-        [d] the gradient estimate, (1 / (2p sigma)) sum_i shaped_i z_i with z = (eps, -eps):
-        a descent direction for an optax optimiser (fitness is minimised).
-    """
+    """OpenES's gradient estimate [d] of the shaped fitness [2p] (members mean +- sigma eps
+    [p, d], antithetic), for an optax optimiser to descend."""
     p = eps.shape[0]
     shaped = centered_ranks(fitness)
     return (shaped[:p] - shaped[p:]) @ eps / (2 * p * sigma)
@@ -267,8 +165,7 @@ class OpenES(NamedTuple):
 
 
 def openes(pairs: int, sigma: float, optimizer: optax.GradientTransformation) -> OpenES:
-    """OpenES with ``pairs`` antithetic pairs (a population of 2 x pairs), perturbation scale
-    ``sigma`` and ``optimizer`` applied to the gradient estimate (:func:`es_gradient`)."""
+    """OpenES with ``pairs`` antithetic pairs, scale ``sigma``, ``optimizer`` on the gradient."""
 
     def init(mean: jnp.ndarray) -> ESState:
         return ESState(mean=mean, opt_state=optimizer.init(mean))
@@ -290,13 +187,8 @@ def openes(pairs: int, sigma: float, optimizer: optax.GradientTransformation) ->
 
 
 class Episode(NamedTuple):
-    """One fixed-length rollout's results (scalars).
-
-    Attributes:
-        ret: reward summed up to and including the step that found the target.
-        finished: the target was found. steps: steps until it was (``steps`` if not).
-        collisions: collisions counted until then.
-    """
+    """One rollout's return, finished, steps and collisions, up to the step that found the
+    target."""
 
     ret: jnp.ndarray
     finished: jnp.ndarray
@@ -307,10 +199,8 @@ class Episode(NamedTuple):
 def rollout(
     key: jax.Array, params: MLPParams, env: envs.EpuckEnv, env_params: Any, steps: int
 ) -> Episode:
-    """One episode of ``steps`` steps of the policy in ``env`` (``auto_reset=False``).
-
-    Steps after the target is found still run (fixed shapes under ``vmap``) but count nothing.
-    """
+    """``steps`` steps of the policy in ``env`` (``auto_reset=False``); those after the target
+    is found run (fixed shapes) but count nothing."""
     k_reset, k_steps = jax.random.split(key)
     obs, state = env.reset(k_reset, env_params)
 
@@ -333,15 +223,9 @@ def rollout(
 
 
 class TrainResult(NamedTuple):
-    """What :func:`make_train`'s ``train`` returns.
-
-    Attributes:
-        params: the trained policy (the search distribution's final mean).
-        metrics: per generation, arrays [generations]: ``fitness_mean`` and ``fitness_best``
-            (the population's, lower is better), ``center_fitness`` (the mean's, on the same
-            episodes, before the update), ``center_finished`` (its share of episodes that found
-            the target), ``center_collisions`` (its mean collisions), ``grad_norm``.
-    """
+    """The trained policy (the final mean) and metrics [generations]: the population's
+    fitness_mean and fitness_best, the mean's center_fitness, center_finished and
+    center_collisions (same episodes, before the update), grad_norm."""
 
     params: MLPParams
     metrics: dict[str, jnp.ndarray]
@@ -350,18 +234,8 @@ class TrainResult(NamedTuple):
 def make_train(
     config: TrainConfig, progress: Callable[[int, dict[str, Any]], None] | None = None
 ) -> Callable[[jax.Array], TrainResult]:
-    """The whole training run as one jitted function, ``train(key) -> TrainResult``.
-
-    Args:
-        config: the run's settings.
-        progress: optional host callback ``progress(generation, metrics)`` called after every
-            generation from inside the compiled loop (``jax.debug.callback``), e.g. a log line.
-
-    Returns:
-        ``train(key)``: from ``key`` alone, the initial weights (``fold_in(key, 0)``) and every
-        generation's perturbations and episodes (``fold_in(key, 1)``, split per generation);
-        the same key gives the same result.
-    """
+    """The whole training run as one jitted ``train(key) -> TrainResult``, reproducible from
+    its key; ``progress(generation, metrics)`` is called from inside it each generation."""
     env = envs.make(config.world, auto_reset=False, collision_penalty=config.collision_penalty)
     env_params = env.default_params
     template = init_mlp(jax.random.key(0), config.hidden)
@@ -373,8 +247,7 @@ def make_train(
     )
     es = openes(config.pairs, config.sigma, optimizer)
     members = config.population + 1  # the population and the mean
-    # Rollouts split over the local devices (one CPU device per core in the scripts), unless
-    # they do not split evenly.
+    # Rollouts split over the local devices, when they split evenly.
     sharding = distributed.batch_sharding(jax.local_devices())
     if sharding is not None and members * config.episodes % sharding.mesh.size:
         sharding = None
@@ -428,10 +301,8 @@ def make_train(
 
 # -------------------------------------------------------------------------------------- on disk
 
-PARAMS_FILE = "params.npz"
-"""The weights: arrays w1, b1, w2, b2 (float32)."""
-CONFIG_FILE = "config.json"
-"""The training run: its TrainConfig, seed, versions, wall time and final fitness."""
+PARAMS_FILE = "params.npz"  # w1, b1, w2, b2 (float32)
+CONFIG_FILE = "config.json"  # the run's TrainConfig, seed, versions, wall time, final fitness
 
 
 def default_params_dir() -> Path:
@@ -440,8 +311,7 @@ def default_params_dir() -> Path:
 
 
 def save_params(directory: str | Path, params: MLPParams, info: dict[str, Any]) -> None:
-    """Write ``params.npz`` and ``config.json`` (``info``, plain JSON) into ``directory``,
-    each atomically."""
+    """Write ``params.npz`` and ``config.json`` (``info``) into ``directory``, atomically."""
     d = Path(directory)
     arrays = {f.name: np.asarray(getattr(params, f.name), np.float32) for f in _fields()}
 
@@ -455,12 +325,8 @@ def save_params(directory: str | Path, params: MLPParams, info: dict[str, Any]) 
 
 
 def load_params(directory: str | Path | None = None) -> tuple[MLPParams, dict[str, Any]]:
-    """The weights and the training record from ``directory`` (default: the shipped ones).
-
-    Raises:
-        UserError: (a ValueError) one line naming the file: missing, damaged, or arrays that
-            are not an MLP's (names, shapes, finite).
-    """
+    """The weights and training record in ``directory`` (default: the shipped ones); a one-line
+    UserError naming the file when missing, damaged or not an MLP's."""
     d = default_params_dir() if directory is None else Path(directory)
     path, hint = d / PARAMS_FILE, "train one with scripts/train_baseline.py"
     if not path.is_file():

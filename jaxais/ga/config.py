@@ -11,10 +11,8 @@ import numpy as np
 
 __all__ = ["CROSSING_STARTS", "MAX_SEED", "ConfigError", "GAConfig"]
 
-CROSSING_STARTS: Final = 50
-"""Fresh random starts per set when a seed's crossing rates are measured [ours]."""
-MAX_SEED: Final = 2**31 - 1
-"""The largest PRNG seed of a GA run."""
+CROSSING_STARTS: Final = 50  # fresh starts per set measuring a seed's crossing rates [ours]
+MAX_SEED: Final = 2**31 - 1  # the largest PRNG seed of a GA run
 
 
 class ConfigError(ValueError):
@@ -41,17 +39,12 @@ def _setting(default: Any, help: str) -> Any:
 @dataclass(frozen=True)
 class GAConfig:
     """Static settings of a GA run (hashable: a static argument of the jitted core); each field's
-    ``metadata["help"]`` describes it (``scripts/evolve.py``'s flags).
+    ``metadata["help"]`` is its flag's help.
 
-    The defaults [ours] serve SPEC 10's "evaluate robustly ... and stop on success" alone: the
-    default run's seed sets each cross in >= 80 % of 50 fresh starts (``docs/seeds/seeds.md``).
-    By generations to the success stop (seeds 0-2, earlier random streams): uniform crossover
-    44, 170, 42; RL-assisted 128, 200 (cap), 186; three starts per robot left a set under 80 %.
-    ``generations`` 200: SPEC 10's 30 are too few to leave the start pocket. ``tau_cap`` 500 s:
-    tracking sets cross in 35-200 s. ``starts`` 1 ("once per generation"): robustness comes from
-    the checks and the checked elite. ``success_rate`` 0.95: at 0.9 sets crossing in 75-85 %
-    passed. ``crossover`` uniform: "target unseen" earns +0.05 per iteration, so the RL rule
-    hands children the antigen-0 antibody of the parent that searched longer (tests/test_maze.py).
+    Defaults [ours] (SPEC 10, docs/seeds/seeds.md): ``generations`` 200, since 30 do not leave the
+    start pocket; ``tau_cap`` 500 s, tracking sets cross in 35-200 s; ``starts`` 1, robustness
+    coming from the checks; ``success_rate`` 0.95, at 0.9 sets crossing 75-85 % passed;
+    ``crossover`` uniform, since the RL rule favours the parent that searched longer.
     """
 
     populations: int = _setting(5, "independent populations P [paper: 5]")
@@ -100,7 +93,7 @@ class GAConfig:
                 raise ConfigError(name, f"must be {what}, got {getattr(self, name)!r}")
 
     def episode_config(self):
-        """The task loop's :class:`jaxais.loop.EpisodeConfig` of one run (the LTL caps)."""
+        """The task loop's :class:`jaxais.loop.EpisodeConfig` with the LTL caps."""
         from jaxais.loop import EpisodeConfig
 
         return EpisodeConfig(

@@ -37,17 +37,14 @@ __all__ = [
     "tell",
 ]
 
-LOWER_IS_BETTER: Final = True
-"""The GA minimises f = (ρc + τ)/2 (paper eq 11): a lower fitness is a better robot."""
+LOWER_IS_BETTER: Final = True  # the GA minimises f = (ρc + τ)/2 (paper eq 11)
 _jit = functools.partial(jax.jit, static_argnames="config")
 
 
 @pytree_dataclass
 class Evaluation:
-    """Results of robots run from ``starts`` (static) random starts each: [...] float32 mean
-    τ (s, capped), mean c (each run's count capped), f = (ρc + τ)/2 of those; [..., 8] mean
-    final RL score L of each antibody; [...] int32 ``crossings``, the starts in which the robot
-    crossed the maze (finished within the time cap)."""
+    """Robots run from ``starts`` (static) starts each: float32 [...] means of τ and capped c, f
+    of those, L [..., 8]; int32 [...] ``crossings``, the starts that finished within the cap."""
 
     fitness: jnp.ndarray
     tau: jnp.ndarray
@@ -64,9 +61,8 @@ class Evaluation:
 
 @pytree_dataclass
 class Best:
-    """Each population's best robot so far: its set [P, 8], the record of its evaluation or
-    pooled checks (fitness, tau, collisions [P] float32, L [P, 8], crossings and starts [P]
-    int32; starts 0 before any) and the generation it was first measured in ([P], -1 before)."""
+    """Each population's best robot so far: its set [P, 8], its evaluation's or pooled checks'
+    record ([P]; L [P, 8]; starts 0 before any) and its first generation ([P], -1 before)."""
 
     antibodies: Antibodies
     fitness: jnp.ndarray
@@ -80,11 +76,9 @@ class Best:
 
 @pytree_dataclass
 class GAState:
-    """Everything a GA run needs to continue (saved in every checkpoint): ``population``
-    [P, R, 8], generation ``generation`` (int32, the generations evaluated so far), still to be
-    evaluated; ``evaluated`` [P, R, 8], the last evaluated generation, with its results
-    (``fitness`` ... ``crossings`` [P, R], L [P, R, 8]; before any: f = inf); ``best``; and
-    ``key``, the run's typed PRNG key, from which the driver splits every generation's keys."""
+    """Everything a GA run needs to continue (each checkpoint): ``population`` [P, R, 8] to
+    evaluate as generation ``generation``; ``evaluated`` [P, R, 8] and its results [P, R] (f =
+    inf before any); ``best``; ``key``, from which the driver splits every generation's keys."""
 
     population: Antibodies
     evaluated: Antibodies
@@ -134,11 +128,8 @@ def abstract_state(config: GAConfig) -> GAState:
 
 
 def ask(key: jax.Array, state: GAState, config: GAConfig) -> tuple[Antibodies, GAState]:
-    """The [P, R, 8] sets to evaluate next, and the state unchanged.
-
-    :func:`tell` breeds each generation as soon as its parents are evaluated (a checkpoint holds
-    the bred population), so asking draws nothing and ``key`` is not used.
-    """
+    """The [P, R, 8] sets to evaluate next, and the state; draws nothing (:func:`tell` breeds,
+    so a checkpoint holds the bred population)."""
     del key, config
     return state.population, state
 
@@ -247,12 +238,10 @@ def tell(
     state: GAState,
     config: GAConfig,
 ) -> GAState:
-    """Record the evaluation [P, R] of ``population`` and breed the next generation
-    (:func:`next_generation`); ``generation`` advances, ``state.key`` is left to the driver.
+    """Record the evaluation [P, R] of ``population`` and breed the next generation.
 
-    Without checks (``success_starts`` = 0) each population's best of the evaluation becomes its
-    best so far where its f is strictly lower (the earliest of equal ones stays); with checks
-    the bests are left to :func:`check`.
+    Without checks (``success_starts`` = 0) a strictly lower f becomes the population's best;
+    with checks the bests are left to :func:`check`. ``state.key`` is the driver's.
     """
     evaluation = jax.tree.map(jnp.asarray, evaluation)
     best = state.best
@@ -337,12 +326,8 @@ def pool_check(state: GAState, record: Evaluation) -> GAState:
 
 @jax.jit
 def best_as_elite(state: GAState) -> GAState:
-    """Each population's robot 0 (its elite) replaced by its checked best so far.
-
-    The bred elite is the lowest f of one noisy evaluation: a set that crossed in most of its
-    checks but had one unlucky evaluation would be lost (measured: populations whose best
-    crossed in 36 of 40 checks fell back under 10 %). Re-evaluated elites (SPEC 10) keep it.
-    """
+    """Each population's robot 0 (its elite) replaced by its checked best so far: one unlucky
+    evaluation would lose a good set (bests crossing 36 of 40 checks fell under 10 %)."""
     checked = state.best.starts >= 1  # [P]
 
     def put(pop: jnp.ndarray, best: jnp.ndarray) -> jnp.ndarray:

@@ -1,7 +1,6 @@
-"""The GA's host side: evaluation in the maze (:func:`rollout`, the one call into the task
-loop), the generations (:func:`step`, :func:`run`) with their success checks, the stop rules and
-the seed. Every key comes from ``state.key``, so a run is a pure function of its initial key
-however it is split into calls or checkpoints.
+"""The GA's host side: evaluation in the maze (:func:`rollout`), generations (:func:`step`,
+:func:`run`) with their checks, stop rules and the seed. Every key comes from ``state.key``, so
+a run is a function of its initial key however it is split into calls or checkpoints.
 """
 
 from __future__ import annotations
@@ -73,9 +72,8 @@ def rollout(
     S, (P, R) = keys.shape[0], population.shape[:2]
     episode = config.episode_config()
     reset_keys, run_keys, flat = _rollout_inputs(keys, population)
-    # The world's walls are compiled in as constants (constant_world), which XLA folds: in
-    # ga_maze the loop runs several times faster (docs/performance.md); its numbers differ in the
-    # last bits from a run with the world an argument, so the GA always runs this way.
+    # The world compiled in as constants runs several times faster in ga_maze, with numbers of
+    # its own in the last bits: the GA always runs this way.
     args = (reset_keys, run_keys, world, sim_params, LTL, flat, episode, progress)
     batch = run_batch(*args, constant_world=True)
     out = outcome(batch.runs, episode, float(sim_params.dt))
@@ -107,8 +105,7 @@ def _summarise(runs: dict[str, np.ndarray]) -> Evaluation:
 
 
 def start_keys(key: jax.Array, starts: int) -> jax.Array:
-    """[starts] start keys ``jax.random.split(key, starts)``: start s of every robot comes from
-    key s alone, so an evaluation is, robot by robot, the mean of one-start evaluations."""
+    """[starts] keys: start s of every robot from key s alone (a mean of one-start runs)."""
     return jax.random.split(key, starts)
 
 
@@ -120,11 +117,8 @@ def evaluate(
     config: GAConfig,
     progress: Callable[[int], None] | None = None,
 ) -> Evaluation:
-    """Every robot of ``population`` [P, R, 8] from ``config.starts`` random starts (means).
-
-    ``key`` is split into ``config.starts`` start keys, or is an array [S] of start keys (S then
-    overrides ``config.starts``). ``progress``: see :func:`jaxais.runner.rollout`.
-    """
+    """Every robot of ``population`` [P, R, 8] from ``config.starts`` starts split from ``key``
+    (or from the start keys [S] given), as means."""
     keys = start_keys(key, config.starts) if jnp.ndim(key) == 0 else key
     return _summarise(rollout(keys, population, world, sim_params, config, progress))
 
@@ -138,9 +132,8 @@ def measure(
     config: GAConfig | None = None,
     batch_starts: int | None = None,
 ) -> Evaluation:
-    """Each of K sets [K, 8] from ``n_starts`` fresh random starts (``config``'s caps, default
-    :class:`GAConfig`'s), in rollouts of at most ``batch_starts`` starts per set (default all;
-    the results do not depend on it). Returns an :class:`Evaluation` of [K] arrays."""
+    """The :class:`Evaluation` [K] of sets [K, 8] from ``n_starts`` fresh starts (``config``'s
+    caps), in rollouts of at most ``batch_starts`` starts (the results do not depend on it)."""
     if not (isinstance(n_starts, int | np.integer) and n_starts >= 1):
         raise ValueError(f"n_starts must be an integer >= 1, got {n_starts!r}")
     if len(sets.shape) != 2 or sets.shape[1] != N_ANTIGENS:
@@ -159,8 +152,7 @@ def measure(
 
 
 def crossing_key(seed: int) -> jax.Array:
-    """Keys for measuring the seed of the GA run with PRNG seed ``seed``, none of which that run
-    used: ``jax.random.fold_in(jax.random.key(seed), "cros")`` (the run splits its key only)."""
+    """Keys measuring the seed of GA run ``seed``, which that run never used (it only splits)."""
     return jax.random.fold_in(jax.random.key(seed), _CROSSING_STREAM)
 
 
@@ -171,10 +163,9 @@ def verify(
     sim_params: envs.SimParams,
     config: GAConfig,
 ) -> GAState:
-    """The success check: each population's best robot of the last generation (lowest f, the
-    first on ties) runs from ``success_starts`` fresh starts, folded in by
-    :func:`jaxais.ga.core.check`. A population's best so far thus comes from checks only, never
-    from the noisy evaluation it was selected on (the winner's curse)."""
+    """The success check: each population's best of the last generation runs from
+    ``success_starts`` fresh starts (:func:`jaxais.ga.core.check`), so bests come from checks,
+    never from the evaluation they were selected on (the winner's curse)."""
     if config.success_starts < 1 or int(state.generation) < 1:
         raise ValueError("verify needs success_starts >= 1 and an evaluated generation")
     _, sets = core.generation_best(state.evaluated, state.fitness)
@@ -189,9 +180,8 @@ def confirm(
     sim_params: envs.SimParams,
     config: GAConfig,
 ) -> GAState:
-    """The success stop's confirmation: every best so far runs from ``success_starts`` further
-    fresh starts, pooled into its record. A set must pass two independent checks, so one lucky
-    check (a set crossing in 70 % passes 19 of 20 once in 130 tries) does not end the run."""
+    """The success stop's confirmation: every best runs ``success_starts`` more fresh starts,
+    pooled, so one lucky check does not end the run."""
     if config.success_starts < 1 or not np.all(np.asarray(state.best.starts) >= 1):
         raise ValueError("confirm needs success_starts >= 1 and a checked best everywhere")
     record = measure(key, state.best.antibodies, world, config.success_starts, sim_params, config)
@@ -205,9 +195,8 @@ def step(
     sim_params: envs.SimParams,
     progress: Callable[[int], None] | None = None,
 ) -> tuple[GAState, Evaluation]:
-    """One generation: evaluate, tell; with ``success_starts`` >= 1 :func:`verify`,
-    :func:`confirm` when the bests meet ``success_rate``, and (``elitism`` >= 1) each checked best
-    becomes its population's elite. Returns (the next state, this evaluation)."""
+    """One generation: evaluate, tell, and with checks :func:`verify`, :func:`confirm` on
+    success, the checked bests as elites. Returns (the next state, this evaluation)."""
     key, k_eval, k_tell, k_check, k_confirm = jax.random.split(state.key, 5)
     population, state = core.ask(k_eval, state.replace(key=key), config)  # (ask draws nothing)
     evaluation = evaluate(k_eval, population, world, sim_params, config, progress)
@@ -229,8 +218,7 @@ def reached_target(state: GAState, config: GAConfig) -> bool:
 
 
 def reached_success(state: GAState, config: GAConfig) -> bool:
-    """Whether every population's best so far crossed the maze in at least ``success_rate`` of
-    its (pooled) check starts (False if ``success_rate`` is None or there is no best yet)."""
+    """Whether every best so far crossed in ``success_rate`` of its pooled check starts."""
     if config.success_rate is None or int(state.generation) == 0:
         return False
     starts = np.asarray(state.best.starts, np.int64)
@@ -241,8 +229,7 @@ def reached_success(state: GAState, config: GAConfig) -> bool:
 
 
 def stopped_by(state: GAState, config: GAConfig) -> str | None:
-    """Why a run in ``state`` stops: ``"success"``, ``"target_f"``, ``"generations"`` (in that
-    order of precedence), or None while it goes on."""
+    """Why a run stops: ``"success"``, ``"target_f"``, ``"generations"`` (first first), or None."""
     if reached_success(state, config):
         return "success"
     if reached_target(state, config):
@@ -260,13 +247,8 @@ def run(
     callback: Callable[[GAState, Evaluation], None] | None = None,
     progress: str | None = None,
 ) -> GAState:
-    """Evolve from a typed PRNG key (a fresh run) or a state until :func:`stopped_by` is set.
-
-    Args:
-        callback: called after every generation with (new state, its evaluation), e.g. to save
-            a checkpoint.
-        progress: None, or the description of a tqdm bar of generations on stderr.
-    """
+    """Evolve from a key or a state until :func:`stopped_by`; ``callback(state, evaluation)``
+    after every generation; ``progress``: a tqdm bar's description (None: no bar)."""
     from tqdm import tqdm
 
     sim_params = envs.default_params() if sim_params is None else sim_params
@@ -285,8 +267,8 @@ def run(
 
 
 def best_sets(state: GAState) -> Seed:
-    """The LTL seed: each population's best so far, with τ [P], c [P] (rounded: the seed stores
-    counts) and L [P, 8] of its record, which the STL's eq (1) needs measured for that set."""
+    """The LTL seed: each population's best with τ [P], c [P] (rounded) and L [P, 8] of its
+    record, which eq (1) needs."""
     if int(state.generation) < 1 or not np.all(np.asarray(state.best.starts) >= 1):
         raise ValueError("best_sets: no generation has been evaluated yet")
     b = jax.tree.map(np.asarray, state.best)
@@ -299,8 +281,8 @@ def best_sets(state: GAState) -> Seed:
 
 
 def final_sets(state: GAState, k: int | None = None) -> Antibodies:
-    """Sets of the last evaluated generation (NumPy): with ``k`` None the best robot of each
-    population [P, 8]; else the ``k`` best robots of population 0 [k, 8], ascending f."""
+    """The last generation's best set of each population [P, 8], or population 0's ``k`` best
+    [k, 8], ascending f (NumPy)."""
     if int(state.generation) < 1:
         raise ValueError("final_sets: no generation has been evaluated yet")
     f = np.asarray(state.fitness)

@@ -1,17 +1,10 @@
-"""Antibodies: behaviour genes with the attribute limits of the paper's Table 1 (SPEC 5).
+"""Antibodies: behaviour genes within the attribute limits of the paper's Table 1 (SPEC 5).
 
-An antibody is a behaviour type ``T`` plus the attributes S (speed, units), F (turn frequency,
-% of iterations), A (turn angle, % reduction of one wheel's speed), D (turn direction, 0 = left,
-1 = right), Rf (right-turn frequency, %) and Ra (right-turn angle, %). A set holds one antibody
-per antigen (shape ``[8]``); the STL keeps five sets (``[5, 8]``); every function here accepts any
-leading batch shape.
-
-Canonical form [ours]: attributes a type does not use are 0 (D included), so that equality,
-files and :func:`antibody_distance` are clean. Sampling and mutation always
-produce canonical antibodies and :func:`within_limits` checks it.
-
-Attribute values are continuous float32 draws, uniform over the closed Table 1 interval [ours:
-the paper does not say whether they are integers].
+An antibody is a type T and the attributes S (speed), F (turn frequency, %), A (turn angle, %
+reduction of one wheel's speed), D (0 = left, 1 = right), Rf and Ra (right-turn frequency and
+angle, %); one per antigen makes a set [8]. Functions accept any leading batch shape.
+Canonical form [ours]: attributes a type does not use are 0. Values are continuous float32,
+uniform over Table 1's closed interval [ours].
 """
 
 from __future__ import annotations
@@ -28,40 +21,6 @@ import numpy as np
 from jaxais.envs.struct import device_array, pytree_dataclass
 from jaxais.immune.antigens import ANTIGEN_NAMES, N_ANTIGENS
 
-__all__ = [
-    "ATTRIBUTE_NAMES",
-    "Antibodies",
-    "DIRECTION_NAMES",
-    "FORWARD_TURN",
-    "LEFT",
-    "LIMITS_MAX",
-    "LIMITS_MIN",
-    "N_ANTIGENS",
-    "N_ATTRIBUTES",
-    "N_TYPES",
-    "REVERSE_TURN",
-    "RIGHT",
-    "STATIC_TURN",
-    "TRACK_MARKERS",
-    "TYPE_NAMES",
-    "USES",
-    "WANDER_BOTH",
-    "WANDER_SINGLE",
-    "antibody_distance",
-    "attribute_matrix",
-    "canonical",
-    "from_dicts",
-    "from_matrix",
-    "from_uniforms",
-    "mutate",
-    "sample_antibodies",
-    "sample_attributes",
-    "stack",
-    "take",
-    "to_dicts",
-    "within_limits",
-]
-
 TYPE_NAMES = (
     "wander single",
     "wander both",
@@ -73,8 +32,7 @@ TYPE_NAMES = (
 N_TYPES = 6
 WANDER_SINGLE, WANDER_BOTH, FORWARD_TURN, STATIC_TURN, REVERSE_TURN, TRACK_MARKERS = range(6)
 
-ATTRIBUTE_NAMES = ("S", "F", "A", "D", "Rf", "Ra")
-"""Attribute columns of the limit tables and of :func:`attribute_matrix`."""
+ATTRIBUTE_NAMES = ("S", "F", "A", "D", "Rf", "Ra")  # columns of the limits and attribute_matrix
 N_ATTRIBUTES = 6
 _D = ATTRIBUTE_NAMES.index("D")
 _FIELDS = ("speed", "freq", "angle", "direction", "right_freq", "right_angle")
@@ -82,8 +40,7 @@ DIRECTION_NAMES = ("left", "right")
 LEFT, RIGHT = 0, 1
 
 _ = math.nan
-# Table 1 of the paper, one row per type, columns S, F, A, D, Rf, Ra; NaN = the type has no such
-# attribute. D is stored as the integer range {0, 1}.
+# Table 1 [paper]: [N_TYPES, N_ATTRIBUTES], NaN where a type lacks the attribute; D in {0, 1}.
 LIMITS_MIN = np.array(
     [
         [50, 10, 10, 0, _, _],  # 0 wander single
@@ -95,7 +52,6 @@ LIMITS_MIN = np.array(
     ],
     dtype=np.float32,
 )
-"""[N_TYPES, N_ATTRIBUTES] lower limits of Table 1 (NaN where the type lacks the attribute)."""
 LIMITS_MAX = np.array(
     [
         [400, 90, 110, 1, _, _],
@@ -107,9 +63,7 @@ LIMITS_MAX = np.array(
     ],
     dtype=np.float32,
 )
-"""[N_TYPES, N_ATTRIBUTES] upper limits of Table 1 (NaN where the type lacks the attribute)."""
-USES = ~np.isnan(LIMITS_MIN)
-"""[N_TYPES, N_ATTRIBUTES] bool, which attributes each type uses."""
+USES = ~np.isnan(LIMITS_MIN)  # [N_TYPES, N_ATTRIBUTES] the attributes each type uses
 del _
 
 # NaN-free copies for traced arithmetic (the unused entries are masked by USES anyway).
@@ -117,22 +71,13 @@ _LO = np.nan_to_num(LIMITS_MIN, nan=0.0)
 _HI = np.nan_to_num(LIMITS_MAX, nan=0.0)
 _RANGE = _HI - _LO
 _N_USED = USES.sum(axis=1).astype(np.float32)
-_IS_D = np.arange(6) == ATTRIBUTE_NAMES.index("D")
+_IS_D = np.arange(6) == _D
 
 
 @pytree_dataclass
 class Antibodies:
-    """A batch of antibodies; every field has the same leading shape (``[8]`` for a set).
-
-    Attributes:
-        type: [...] int32 behaviour type 0-5 (see ``TYPE_NAMES``).
-        speed: [...] float32 S, wheel speed units.
-        freq: [...] float32 F, % of iterations that turn (wander types).
-        angle: [...] float32 A, % reduction of the turning wheel's speed.
-        direction: [...] int32 D, 0 = left, 1 = right.
-        right_freq: [...] float32 Rf, % of iterations with a right turn (wander both).
-        right_angle: [...] float32 Ra, % reduction of the right wheel (wander both).
-    """
+    """A batch of antibodies [...]: int32 type (``TYPE_NAMES``) and direction (D), float32 speed
+    (S), freq (F), angle (A), right_freq (Rf), right_angle (Ra)."""
 
     type: jnp.ndarray
     speed: jnp.ndarray
@@ -144,40 +89,24 @@ class Antibodies:
 
     @property
     def shape(self) -> tuple[int, ...]:
-        """The batch shape (``()`` for one antibody, ``(8,)`` for a set)."""
         return tuple(jnp.shape(self.type))
 
 
 def _namespace(*trees: Any):
-    """NumPy for host arrays only (e.g. a file just read), else ``jax.numpy``.
-
-    Host data cut and checked with NumPy spares a script's start JAX's op-by-op compilations.
-    """
+    """NumPy for host arrays only (a file just read: spares JAX's op-by-op compiles), else jnp."""
     host = all(isinstance(x, np.ndarray | np.generic) for x in jax.tree.leaves(trees))
     return np if host else jnp
 
 
 def attribute_matrix(ab: Antibodies) -> jnp.ndarray:
-    """The attributes as one array, columns ``ATTRIBUTE_NAMES`` (D as 0.0 / 1.0).
-
-    Returns:
-        [..., N_ATTRIBUTES] float32 (NumPy for antibodies of NumPy arrays).
-    """
+    """[..., N_ATTRIBUTES] float32, columns ``ATTRIBUTE_NAMES`` (NumPy for NumPy antibodies)."""
     xp = _namespace(ab)
     return xp.stack([xp.asarray(getattr(ab, f), xp.float32) for f in _FIELDS], axis=-1)
 
 
 def from_matrix(type_: jnp.ndarray, attributes: jnp.ndarray) -> Antibodies:
-    """Inverse of :func:`attribute_matrix`.
-
-    Args:
-        type_: [...] int behaviour types.
-        attributes: [..., N_ATTRIBUTES] float, columns ``ATTRIBUTE_NAMES``.
-
-    Returns:
-        Antibodies of NumPy arrays when both inputs are NumPy arrays (host data, e.g. a parsed
-        file: cut by NumPy, where JAX would compile each slice op by op), else of JAX arrays.
-    """
+    """Inverse of :func:`attribute_matrix`: types [...] and attributes [..., N_ATTRIBUTES]
+    (NumPy antibodies for NumPy inputs)."""
     xp = _namespace(type_, attributes)
     attributes = xp.asarray(attributes, xp.float32)
     cols = {f: attributes[..., i] for i, f in enumerate(_FIELDS)}
@@ -205,42 +134,14 @@ def _to_type(u: jnp.ndarray) -> jnp.ndarray:
 
 
 def _uniform(key: jax.Array, shape: tuple[int, ...]) -> jnp.ndarray:
-    """``jax.random.uniform(key, shape)``, drawn flat and reshaped.
-
-    With JAX's default partitionable threefry the numbers are identical (the counters run over
-    the flattened index), but XLA on CPU compiles the flat draw several times faster than a
-    multi-dimensional one. Sampling and mutation also make one draw each and slice it, since
-    every random primitive adds compile time, which dominates these short programs.
-    """
+    """``jax.random.uniform(key, shape)`` drawn flat: the same numbers, compiled several times
+    faster on CPU (one draw per function, sliced, for the same reason)."""
     return jax.random.uniform(key, (math.prod(shape),)).reshape(shape)
 
 
-def sample_attributes(key: jax.Array, type_: jnp.ndarray) -> Antibodies:
-    """Fresh canonical attributes for given types, uniform within Table 1.
-
-    S, F, A, Rf and Ra are uniform on the type's [min, max] (static turn's A is exactly 100);
-    D is 0 or 1 with probability 1/2 for the types that use it.
-
-    Args:
-        key: typed PRNG key.
-        type_: [...] int behaviour types 0-5.
-
-    Returns:
-        Antibodies of shape ``type_.shape``.
-    """
-    type_ = jnp.asarray(type_, jnp.int32)
-    u = _uniform(key, type_.shape + (N_ATTRIBUTES,))
-    return from_matrix(type_, _to_attributes(type_, u))
-
-
 def sample_antibodies(key: jax.Array, shape: int | tuple[int, ...] = (N_ANTIGENS,)) -> Antibodies:
-    """Random antibodies: type uniform over 0-5, then attributes as :func:`sample_attributes`.
-
-    Args:
-        key: typed PRNG key.
-        shape: batch shape, e.g. ``()`` for one antibody, ``(8,)`` for a set or ``(5, 8)`` for
-            the STL's five sets.
-    """
+    """Random antibodies of batch ``shape``: type uniform over 0-5, attributes uniform within
+    Table 1 (D left or right with probability 1/2)."""
     shape = (shape,) if isinstance(shape, int) else tuple(shape)
     return from_uniforms(_uniform(key, shape + (1 + N_ATTRIBUTES,)))
 
@@ -253,21 +154,8 @@ def from_uniforms(u: jnp.ndarray) -> Antibodies:
 
 
 def mutate(key: jax.Array, ab: Antibodies, rate: float | jnp.ndarray = 0.05) -> Antibodies:
-    """GA mutation (SPEC 10): resample each gene within Table 1 with probability ``rate``.
-
-    The type and each of the six attributes of every antibody mutate independently. A mutated
-    type is redrawn uniformly over 0-5 (it may come out unchanged) and then all of that
-    antibody's attributes are redrawn for the new type. A mutated attribute the type does not use
-    stays 0. ``rate = 0`` returns ``ab`` unchanged; ``rate = 1`` redraws everything.
-
-    Args:
-        key: typed PRNG key.
-        ab: canonical antibodies, any batch shape.
-        rate: per-gene mutation probability (may be traced).
-
-    Returns:
-        Antibodies with the shape of ``ab``.
-    """
+    """GA mutation (SPEC 10): each gene (type, six attributes) redrawn within Table 1 with
+    probability ``rate`` (traced); a redrawn type redraws all of its antibody's attributes."""
     n = 1 + N_ATTRIBUTES
     u = _uniform(key, ab.shape + (2 * n,))
     hit = u[..., :n] < rate
@@ -281,14 +169,7 @@ def mutate(key: jax.Array, ab: Antibodies, rate: float | jnp.ndarray = 0.05) -> 
 
 
 def within_limits(ab: Antibodies) -> jnp.ndarray:
-    """Whether each antibody is a valid canonical Table 1 antibody.
-
-    Valid: type in 0-5, every used attribute finite and within its closed limits (D in {0, 1}),
-    every unused attribute exactly 0.
-
-    Returns:
-        [...] bool with the batch shape of ``ab`` (NumPy for antibodies of NumPy arrays).
-    """
+    """[...] bool: type in 0-5, used attributes within Table 1's limits, unused ones 0."""
     xp = _namespace(ab)
     valid_type = (ab.type >= 0) & (ab.type < N_TYPES)
     t = xp.clip(ab.type, 0, N_TYPES - 1)
@@ -299,19 +180,8 @@ def within_limits(ab: Antibodies) -> jnp.ndarray:
 
 
 def antibody_distance(a: Antibodies, b: Antibodies) -> jnp.ndarray:
-    """Distance between antibodies for the GA diversity measure (SPEC 10) [ours].
-
-    1 for different types; otherwise the mean, over the attributes the type uses, of
-    ``|a - b| / (max - min)`` with Table 1's limits (D: 0 same, 1 different). An attribute with
-    zero range (static turn's A) contributes 0 but still counts in the mean. The result is in
-    [0, 1] for antibodies within limits.
-
-    Args:
-        a, b: antibodies with broadcastable batch shapes.
-
-    Returns:
-        [...] float32 distances.
-    """
+    """GA diversity distance [...] in [0, 1] (SPEC 10) [ours]: 1 between types, else the mean
+    over used attributes of |a - b| / (max - min) (a zero range counts 0)."""
     t = jnp.clip(a.type, 0, N_TYPES - 1)
     span = jnp.asarray(_RANGE)[t]
     diff = jnp.abs(attribute_matrix(a) - attribute_matrix(b))
@@ -337,17 +207,8 @@ def _short_float(x: float) -> float:
 
 
 def to_dicts(ab: Antibodies) -> list[dict[str, Any]]:
-    """A human-readable set: one dict per antigen, only the attributes its type uses.
-
-    Example entry: ``{"antigen": "obstacle left", "type": "forward turn", "S": 250.0,
-    "A": 80.5, "D": "right"}``.
-
-    Args:
-        ab: one set, shape ``[8]`` (host or device arrays, not traced).
-
-    Returns:
-        8 dicts, in antigen order.
-    """
+    """One set [8] as 8 dicts in antigen order, e.g. ``{"antigen": "obstacle left", "type":
+    "forward turn", "S": 250.0, "A": 80.5, "D": "right"}`` (only the attributes used)."""
     if ab.shape != (N_ANTIGENS,):
         raise ValueError(f"to_dicts expects one set of shape ({N_ANTIGENS},), got {ab.shape}")
     types = np.asarray(ab.type)
@@ -410,21 +271,8 @@ def _parse_one(j: int, item: Any) -> tuple[int, list[float]]:
 
 
 def from_dicts(items: Sequence[Mapping[str, Any]]) -> Antibodies:
-    """Parse and validate a set written by :func:`to_dicts` (or by hand).
-
-    Each dict needs ``"type"`` (a name from ``TYPE_NAMES``) and exactly the attributes that type
-    uses (D as ``"left"``/``"right"``, numbers within Table 1); ``"antigen"`` is optional but, if
-    given, must name the antigen at that position. Unused attributes may be absent or ``None``.
-
-    Args:
-        items: 8 dicts in antigen order.
-
-    Returns:
-        Canonical Antibodies of shape ``[8]``.
-
-    Raises:
-        ValueError: a one-line message naming the antibody and the offending field.
-    """
+    """A set [8] from :func:`to_dicts`' form: each dict exactly its type's attributes, within
+    Table 1; ValueError names the antibody and field."""
     if isinstance(items, (str, bytes, Mapping)) or not isinstance(items, Sequence):
         raise ValueError(f"antibody set: expected a list of {N_ANTIGENS} dicts")
     if len(items) != N_ANTIGENS:

@@ -6,8 +6,7 @@ With ``Vm`` the maximum IR reading (paper section 4.1):
 - ``250 <= Vm < 2400``: 2 obstacle right / 3 obstacle rear / 4 obstacle left;
 - ``Vm >= 2400``: 5 collision right / 6 collision rear / 7 collision left.
 
-The side is the sensor group holding ``Vm`` [ours]: right = ps0-ps2, rear = ps3-ps4,
-left = ps5-ps7. Everything here works for one robot; ``vmap`` for a batch.
+The side is the sensor group holding ``Vm`` [ours]: right ps0-ps2, rear ps3-ps4, left ps5-ps7.
 """
 
 from __future__ import annotations
@@ -20,34 +19,9 @@ import numpy as np
 if TYPE_CHECKING:  # only for annotations: antigens must not need the simulator to import
     from jaxais.envs import Observation
 
-__all__ = [
-    "ANTIGEN_NAMES",
-    "COLLISION_LEFT",
-    "COLLISION_REAR",
-    "COLLISION_RIGHT",
-    "COLLISION_THRESHOLD",
-    "N_ANTIGENS",
-    "OBSTACLE_LEFT",
-    "OBSTACLE_REAR",
-    "OBSTACLE_RIGHT",
-    "OBSTACLE_THRESHOLD",
-    "SENSOR_SIDE",
-    "SIDE_LEFT",
-    "SIDE_REAR",
-    "SIDE_RIGHT",
-    "TARGET_SEEN",
-    "TARGET_UNSEEN",
-    "antigen",
-    "antigen_of",
-    "is_collision",
-    "is_obstacle_or_collision",
-    "severity",
-]
 
-OBSTACLE_THRESHOLD = 250.0
-"""``Vm`` at or above this is an obstacle antigen (2-4) [paper]."""
-COLLISION_THRESHOLD = 2400.0
-"""``Vm`` at or above this is a collision antigen (5-7) [paper]."""
+OBSTACLE_THRESHOLD = 250.0  # Vm from here: an obstacle antigen (2-4) [paper]
+COLLISION_THRESHOLD = 2400.0  # Vm from here: a collision antigen (5-7) [paper]
 
 N_ANTIGENS = 8
 TARGET_UNSEEN = 0
@@ -66,21 +40,13 @@ ANTIGEN_NAMES = (
 )
 
 SIDE_RIGHT, SIDE_REAR, SIDE_LEFT = 0, 1, 2
+# [8] side of each IR sensor ps0..ps7 [ours, e-puck bearings].
 SENSOR_SIDE = np.array([0, 0, 0, 1, 1, 2, 2, 2], dtype=np.int32)
-"""[8] side of each IR sensor ps0..ps7 (0 right, 1 rear, 2 left) [ours, e-puck bearings]."""
 
 
 def antigen(ir: jnp.ndarray, blue_pixels: jnp.ndarray) -> jnp.ndarray:
-    """The antigen presented by one robot's sensor readings.
-
-    Args:
-        ir: [..., 8] IR readings ps0..ps7 (0..4095).
-        blue_pixels: [...] number of blue (marker or goal) camera pixels.
-
-    Returns:
-        [...] int32 antigen index 0-7. When several sensors share the maximum reading, the
-        lowest-numbered one decides the side (``argmax`` order: right before rear before left).
-    """
+    """int32 antigen 0-7 [...] of IR readings [..., 8] and blue pixel counts [...]; among
+    sensors sharing the maximum, the lowest-numbered decides the side."""
     ir = jnp.asarray(ir, jnp.float32)
     vm = jnp.max(ir, axis=-1)
     side = jnp.asarray(SENSOR_SIDE)[jnp.argmax(ir, axis=-1)]
@@ -93,11 +59,7 @@ def antigen(ir: jnp.ndarray, blue_pixels: jnp.ndarray) -> jnp.ndarray:
 
 
 def antigen_of(obs: Observation) -> jnp.ndarray:
-    """The antigen of an :class:`~jaxais.envs.Observation` (from ``ir`` and ``blue_pixels``).
-
-    Returns:
-        [] int32 antigen index 0-7 (or the observation's batch shape).
-    """
+    """The antigen of an :class:`~jaxais.envs.Observation`."""
     return antigen(obs.ir, obs.blue_pixels)
 
 
@@ -112,9 +74,5 @@ def is_collision(m: jnp.ndarray) -> jnp.ndarray:
 
 
 def severity(m: jnp.ndarray) -> jnp.ndarray:
-    """``lev`` of SPEC 6: 0 for antigens 0-1, 1 for obstacles (2-4), 2 for collisions (5-7).
-
-    Returns:
-        int32 with the shape of ``m``.
-    """
+    """int32 ``lev`` of SPEC 6: 0 for antigens 0-1, 1 for obstacles, 2 for collisions."""
     return is_obstacle_or_collision(m).astype(jnp.int32) + is_collision(m).astype(jnp.int32)

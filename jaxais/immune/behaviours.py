@@ -1,13 +1,8 @@
 """Behaviours: one antibody's wheel speeds for one iteration (SPEC 5).
 
-Every behaviour is "both wheels at a base speed (S, or -S for reverse turn), with at most one
-wheel per side reduced by X %", where reducing by X % means ``v = base * (1 - X / 100)``; X > 100
-drives that wheel the other way [ours]. :func:`wheel_speeds` computes the two reductions for the
-antibody's type with a few elementwise ``where``s instead of branching, because it runs every
-iteration for thousands of robots.
-
-The side D names the wheel that is reduced: D = left slows the left wheel, so the robot turns
-left (reverse turn: the left wheel backs up slower, so the robot's rear swings right).
+Every behaviour is both wheels at a base speed (S, or -S for reverse turn) with at most one wheel
+per side reduced by X %: ``v = base * (1 - X / 100)``, X > 100 reversing it [ours]. D names the
+reduced wheel: D = left turns left.
 """
 
 from __future__ import annotations
@@ -26,47 +21,22 @@ from jaxais.immune.antibodies import (
     Antibodies,
 )
 
-MAX_WHEEL_SPEED = 1000.0
-"""Wheel speeds are clipped to +-this, speed units [ours, e-puck]."""
-STATIC_TURN_REDUCTION = 100.0
-"""Static turn stops the wheel on side D (a 100 % reduction), whatever the antibody's A holds."""
-CENTRE_COLUMN = 7.0
-"""Middle column of the 15-column camera image; track markers steers towards it."""
-
-__all__ = [
-    "CENTRE_COLUMN",
-    "MAX_WHEEL_SPEED",
-    "STATIC_TURN_REDUCTION",
-    "wheel_speeds",
-]
+MAX_WHEEL_SPEED = 1000.0  # speed units [ours, e-puck]
+STATIC_TURN_REDUCTION = 100.0  # static turn stops side D's wheel, whatever A holds
+CENTRE_COLUMN = 7.0  # the camera's middle column, which track markers steers towards
 
 
 def wheel_speeds(
     u: jnp.ndarray, ab: Antibodies, blue_pixels: jnp.ndarray, blue_centroid: jnp.ndarray
 ) -> jnp.ndarray:
-    """Left and right wheel speeds of one antibody for one iteration.
+    """[2] float32 (left, right) speeds of one antibody; ``u`` [2] are the wander types' turn
+    draws (made once a bout). Branch-free, as it runs for thousands of robots.
 
-    Per type (S speed, F/Rf frequencies %, A/Ra reductions %, D side):
-
-    - 0 wander single: with probability F/100 the wheel on side D is reduced by A %, else both S.
-    - 1 wander both: with probability F/100 the left wheel is reduced by A %; otherwise, with
-      probability Rf/100, the right wheel is reduced by Ra % (so a right turn has overall
-      probability (1 - F/100) Rf/100); otherwise straight.
-    - 2 forward turn: the wheel on side D is reduced by A %.
-    - 3 static turn: the wheel on side D stopped, the other at S.
-    - 4 reverse turn: both wheels at -S, the one on side D at -S (1 - A/100).
-    - 5 track markers: the left (right) wheel reduced by A % when the blue centroid is left
-      (right) of column 7; straight when centred or when there are no blue pixels.
-
-    Args:
-        u: [2] i.i.d. uniforms for the wander types' turn decisions (the controllers draw them
-            once a bout, so a bout keeps its decision).
-        ab: one antibody (scalar fields).
-        blue_pixels: [] int number of blue pixels.
-        blue_centroid: [] float mean column of the blue pixels (0 = leftmost, 14 = rightmost).
-
-    Returns:
-        [2] float32 (left, right) speeds, clipped to +-``MAX_WHEEL_SPEED``.
+    - 0 wander single: side D reduced by A % with probability F/100.
+    - 1 wander both: left by A % with probability F/100, else right by Ra % with Rf/100.
+    - 2 forward turn: side D reduced by A %. 3 static turn: side D stopped.
+    - 4 reverse turn: both at -S, side D at -S (1 - A/100).
+    - 5 track markers: the side of the blue centroid (vs column 7) reduced by A %.
     """
     t = ab.type
     speed = jnp.asarray(ab.speed, jnp.float32)

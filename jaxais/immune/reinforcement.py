@@ -1,8 +1,7 @@
 """Reinforcement scores and the stuck penalties (SPEC 6, the paper's Table 2 and section 4.4).
 
-Pure functions for one robot, shared by the GA (LTL, cumulative score L) and the immune network
-(STL, paratope P). Antigens fall in three groups: 0 target unseen, 1 target seen, 2-7 obstacle
-or collision. The antibody that acted at t-1 is scored from the pair (m_{t-1}, m_t):
+For one robot, shared by the LTL (score L) and the STL (paratope P): the antibody that acted at
+t-1 is scored from the antigens (m_{t-1}, m_t):
 
 ======  =====  =========================================================================
 old     new    score
@@ -30,81 +29,33 @@ import numpy as np
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.immune.antigens import TARGET_SEEN, TARGET_UNSEEN, is_obstacle_or_collision, severity
 
-__all__ = [
-    "CENTRE_COLUMN",
-    "CENTRE_HALF_WIDTH",
-    "OBSTACLE_LIMIT",
-    "PENALTY_IDIOTYPIC",
-    "PENALTY_NON_IDIOTYPIC",
-    "PENALTY_NO_PROGRESS",
-    "PenaltyCounters",
-    "SCORE_AVOIDED",
-    "SCORE_AVOIDED_AND_SEEN",
-    "SCORE_FOUND_MARKER",
-    "SCORE_KEPT_MARKER_MAX",
-    "SCORE_LOST_MARKER",
-    "SCORE_OBSTACLE_MAX",
-    "SCORE_OBSTACLE_MIN",
-    "SCORE_SEEN_TO_OBSTACLE",
-    "SCORE_UNSEEN_TO_OBSTACLE",
-    "SCORE_UNSEEN_TO_UNSEEN",
-    "UNSEEN_LIMIT",
-    "V_PREV_FLOOR",
-    "WEIGHT_PROXIMITY",
-    "WEIGHT_SEVERITY",
-    "init_counters",
-    "penalty_size",
-    "rl_score",
-    "update_penalty",
-]
-
 # Fixed rows of Table 2 [paper].
-SCORE_UNSEEN_TO_UNSEEN = 0.05
-"""0 -> 0: no obstacles encountered."""
-SCORE_LOST_MARKER = -0.10
-"""1 -> 0: lost sight of the marker."""
-SCORE_AVOIDED = 0.10
-"""2-7 -> 0: avoided the obstacle."""
-SCORE_FOUND_MARKER = 0.10
-"""0 -> 1: found the marker."""
-SCORE_AVOIDED_AND_SEEN = 0.20
-"""2-7 -> 1: avoided the obstacle and gained or kept sight of the marker."""
-SCORE_UNSEEN_TO_OBSTACLE = -0.05
-"""0 -> 2-7: encountered an obstacle."""
-SCORE_SEEN_TO_OBSTACLE = -0.05
-"""1 -> 2-7: encountered an obstacle."""
+SCORE_UNSEEN_TO_UNSEEN = 0.05  # 0 -> 0: no obstacles encountered.
+SCORE_LOST_MARKER = -0.10  # 1 -> 0: lost sight of the marker.
+SCORE_AVOIDED = 0.10  # 2-7 -> 0: avoided the obstacle.
+SCORE_FOUND_MARKER = 0.10  # 0 -> 1: found the marker.
+SCORE_AVOIDED_AND_SEEN = 0.20  # 2-7 -> 1: avoided the obstacle, sees the marker.
+SCORE_UNSEEN_TO_OBSTACLE = -0.05  # 0 -> 2-7: encountered an obstacle.
+SCORE_SEEN_TO_OBSTACLE = -0.05  # 1 -> 2-7: encountered an obstacle.
 
 # 1 -> 1, "0.00 to 0.05 depending on the marker's orientation" [paper: range; ours: formula].
-SCORE_KEPT_MARKER_MAX = 0.05
-"""1 -> 1 score with the marker dead ahead."""
-CENTRE_COLUMN = 7.0
-"""Camera column straight ahead (of 0..14)."""
-CENTRE_HALF_WIDTH = 7.0
-"""Centroid offset from the centre at which the 1 -> 1 score reaches 0 (the image edge)."""
+SCORE_KEPT_MARKER_MAX = 0.05  # 1 -> 1 score with the marker dead ahead.
+CENTRE_COLUMN = 7.0  # Camera column straight ahead (of 0..14).
+CENTRE_HALF_WIDTH = 7.0  # Centroid offset where the 1 -> 1 score reaches 0 (the image edge).
 
 # 2-7 -> 2-7, "-0.40 to 0.50, depending on several factors" [paper: range; ours: formula].
-WEIGHT_SEVERITY = 0.25
-"""Per level of severity gained (collision -> obstacle) or lost."""
-WEIGHT_PROXIMITY = 0.25
-"""Times the relative fall of Vm, clipped to [-1, 1]."""
-PENALTY_NO_PROGRESS = 0.10
-"""Subtracted when the antigen is unchanged and Vm did not fall."""
+WEIGHT_SEVERITY = 0.25  # Per level of severity gained (collision -> obstacle) or lost.
+WEIGHT_PROXIMITY = 0.25  # Times the relative fall of Vm, clipped to [-1, 1].
+PENALTY_NO_PROGRESS = 0.10  # Subtracted when the antigen is unchanged and Vm did not fall.
 SCORE_OBSTACLE_MIN = -0.40
 SCORE_OBSTACLE_MAX = 0.50
-V_PREV_FLOOR = 1e-6
-"""Denominator floor for the relative Vm change, so V_old = 0 gives no NaN (it cannot occur with
-a real 2-7 antigen, whose Vm is at least 250)."""
+V_PREV_FLOOR = 1e-6  # V_old = 0 gives no NaN (a real 2-7 antigen has Vm >= 250).
 
 # Stuck penalties [paper].
-UNSEEN_LIMIT = 250
-"""Penalise after more than this many consecutive iterations of antigen 0."""
-OBSTACLE_LIMIT = 15
-"""Penalise after more than this many consecutive obstacle encounters (what an encounter is:
-:class:`jaxais.immune.readings.Readings`)."""
-PENALTY_IDIOTYPIC = 0.5
-"""Score removed from the acting antibody by a penalty in idiotypic systems."""
-PENALTY_NON_IDIOTYPIC = 1.0
-"""Score removed from the acting antibody by a penalty in non-idiotypic systems."""
+UNSEEN_LIMIT = 250  # Penalise after more than this many consecutive iterations of antigen 0.
+OBSTACLE_LIMIT = 15  # Penalise after more consecutive obstacle encounters (Readings).
+PENALTY_IDIOTYPIC = 0.5  # Score a penalty removes from the acting antibody, idiotypic systems.
+PENALTY_NON_IDIOTYPIC = 1.0  # ... and in non-idiotypic systems.
 
 # [old group, new group] for the fixed rows; group 0 unseen, 1 seen, 2 obstacle/collision. The
 # two ranged cells (1 -> 1, 2-7 -> 2-7) are computed and hold NaN here.
@@ -129,18 +80,8 @@ def rl_score(
     v: jnp.ndarray,
     centroid: jnp.ndarray,
 ) -> jnp.ndarray:
-    """Table 2 score of the antibody that acted at t-1 (see the module table).
-
-    Args:
-        m_prev: [] int antigen at t-1.
-        m: [] int antigen at t.
-        v_prev: [] float Vm (maximum IR reading) at t-1.
-        v: [] float Vm at t.
-        centroid: [] float blue centroid column at t (0..14; used by 1 -> 1 only).
-
-    Returns:
-        [] float32 score in [-0.40, 0.50].
-    """
+    """Table 2 score in [-0.40, 0.50] of the antibody that acted at t-1, from the antigens and
+    Vm at t-1 and t and the blue centroid column at t (0..14)."""
     v_prev = jnp.asarray(v_prev, jnp.float32)
     v = jnp.asarray(v, jnp.float32)
     g_prev, g = _group(m_prev), _group(m)
@@ -165,14 +106,8 @@ def rl_score(
 
 @pytree_dataclass
 class PenaltyCounters:
-    """Lengths of the current runs of stuck-looking antigens.
-
-    Attributes:
-        unseen_run: [] int32 consecutive iterations of antigen 0, up to and including the last
-            one passed to :func:`update_penalty` (0 after a penalty).
-        obstacle_run: [] int32 consecutive obstacle encounters, likewise.
-        clear_run: [] int32 consecutive iterations of antigens 0-1 (Vm < 250).
-    """
+    """Lengths (int32) of the current runs of antigen 0 (``unseen_run``), of obstacle
+    encounters (``obstacle_run``; both 0 after a penalty) and of antigens 0-1 (``clear_run``)."""
 
     unseen_run: jnp.ndarray
     obstacle_run: jnp.ndarray
@@ -192,31 +127,12 @@ def update_penalty(
     count_encounters: bool | jnp.ndarray = False,
     encounter_gap: int | jnp.ndarray = 1,
 ) -> tuple[PenaltyCounters, jnp.ndarray]:
-    """Count the current antigen ``m`` into the runs and say whether a penalty fires now.
+    """The runs with antigen ``m`` counted in, and whether a penalty fires now.
 
-    The unseen run grows by one for each consecutive iteration of antigen 0 and drops to 0 on
-    any other [paper: "more than 250 iterations"]. The obstacle run counts encounters:
-
-    - ``count_encounters`` [ours]: an encounter is an entry into antigens 2-7 from 0-1, and the
-      run ends only after ``encounter_gap`` consecutive clear iterations (the robot has moved
-      well away). A robot hovering at the obstacle threshold, whose antigen flips between 0 and
-      2-7, then racks up encounters and is caught; a long unbroken contact is one encounter
-      (Table 2's no-progress term scores that).
-    - otherwise (the literal reading): every iteration of 2-7 counts, one clear iteration ends
-      the run; it fires after 0.48 s of unbroken contact and never catches the hoverer.
-
-    A penalty fires on the iteration that makes a run exceed its limit (the 251st antigen 0, the
-    16th encounter); that run then restarts at 0, so while the robot stays stuck the penalty
-    repeats. Apply ``penalty_size`` to the antibody being scored when it returns True.
-
-    Args:
-        counters: runs before this iteration.
-        m: [] int antigen of this iteration.
-        count_encounters: [] bool, the reading (see above).
-        encounter_gap: [] int clear iterations that end a run of encounters.
-
-    Returns:
-        (updated counters, [] bool penalise).
+    A penalty fires when a run passes its limit (the 251st antigen 0 [paper], the 16th
+    encounter) and restarts that run. ``count_encounters`` [ours]: an encounter is an entry into
+    2-7 from 0-1, ended by ``encounter_gap`` clear iterations (catches a robot hovering at the
+    threshold); else [paper, literal] every iteration of 2-7 counts and one clear one ends it.
     """
     obstacle_now = is_obstacle_or_collision(m)
     unseen = jnp.where(m == TARGET_UNSEEN, counters.unseen_run + 1, 0)
@@ -242,6 +158,5 @@ def penalty_size(
     with_idiotypic: float | jnp.ndarray = PENALTY_IDIOTYPIC,
     without: float | jnp.ndarray = PENALTY_NON_IDIOTYPIC,
 ) -> jnp.ndarray:
-    """Score removed by one penalty: 0.5 with idiotypic selection, 1.0 without [paper] (the STL
-    takes both from its ``NetworkParams``, so they can be swept)."""
+    """Score removed by one penalty: 0.5 with idiotypic selection, 1.0 without [paper]."""
     return jnp.where(idiotypic, with_idiotypic, without).astype(jnp.float32)

@@ -1,12 +1,7 @@
 """The environment of :mod:`jaxais.envs.gymnax` as a brax ``Env``, for brax's training code.
 
-Needs brax (``pip install 'jaxais[brax]'``); nothing else in jaxais imports this module::
-
-    from brax.training.agents.ppo import train as ppo
-    from jaxais.envs.brax import BraxEnv
-
-    make_policy, params, metrics = ppo.train(
-        BraxEnv("world1"), num_timesteps=1_000_000, episode_length=2000, num_envs=64, ...)
+Needs brax (``pip install 'jaxais[brax]'``); nothing else in jaxais imports this module. brax's
+trainers take it as it is: ``ppo.train(BraxEnv("world1"), ...)`` (``examples/brax_ppo.py``).
 
 brax's ``step(state, action)`` takes no key: the wrapper keeps one in ``state.info["rng"]``
 (split from the reset's key) and splits it every step. The brax ``State`` holds:
@@ -25,10 +20,10 @@ brax's ``step(state, action)`` takes no key: the wrapper keeps one in ``state.in
 Auto-reset: brax's ``AutoResetWrapper`` (``brax.envs.training.wrap``, used by its trainers)
 restarts a finished episode from ``info["first_pipeline_state"]``. So that episodes do not all
 restart from their environment's first placement, ``reset`` samples ``resets`` placements (16 by
-default) into ``info["placements"]`` and every ``step`` writes a random one of them into
-``info["first_pipeline_state"]``/``info["first_obs"]`` when those keys are there: a gather, not
-a reset (which under ``vmap`` would run every step). ppo's ``num_resets_per_eval`` draws new
-pools; ``resets=0`` keeps brax's behaviour.
+default; the first is the episode's) into ``info["placements"]`` and every ``step`` writes a
+random one of them into ``info["first_pipeline_state"]``/``info["first_obs"]`` when those keys
+are there: a gather, not a reset (which under ``vmap`` would run every step). ppo's
+``num_resets_per_eval`` draws new pools; ``resets=0`` keeps brax's behaviour.
 
 :func:`register` adds every built-in world to brax's registry (``brax.envs.create(
 "jaxais_world1", episode_length=...)``, ``brax.envs.get_environment(name, backend=...)``).
@@ -114,13 +109,15 @@ class BraxEnv(_BraxEnvBase):
         return self._env
 
     def reset(self, rng: jax.Array) -> BraxState:
-        rng, key, k_pool = jax.random.split(rng, 3)
-        obs, state = self._env.reset_env(key, self._params)
+        rng, key = jax.random.split(rng)
+        # One (vmapped) reset program for the start and the pool: the start is the pool's first.
+        keys = jax.random.split(key, max(self._resets, 1))
+        pool = jax.vmap(self._env.reset_env, (0, None))(keys, self._params)
+        obs, state = jax.tree.map(lambda a: a[0], pool)
         zero = jnp.zeros((), jnp.float32)
         info = {"rng": rng, "truncation": zero}
         if self._resets:
-            pool = jax.random.split(k_pool, self._resets)
-            info["placements"] = jax.vmap(self._env.reset_env, (0, None))(pool, self._params)
+            info["placements"] = pool
         return BraxState(
             pipeline_state=state,
             obs=obs,

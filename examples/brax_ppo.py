@@ -1,6 +1,6 @@
 """brax's PPO, unmodified, on a jaxais world (``pip install 'jaxais[brax]'``).
 
-    python examples/brax_ppo.py            # a tiny run (seconds after compiling)
+    python examples/brax_ppo.py            # a tiny run: about 3 CPU minutes, nearly all compiling
     python examples/brax_ppo.py 2000000    # a real one: more env steps
 
 Prints one line per evaluation: the mean episode's reward, counted collisions and approach to

@@ -1,27 +1,32 @@
 """The environment of :mod:`jaxais.envs.gymnax` as a brax ``Env``, for brax's training code.
 
-Needs brax (``pip install 'jaxais[brax]'``); nothing else in jaxais imports this module::
-
-    from brax.training.agents.ppo import train as ppo
-    from jaxais.envs.brax import BraxEnv
-
-    env = BraxEnv("world1", max_steps=125_000)
-    make_policy, params, metrics = ppo.train(env, num_timesteps=..., episode_length=2000, ...)
+Needs brax (``pip install 'jaxais[brax]'``); nothing else in jaxais imports this module. brax's
+trainers take it as it is: ``ppo.train(BraxEnv("world1"), ...)`` (``examples/brax_ppo.py``).
 
 brax's ``step(state, action)`` takes no key: the wrapper keeps one in ``state.info["rng"]``
 (split from the reset's key) and splits it every step. The brax ``State`` holds:
 
-- ``pipeline_state``: the gymnax-style :class:`~jaxais.envs.gymnax.EnvState` (brax's
-  ``AutoResetWrapper`` restores the first one at the end of an episode, as for its own envs);
+- ``pipeline_state``: the gymnax-style :class:`~jaxais.envs.gymnax.EnvState`;
 - ``obs`` [11], ``reward``: as :class:`~jaxais.envs.gymnax.EpuckEnv` defines them;
 - ``done``: 1.0 when the episode terminated (target found) or was truncated at ``max_steps``;
   ``info["truncation"]`` is 1.0 in the second case (brax's convention; brax's
   ``EpisodeWrapper`` overwrites it with its own ``episode_length`` cap, so keep ``max_steps``
   at or above that, as the default of 125,000 steps is);
-- ``metrics``: ``collisions``, ``distance``, ``goal_pixels`` (float32).
+- ``metrics`` (:data:`METRICS`), per step as brax's ``EpisodeWrapper`` sums them:
+  ``collision`` (1.0 on the step that counted a collision), ``progress`` (metres of approach
+  to the goal this step) and ``found`` (1.0 on the step that found the target); keys added by
+  brax's wrappers (``reward``) are kept.
+
+Auto-reset: brax's ``AutoResetWrapper`` (``brax.envs.training.wrap``, used by its trainers)
+restarts a finished episode from ``info["first_pipeline_state"]``. So that episodes do not all
+restart from their environment's first placement, ``reset`` samples ``resets`` placements (16 by
+default; the first is the episode's) into ``info["placements"]`` and every ``step`` writes a
+random one of them into ``info["first_pipeline_state"]``/``info["first_obs"]`` when those keys
+are there: a gather, not a reset (which under ``vmap`` would run every step). ppo's
+``num_resets_per_eval`` draws new pools; ``resets=0`` keeps brax's behaviour.
 
 :func:`register` adds every built-in world to brax's registry (``brax.envs.create(
-"jaxais_world1", episode_length=...)``).
+"jaxais_world1", episode_length=...)``, ``brax.envs.get_environment(name, backend=...)``).
 """
 
 from __future__ import annotations
@@ -32,8 +37,9 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-from .gymnax import OBS_NAMES, EnvParams, EpuckEnv, make
+from .gymnax import OBS_NAMES, EnvParams, EpuckEnv, goal_distance, make
 from .world import BUILTIN_WORLDS, World
 
 try:
@@ -45,15 +51,27 @@ except ImportError as err:  # brax is optional
         "jaxais.envs.brax needs brax: install the brax extra: pip install 'jaxais[brax]'"
     ) from err
 
-__all__ = ["BraxEnv", "BraxState", "register"]
+__all__ = ["METRICS", "BraxEnv", "BraxState", "register"]
 
 
-METRICS = ("collisions", "distance", "goal_pixels")
-"""Entries of ``State.metrics`` (from the step's info, as float32)."""
+METRICS = ("collision", "progress", "found")
+"""Entries of ``State.metrics``, per step (float32)."""
 
 
-def _metrics(info: dict[str, jax.Array]) -> dict[str, jax.Array]:
-    return {name: info[name].astype(jnp.float32) for name in METRICS}
+def _device_put_replicated(x: Any, devices: list) -> Any:
+    """``x`` stacked once per device, sharded over ``devices``: brax's own replacement."""
+    mesh = jax.sharding.Mesh(np.array(devices), ("replicas",))
+    sharding = jax.NamedSharding(mesh, jax.P("replicas"))
+    stack = lambda a: (jnp if isinstance(a, jax.Array) else np).stack([a] * len(devices))
+    return jax.tree.map(lambda a: jax.device_put(stack(a), sharding), x)
+
+
+try:
+    jax.device_put_replicated  # noqa: B018
+except AttributeError:
+    # brax 0.14.2 (the newest release) calls jax.device_put_replicated, which jax 0.10 removed;
+    # brax's main branch inlines this definition (commit 303d89d). Drop when brax > 0.14.2.
+    jax.device_put_replicated = _device_put_replicated
 
 
 class BraxEnv(_BraxEnvBase):
@@ -63,6 +81,7 @@ class BraxEnv(_BraxEnvBase):
         world: a built-in world name, a world file's path, a loaded ``World``, or an
             :class:`~jaxais.envs.gymnax.EpuckEnv` (its default parameters are used).
         params: the environment's parameters (default: the environment's defaults).
+        resets: placements sampled per ``reset`` for brax's auto-reset to draw from (0: none).
         **overrides: as for :func:`jaxais.envs.make` (``max_steps``, ``collision_penalty``, ...).
     """
 
@@ -70,6 +89,7 @@ class BraxEnv(_BraxEnvBase):
         self,
         world: str | Path | World | EpuckEnv = "world1",
         params: EnvParams | None = None,
+        resets: int = 16,
         **overrides: Any,
     ):
         if isinstance(world, EpuckEnv):
@@ -78,7 +98,10 @@ class BraxEnv(_BraxEnvBase):
             self._env = world
         else:
             self._env = make(world, auto_reset=False, **overrides)
+        if int(resets) != resets or resets < 0:
+            raise ValueError(f"resets must be a non-negative integer, got {resets!r}")
         self._params = self._env.default_params if params is None else params
+        self._resets = int(resets)
 
     @property
     def env(self) -> EpuckEnv:
@@ -87,31 +110,46 @@ class BraxEnv(_BraxEnvBase):
 
     def reset(self, rng: jax.Array) -> BraxState:
         rng, key = jax.random.split(rng)
-        obs, state = self._env.reset_env(key, self._params)
+        # One (vmapped) reset program for the start and the pool: the start is the pool's first.
+        keys = jax.random.split(key, max(self._resets, 1))
+        pool = jax.vmap(self._env.reset_env, (0, None))(keys, self._params)
+        obs, state = jax.tree.map(lambda a: a[0], pool)
         zero = jnp.zeros((), jnp.float32)
-        metrics = {name: zero for name in METRICS}
+        info = {"rng": rng, "truncation": zero}
+        if self._resets:
+            info["placements"] = pool
         return BraxState(
             pipeline_state=state,
             obs=obs,
             reward=zero,
             done=zero,
-            metrics=metrics,
-            info={"rng": rng, "truncation": zero},
+            metrics={name: zero for name in METRICS},
+            info=info,
         )
 
     def step(self, state: BraxState, action: jax.Array) -> BraxState:
-        rng, key = jax.random.split(state.info["rng"])
+        rng, key, k_pick = jax.random.split(state.info["rng"], 3)
+        before = state.pipeline_state
         obs, env_state, reward, terminated, truncated, info = self._env.step_env(
-            key, state.pipeline_state, action, self._params
+            key, before, action, self._params
         )
-        done = (terminated | truncated).astype(jnp.float32)
+        metrics = {
+            "collision": info["collisions"] - before.collisions,
+            "progress": goal_distance(before.sim) - info["distance"],
+            "found": terminated,
+        }
+        new_info = {**state.info, "rng": rng, "truncation": truncated.astype(jnp.float32)}
+        if self._resets and "first_pipeline_state" in state.info:
+            pick = jax.random.randint(k_pick, (), 0, self._resets)
+            first_obs, first = jax.tree.map(lambda a: a[pick], state.info["placements"])
+            new_info.update(first_pipeline_state=first, first_obs=first_obs)
         return state.replace(
             pipeline_state=env_state,
             obs=obs,
             reward=reward,
-            done=done,
-            metrics=_metrics(info),
-            info={**state.info, "rng": rng, "truncation": truncated.astype(jnp.float32)},
+            done=(terminated | truncated).astype(jnp.float32),
+            metrics={**state.metrics, **{k: v.astype(jnp.float32) for k, v in metrics.items()}},
+            info=new_info,
         )
 
     @property
@@ -127,10 +165,15 @@ class BraxEnv(_BraxEnvBase):
         return "jaxais"
 
 
+def _factory(world: str, backend: str | None = None, **kwargs: Any) -> BraxEnv:
+    # brax's get_environment passes backend= (mjx, generalized, ...); jaxais has one simulator.
+    return BraxEnv(world, **kwargs)
+
+
 def register(prefix: str = "jaxais_") -> tuple[str, ...]:
     """Add every built-in world to brax's registry as ``{prefix}{world}``; returns the names."""
     names = []
     for world in BUILTIN_WORLDS:
-        _brax_envs.register_environment(prefix + world, functools.partial(BraxEnv, world))
+        _brax_envs.register_environment(prefix + world, functools.partial(_factory, world))
         names.append(prefix + world)
     return tuple(names)

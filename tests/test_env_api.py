@@ -1,14 +1,12 @@
-"""The gymnax-style environment (``jaxais.envs.make``) and its brax wrapper.
+"""The gymnax-style environment (``jaxais.envs.make``); its brax face: tests/test_brax.py.
 
 Every test shares one environment per auto-reset setting, so each compiled function (reset,
-step, step without auto-reset, its vmapped batch, the brax pair) compiles once. Parameters that
+step, step without auto-reset, its vmapped batch) compiles once. Parameters that
 a test changes (``max_steps``) are traced leaves: they reuse the same programs.
 """
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
 from pathlib import Path
 
 import jax
@@ -182,26 +180,3 @@ def test_truncated_at_max_steps(env):
     assert bool(env.is_terminal(state.replace(sim=state.sim.replace(t=5)), params))
     assert int(new.sim.t) == 0  # auto-reset
     assert env._step._cache_size() == size  # max_steps is traced: no new compilation
-
-
-def test_brax_wrapper(env):
-    if importlib.util.find_spec("brax") is None:
-        with pytest.raises(ImportError, match=r"pip install 'jaxais\[brax\]'"):
-            importlib.import_module("jaxais.envs.brax")
-    pytest.importorskip("brax")
-    from jaxais.envs.brax import BraxEnv, BraxState
-
-    benv = BraxEnv(env, params=env.default_params.replace(max_steps=3))
-    assert benv.observation_size == 11 and benv.action_size == 2 and benv.backend == "jaxais"
-    state = jax.jit(benv.reset)(jax.random.PRNGKey(0))
-    assert isinstance(state, BraxState)
-    assert state.obs.shape == (benv.observation_size,) and float(state.done) == 0.0
-    step = jax.jit(benv.step)
-    dones, truncs = [], []
-    for _ in range(3):
-        state = step(state, jnp.array([0.3, 0.3]))
-        dones.append(float(state.done))
-        truncs.append(float(state.info["truncation"]))
-    assert dones == [0.0, 0.0, 1.0] and truncs == [0.0, 0.0, 1.0]
-    assert set(state.metrics) == {"collisions", "distance", "goal_pixels"}
-    assert isinstance(state.pipeline_state, genv.EnvState)

@@ -1,0 +1,139 @@
+"""jaxais's brax face (``jaxais.envs.brax``) under brax's own wrappers and trainers.
+
+brax is in the test extra. The wrapper checks share one compiled ``training.wrap`` pair on a
+small world; brax's trainers (``examples/brax_ppo.py``'s PPO, then ES) run in one subprocess
+with XLA's fast-compile flags, since they jit internally and compiling dominates their cost.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from conftest import fast_compile_options
+
+from jaxais.envs import gymnax as genv
+
+brax_envs = pytest.importorskip("brax.envs")
+from jaxais.envs.brax import METRICS, BraxEnv, BraxState, register  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+WORLD = ROOT / "tests" / "worlds" / "empty.toml"
+EPISODE = 256
+"""Steps per episode: enough for a robot driving straight from the start region to hit a wall."""
+ENVS = 8
+RESETS = 4
+
+
+@pytest.fixture(scope="module")
+def wrapped():
+    """``brax.envs.training.wrap`` around BraxEnv: jitted reset, and ``n`` jitted steps."""
+    env = BraxEnv(WORLD, resets=RESETS)
+    w = brax_envs.training.wrap(env, episode_length=EPISODE)
+    opts = fast_compile_options()
+    step = jax.jit(w.step, compiler_options=opts)
+    ahead = jnp.ones((ENVS, 2))  # full speed ahead: into a wall, then pressed against it
+
+    def run(state, n):
+        for _ in range(n):
+            state = step(state, ahead)
+        return state
+
+    return env, jax.jit(w.reset, compiler_options=opts), run
+
+
+def test_episode_sums_are_true_and_auto_reset_replaces(wrapped):
+    env, reset, run = wrapped
+    state = reset(jax.random.split(jax.random.PRNGKey(0), ENVS))  # brax: raw uint32 keys
+    first = state.pipeline_state
+    before_end = run(state, EPISODE - 1)
+    sums = before_end.info["episode_metrics"]
+    counted = np.asarray(before_end.pipeline_state.collisions)
+    assert counted.max() >= 1  # the robots did hit the walls
+    # brax's EpisodeWrapper sums per-step metrics: a running count would sum to far more.
+    np.testing.assert_array_equal(np.asarray(sums["collision"]), counted)
+    approach = jax.vmap(genv.goal_distance)(first.sim) - jax.vmap(genv.goal_distance)(
+        before_end.pipeline_state.sim
+    )
+    np.testing.assert_allclose(sums["progress"], approach, atol=1e-4)
+    np.testing.assert_array_equal(sums["found"], 0.0)  # empty.toml's goal cannot be seen
+
+    ended = run(before_end, 1)
+    np.testing.assert_array_equal(ended.done, 1.0)
+    np.testing.assert_array_equal(ended.pipeline_state.sim.t, 0)
+    np.testing.assert_array_equal(ended.info["episode_metrics"]["collision"], counted)
+    # The new episodes start from placements of each env's pool, not all from its first one.
+    pose, pool = ended.pipeline_state.sim.pose, ended.info["placements"][1].sim.pose
+    assert pool.shape == (ENVS, RESETS, 3)
+    assert bool(jnp.all(jnp.any(jnp.all(pool == pose[:, None], axis=-1), axis=1)))
+    assert not bool(jnp.all(pose == first.sim.pose))
+    again = run(ended, 1)
+    np.testing.assert_array_equal(
+        again.info["episode_metrics"]["collision"], again.metrics["collision"]
+    )
+
+
+def test_step_keeps_metrics_it_did_not_create():
+    env = BraxEnv(WORLD, resets=0)
+    state = jax.eval_shape(env.reset, jax.random.PRNGKey(1))  # shapes only: nothing compiles
+    assert isinstance(state, BraxState) and isinstance(state.pipeline_state, genv.EnvState)
+    assert set(state.metrics) == set(METRICS) and "placements" not in state.info
+    state.metrics["reward"] = state.reward  # as brax's EvalWrapper does
+    out = jax.eval_shape(env.step, state, jnp.zeros(2))
+    assert set(out.metrics) == {*METRICS, "reward"}
+    assert out.obs.shape == (env.observation_size,) == (11,) and env.action_size == 2
+    with pytest.raises(ValueError, match="resets must be a non-negative integer"):
+        BraxEnv(WORLD, resets=-1)
+
+
+def test_registry_accepts_brax_backend_argument():
+    names = register()
+    assert "jaxais_world1" in names
+    env = brax_envs.get_environment("jaxais_world1", backend="mjx", max_steps=100)
+    assert isinstance(env, BraxEnv) and env.env.default_params.max_steps == 100
+    assert env.backend == "jaxais"
+
+
+def test_import_error_names_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "brax", None)
+    monkeypatch.delitem(sys.modules, "jaxais.envs.brax")
+    with pytest.raises(ImportError, match=r"pip install 'jaxais\[brax\]'"):
+        importlib.import_module("jaxais.envs.brax")
+
+
+TRAINERS = """
+import functools, runpy
+from brax.training.agents.es import networks, train as es
+from jaxais.envs.brax import BraxEnv
+
+runpy.run_path("examples/brax_ppo.py", run_name="__main__")
+steps = []
+_, params, metrics = es.train(
+    BraxEnv("tests/worlds/empty.toml"), num_timesteps=2048, episode_length=64, population_size=4,
+    num_evals=2, num_eval_envs=4, seed=0, progress_fn=lambda step, m: steps.append(step),
+    network_factory=functools.partial(networks.make_es_networks, hidden_layer_sizes=(8,)),
+)
+print("es", steps, float(metrics["eval/episode_collision"]))
+"""
+
+
+def test_ppo_and_es_train():
+    """examples/brax_ppo.py (brax's PPO on world1) and brax's ES (on the cheapest world to
+    compile), each with evaluations."""
+    fast = "--xla_backend_optimization_level=0 --xla_cpu_use_fusion_emitters=false"
+    env = {**os.environ, "XLA_FLAGS": f"{os.environ.get('XLA_FLAGS', '')} {fast}"}
+    out = subprocess.run(
+        [sys.executable, "-c", TRAINERS], cwd=ROOT, env=env, capture_output=True, text=True
+    )
+    assert out.returncode == 0, out.stderr[-3000:]
+    lines = out.stdout.splitlines()
+    evals = [line for line in lines if "steps: reward" in line]
+    assert len(evals) == 3 and evals[-1].split()[0] == "4096", out.stdout
+    assert any(line.startswith("es [0, 2048]") for line in lines), out.stdout

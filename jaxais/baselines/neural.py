@@ -53,7 +53,7 @@ from jax.flatten_util import ravel_pytree
 from jaxais import distributed, envs
 from jaxais.baselines.config import TrainConfig
 from jaxais.controllers import Controller, Percept
-from jaxais.envs.gymnax import IR_FULL_SCALE, OBS_NAMES, PIXELS
+from jaxais.envs.params import IR_FULL_SCALE, OBS_NAMES, PIXELS
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.immune.behaviours import MAX_WHEEL_SPEED
 from jaxais.io import atomic_write, atomic_write_json

@@ -1,10 +1,14 @@
 """The e-puck simulator: a pure-JAX 2D ray-cast world (installed as ``jaxais.envs``).
 
-This package never imports the rest of jaxais: physics sits at the bottom of the stack.
+This package never imports the rest of jaxais: physics sits at the bottom of the stack. Its gymnax
+face (``make``, ``EpuckEnv``, ``EnvParams``, ``EnvState``, ``register_gymnax``: ``envs.gymnax``)
+loads on first use: importing gymnax takes seconds, which the simulator and the task loop skip.
 """
 
+import importlib
+from typing import Any
+
 from .geometry import Scene, cast_rays, disc_gaps, min_gap
-from .gymnax import EpuckEnv, make
 from .params import (
     CAMERA_COLUMNS,
     CAMERA_ROWS,
@@ -43,6 +47,8 @@ __all__ = [
     "NONE",
     "WALL",
     "Capacity",
+    "EnvParams",
+    "EnvState",
     "EpuckEnv",
     "Observation",
     "Scene",
@@ -59,9 +65,18 @@ __all__ = [
     "make",
     "min_gap",
     "observe",
+    "register_gymnax",
     "reset",
     "sample_step_noise",
     "step",
     "step_with_noise",
     "world_path",
 ]
+
+_GYMNAX = ("EnvParams", "EnvState", "EpuckEnv", "make", "register_gymnax")
+
+
+def __getattr__(name: str) -> Any:
+    if name in _GYMNAX:
+        return getattr(importlib.import_module(".gymnax", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -8,10 +8,10 @@ brax's ``step(state, action)`` takes no key: the wrapper keeps one in ``state.in
 
 - ``pipeline_state``: the gymnax-style :class:`~jaxais.envs.gymnax.EnvState`;
 - ``obs`` [11], ``reward``: as :class:`~jaxais.envs.gymnax.EpuckEnv` defines them;
-- ``done``: 1.0 when the episode terminated (target found) or was truncated at ``max_steps``;
-  ``info["truncation"]`` is 1.0 in the second case (brax's convention; brax's
-  ``EpisodeWrapper`` overwrites it with its own ``episode_length`` cap, so keep ``max_steps``
-  at or above that, as the default of 125,000 steps is);
+- ``done``: 1.0 when the episode terminated (target found) or was truncated at
+  ``max_steps_in_episode``; ``info["truncation"]`` is 1.0 in the second case (brax's convention;
+  brax's ``EpisodeWrapper`` overwrites it with its own ``episode_length`` cap, so keep
+  ``max_steps_in_episode`` at or above that, as the default of 125,000 steps is);
 - ``metrics`` (:data:`METRICS`), per step as brax's ``EpisodeWrapper`` sums them:
   ``collision`` (1.0 on the step that counted a collision), ``progress`` (metres of approach
   to the goal this step) and ``found`` (1.0 on the step that found the target); keys added by
@@ -82,7 +82,7 @@ class BraxEnv(_BraxEnvBase):
             :class:`~jaxais.envs.gymnax.EpuckEnv` (its default parameters are used).
         params: the environment's parameters (default: the environment's defaults).
         resets: placements sampled per ``reset`` for brax's auto-reset to draw from (0: none).
-        **overrides: as for :func:`jaxais.envs.make` (``max_steps``, ``collision_penalty``, ...).
+        **overrides: as for :func:`jaxais.envs.make` (``max_steps_in_episode``, ...).
     """
 
     def __init__(
@@ -130,9 +130,10 @@ class BraxEnv(_BraxEnvBase):
     def step(self, state: BraxState, action: jax.Array) -> BraxState:
         rng, key, k_pick = jax.random.split(state.info["rng"], 3)
         before = state.pipeline_state
-        obs, env_state, reward, terminated, truncated, info = self._env.step_env(
+        obs, env_state, reward, terminated, info = self._env.step_env(
             key, before, action, self._params
         )
+        truncated = self._env.is_truncated(env_state, self._params)
         metrics = {
             "collision": info["collisions"] - before.collisions,
             "progress": goal_distance(before.sim) - info["distance"],

@@ -1,91 +1,88 @@
-"""A gymnax-style face on the simulator: ``make("world1")`` -> an environment for RL code.
+"""The STL task as a gymnax environment: ``make("world1")`` or ``gymnax.make("jaxais/world1")``.
 
-The environment is the paper's STL task as a reinforcement-learning problem: drive an e-puck to
-the blue goal in a world, without crashing. It follows gymnax 1.0's interface without depending
-on gymnax: frozen pytree dataclasses for the state and the parameters, pure functions with the
-key first, simple box spaces::
+Drive an e-puck to the blue goal in a world without crashing. :class:`EpuckEnv` is a
+``gymnax.environments.environment.Environment`` (gymnax 1.0's API, its ``spaces.Box``)::
 
     from jaxais import envs
 
-    env = envs.make("world1", max_steps=2000)
+    env = envs.make("world1", max_steps_in_episode=2000)
     params = env.default_params
     obs, state = env.reset(key, params)
     obs, state, reward, terminated, truncated, info = env.step(key, state, action, params)
 
-Unlike gymnax's 5-tuple ``(obs, state, reward, done, info)``, ``step`` returns terminated and
-truncated apart (as gymnasium does); gymnax's ``done`` is ``terminated | truncated``.
+``envs.register_gymnax()`` adds every built-in world to gymnax's registry, so that
+``env, params = gymnax.make("jaxais/world1")`` (and evosax's ``GymnaxProblem``) finds it; its
+keyword arguments are :func:`make`'s. gymnax's wrappers (``LogWrapper``,
+``FlattenObservationWrapper``, ``GymnaxToGymWrapper``) take the environment as it is; tools
+written for the older 5-tuple ``step`` (``done`` = terminated or truncated; rejax 0.1,
+PureJaxRL's own wrappers) take ``gymnax.wrappers.LegacyStepAPIWrapper(env)``.
 
-**Observation** (:data:`OBS_NAMES`): a float32 vector [11]:
-
-- 0-7: the IR readings ps0..ps7 scaled to [0, 1] (reading / 4095; 1 is touching, about 0.016
-  with nothing in range, where the e-puck reads about 67);
-- 8: blue pixels seen (marker or goal) / 45, in [0, 1];
-- 9: the blue centroid column scaled to [-1, 1] (-1 = leftmost column, +1 = rightmost, so
-  positive means the target is to the right); 0 when no blue pixel is seen;
-- 10: goal pixels / 45, in [0, 1].
+**Observation** (``OBS_NAMES``): a float32 vector [11]: 0-7, the IR readings ps0..ps7 / 4095
+(1 is touching, about 0.016 with nothing in range); 8, blue pixels seen (marker or goal) / 45;
+9, the blue centroid column in [-1, 1] (+1 = rightmost column), 0 when no blue is seen; 10,
+goal pixels / 45.
 
 **Action**: float32 [2], (left, right) wheel speeds in [-1, 1], clipped to that range and scaled
 to the e-puck's +-1000 speed units (``SimParams.max_speed``).
 
-**Reward** per step, with the defaults of :class:`EnvParams`:
+**Reward** per step (:class:`EnvParams`' defaults): ``progress_scale`` (10) x the decrease of the
+distance from the robot's centre to the goal's centre (m); minus ``collision_penalty`` (1.0) when
+a collision is counted: the maximum IR reading reaches ``collision_level`` (2400, the paper's
+threshold) after the robot was clear (maximum IR below ``clear_level``, 250) since the last
+counted one: one penalty per contact episode (SPEC 9); plus ``finish_bonus`` (10) on the step that
+finds the target.
 
-- ``progress_scale`` (10) x the decrease in Euclidean distance from the robot's centre to the
-  goal's centre over the step, in metres (positive when approaching);
-- minus ``collision_penalty`` (1.0) when a collision is counted this step: the maximum IR reading
-  reaches ``collision_level`` (2400, the paper's collision threshold) and the robot has been free
-  of obstacles (maximum IR reading below ``clear_level``, 250) since the last counted collision:
-  one penalty per contact episode (SPEC 9), not one per step of contact;
-- plus ``finish_bonus`` (10) on the step that terminates the episode by finding the target.
+**Terminated** (``is_terminal``, the natural end): more than ``finish_pixels`` (40) goal pixels
+on ``finish_streak`` (3) consecutive steps, the paper's finish rule. **Truncated**
+(``is_truncated``): ``max_steps_in_episode`` steps (default 125,000 = the paper's 4000 s at
+32 ms) without terminating; never both.
 
-**Terminated**: the paper's finish rule: more than ``finish_pixels`` (40) goal pixels on
-``finish_streak`` (3) consecutive steps. **Truncated**: the step count reaches ``max_steps``
-(default 125,000 steps = the paper's 4000 s cap at 32 ms a step) without terminating; the two
-are never both true.
+**Info**: ``collisions`` (so far this episode), ``distance`` (robot to goal, m, after the step),
+``goal_pixels``, ``max_ir`` (raw, 0..4095), ``discount`` (0.0 when terminated); from ``step``
+also gymnax's ``terminated``, ``truncated`` and ``final_observation`` (the observation that
+ended the episode: the returned one is the next episode's).
 
-**Info**: ``collisions`` (counted so far this episode), ``distance`` (robot to goal centre, m,
-after the step), ``goal_pixels``, ``max_ir`` (the raw maximum IR reading, 0..4095), ``discount``
-(0.0 when terminated, else 1.0, as gymnax's).
+**Auto-reset**: ``step`` starts a new episode when one ends, as gymnax's does, but cheaply:
+``reset`` also draws ``reset_pool`` (8) starts (placements and first observations) into the
+state, and an episode that ends restarts from one of them, picked by the step's key. gymnax's
+own ``step`` runs a fresh ``reset_env`` on every step, which under ``vmap`` cost 10-15x a step
+(placing boxes, goal and robots by trial and error); a gather and a select cost about nothing.
+A batch of envs thus restarts from ``reset_pool`` x batch placements until the next ``reset``.
+``make(..., auto_reset=False)``: ``step`` never resets (fixed-length rollouts; a robot parked
+at the target keeps terminating), ``reset`` draws no pool.
 
-``step`` auto-resets as gymnax's does: when an episode ends, the returned observation and state
-are those of a fresh episode (from a key split off the step's key), while reward, terminated,
-truncated and info describe the step that ended it. ``make(..., auto_reset=False)`` turns that
-off and ``step_env`` never resets: stepping on after the end is the caller's business (a robot
-parked at the target keeps terminating, and earning the bonus, every step). Unbatched the reset
-runs only when an episode ends; under ``vmap`` it runs on every step (``lax.cond`` becomes a
-select), and a reset (placing boxes, goal and robots by trial and error) costs several steps
-(docs/performance.md). For large batches of long episodes, ``auto_reset=False`` and a reset
-between rollouts is cheaper.
+**Bad input**: outside jit, ``make``, ``reset`` and ``step`` raise a one-line ``ValueError``
+naming an :class:`EnvParams` field out of range, or an action that is not 2 finite numbers.
+Inside jit or ``vmap`` (traced values) nothing is checked: out-of-range values run as given.
 
-Everything is jit- and vmap-able; the only randomness is the keys passed in (the reset's
-placements, the simulator's sensor and wanderer noise each step). ``reset`` and ``step`` are
-jitted (for the environment object) so that a plain Python loop runs at compiled speed.
+Everything is jit- and vmap-able; the only randomness is the keys passed in. ``reset`` and
+``step`` are jitted, so that a plain Python loop runs at compiled speed.
 """
 
 from __future__ import annotations
 
-import dataclasses
+import functools
 from pathlib import Path
 from typing import Any
 
+import gymnax
 import jax
 import jax.numpy as jnp
 import numpy as np
+from gymnax.environments import environment, spaces
 
-from .params import CAMERA_COLUMNS, CAMERA_ROWS, N_IR, SimParams, default_params
-from .sim import Observation, State, observe
+from .params import CAMERA_COLUMNS, IR_FULL_SCALE, OBS_NAMES, PIXELS, SimParams, default_params
+from .sim import Observation, State
+from .sim import observe as sim_observe
 from .sim import reset as sim_reset
 from .sim import step as sim_step
 from .struct import pytree_dataclass
-from .world import World, load_world
+from .world import BUILTIN_WORLDS, World, load_world
 
-IR_FULL_SCALE = 4095.0
-"""The IR reading at contact; readings are divided by it."""
-PIXELS = CAMERA_COLUMNS * CAMERA_ROWS
-"""Camera pixels (45); pixel counts are divided by it."""
 PAPER_TIME_CAP = 4000.0
 """The paper's time cap, simulated seconds."""
-OBS_NAMES = tuple(f"ps{k}" for k in range(N_IR)) + ("blue", "centroid", "goal")
-"""Names of the observation's entries, in order."""
+RESET_POOL = 8
+"""Episode starts drawn per environment by ``reset`` for the auto-reset (``make(reset_pool=)``)."""
 
 
 @pytree_dataclass
@@ -97,19 +94,19 @@ class EnvParams:
 
     Attributes:
         world: the world (``load_world``). sim: the robot's constants (``default_params``).
-        max_steps: the episode is truncated after this many steps [paper: 4000 s = 125,000].
+        max_steps_in_episode: truncated after this many steps [paper: 4000 s = 125,000].
         progress_scale: reward per metre of approach to the goal.
         collision_penalty: subtracted once per counted collision (contact episode).
         finish_bonus: added on the step that finds the target.
-        collision_level: maximum IR reading that makes a contact [paper: 2400].
-        clear_level: maximum IR reading below which the robot is free of obstacles [paper: 250].
-        finish_pixels: more than this many goal pixels ... [paper: 40]
+        collision_level: maximum IR reading that makes a contact, 0..4095 [paper: 2400].
+        clear_level: maximum IR reading below which the robot is clear, 0..4095 [paper: 250].
+        finish_pixels: more than this many goal pixels (0..45) ... [paper: 40]
         finish_streak: ... on this many consecutive steps finish the episode [paper: 3].
     """
 
     world: World
     sim: SimParams
-    max_steps: int = round(PAPER_TIME_CAP / 0.032)
+    max_steps_in_episode: int = round(PAPER_TIME_CAP / 0.032)
     progress_scale: float = 10.0
     collision_penalty: float = 1.0
     finish_bonus: float = 10.0
@@ -117,6 +114,47 @@ class EnvParams:
     clear_level: float = 250.0
     finish_pixels: int = 40
     finish_streak: int = 3
+
+
+# field: (low, high, integer): every value finite.
+_RANGES = {
+    "max_steps_in_episode": (1, np.inf, True),
+    "progress_scale": (-np.inf, np.inf, False),
+    "collision_penalty": (-np.inf, np.inf, False),
+    "finish_bonus": (-np.inf, np.inf, False),
+    "collision_level": (0, IR_FULL_SCALE, False),
+    "clear_level": (0, IR_FULL_SCALE, False),
+    "finish_pixels": (0, PIXELS, True),
+    "finish_streak": (1, np.inf, True),
+}
+
+
+def check_params(params: Any) -> EnvParams:
+    """``params`` if every concrete field is in range, else a one-line ``ValueError`` naming the
+    field. Traced fields (inside jit or ``vmap``) are not checked."""
+    if not isinstance(params, EnvParams):
+        raise ValueError(
+            f"params must be an EnvParams (env.default_params.replace(...)), "
+            f"got {type(params).__name__}"
+        )
+    for name, (low, high, integer) in _RANGES.items():
+        value = getattr(params, name)
+        if isinstance(value, jax.core.Tracer):
+            continue
+        try:
+            x = np.asarray(value, np.float64)
+        except (TypeError, ValueError):
+            x = np.asarray(np.nan)
+        ok = np.isfinite(x) & (x >= low) & (x <= high)
+        if not np.all(ok & (x == np.round(x)) if integer else ok):
+            kind = "an integer" if integer else "a number"
+            what = (
+                f"{kind} in [{low:g}, {high:g}]" if high < np.inf
+                else f"{kind} >= {low:g}" if low > -np.inf
+                else "a finite number"
+            )  # fmt: skip
+            raise ValueError(f"EnvParams.{name} must be {what}, got {value!r}")
+    return params
 
 
 @pytree_dataclass
@@ -128,35 +166,19 @@ class EnvState:
         collisions: int32, collisions counted so far (one per contact episode).
         free: bool, no obstacle seen (max IR < clear_level) since the last counted collision.
         streak: int32, consecutive steps with more than finish_pixels goal pixels.
+        starts: the auto-reset's episode starts, ``(obs [K, 11], sim State with leaves [K, ...])``
+            drawn by ``reset``; None without auto-reset.
     """
 
     sim: State
     collisions: jnp.ndarray
     free: jnp.ndarray
     streak: jnp.ndarray
-
-
-@dataclasses.dataclass(frozen=True)
-class Box:
-    """A box space like gymnax's ``Box``: arrays of ``shape`` with ``low <= x <= high``."""
-
-    low: np.ndarray
-    high: np.ndarray
-    shape: tuple[int, ...]
-    dtype: Any = jnp.float32
-
-    def sample(self, key: jax.Array) -> jax.Array:
-        """A uniform draw from the box."""
-        return jax.random.uniform(key, self.shape, self.dtype, self.low, self.high)
-
-    def contains(self, x: jax.Array) -> jax.Array:
-        """Whether ``x`` lies in the box (a bool scalar)."""
-        x = jnp.asarray(x)
-        return jnp.all(x >= self.low) & jnp.all(x <= self.high)
+    starts: tuple[jnp.ndarray, State] | None = None
 
 
 def features(ob: Observation) -> jnp.ndarray:
-    """The simulator's observation as the environment's float32 vector [11] (:data:`OBS_NAMES`)."""
+    """The simulator's observation as the environment's float32 vector [11] (``OBS_NAMES``)."""
     seen = ob.blue_pixels > 0
     half = (CAMERA_COLUMNS - 1) / 2
     centroid = jnp.where(seen, (ob.blue_centroid - half) / half, 0.0)
@@ -169,18 +191,23 @@ def goal_distance(sim: State) -> jnp.ndarray:
     return jnp.linalg.norm(sim.pose[:2] - sim.goal)
 
 
-class EpuckEnv:
-    """The STL task (reach the goal, avoid collisions) with gymnax 1.0's methods.
+def _fresh(sim: State) -> EnvState:
+    """The state at an episode's start (no pool)."""
+    zero = jnp.zeros((), jnp.int32)
+    return EnvState(sim=sim, collisions=zero, free=jnp.ones((), bool), streak=zero)
 
-    Build it with :func:`make`. See the module docstring for the observation, action, reward,
-    termination and info. Methods take ``params`` last; ``None`` means ``default_params``.
+
+class EpuckEnv(environment.Environment):
+    """The STL task (reach the goal, avoid collisions) as a gymnax 1.0 environment.
+
+    Build it with :func:`make`; the module docstring says what it observes, does and rewards.
+    ``params=None`` means ``default_params``.
     """
 
-    def __init__(self, params: EnvParams, auto_reset: bool = True):
+    def __init__(self, params: EnvParams, auto_reset: bool = True, reset_pool: int = RESET_POOL):
         self._params = params
         self.auto_reset = auto_reset
-        self._reset = jax.jit(self.reset_env)
-        self._step = jax.jit(self._step_impl)
+        self.reset_pool = reset_pool
 
     @property
     def default_params(self) -> EnvParams:
@@ -188,25 +215,33 @@ class EpuckEnv:
 
     @property
     def name(self) -> str:
-        return f"jaxais-{self._params.world.name}"
+        return f"jaxais/{self._params.world.name}"
 
     @property
     def num_actions(self) -> int:
         """Size of the (continuous) action vector: the two wheel speeds."""
         return 2
 
-    def observation_space(self, params: EnvParams | None = None) -> Box:
+    def observation_space(self, params: EnvParams | None = None) -> spaces.Box:
         low = np.zeros(len(OBS_NAMES), np.float32)
         low[OBS_NAMES.index("centroid")] = -1.0
-        return Box(low, np.ones(len(OBS_NAMES), np.float32), (len(OBS_NAMES),))
+        return spaces.Box(low, np.ones(len(OBS_NAMES), np.float32), (len(OBS_NAMES),))
 
-    def action_space(self, params: EnvParams | None = None) -> Box:
-        return Box(-np.ones(2, np.float32), np.ones(2, np.float32), (2,))
+    def action_space(self, params: EnvParams | None = None) -> spaces.Box:
+        return spaces.Box(-np.ones(2, np.float32), np.ones(2, np.float32), (2,))
+
+    def _checked(self, params: EnvParams | None) -> EnvParams:
+        # The defaults substituted outside jit: they reach the program as arguments, not
+        # constants (as gymnax's own reset and step would bake them in).
+        return self._params if params is None else check_params(params)
 
     def reset(self, key: jax.Array, params: EnvParams | None = None) -> tuple[jax.Array, EnvState]:
         """A fresh episode: ``(obs [11], state)``; placements and sensor noise from ``key``."""
-        params = self._params if params is None else params
-        return self._reset(key, params)
+        return self._reset(key, self._checked(params))
+
+    @functools.partial(jax.jit, static_argnames="self")
+    def _reset(self, key, params):
+        return self.reset_env(key, params)
 
     def step(
         self,
@@ -215,49 +250,65 @@ class EpuckEnv:
         action: jax.Array,
         params: EnvParams | None = None,
     ) -> tuple[jax.Array, EnvState, jax.Array, jax.Array, jax.Array, dict[str, jax.Array]]:
-        """One 32 ms step, auto-resetting at the end of an episode (unless ``auto_reset=False``).
+        """One 32 ms step; a new episode after the last (unless ``auto_reset=False``).
 
         Args:
-            key: PRNG key for this step (the simulator's noise, and a reset if the episode ends).
+            key: PRNG key (the simulator's noise, and the start picked if the episode ends).
             state: the episode's state. action: [2] wheel speeds in [-1, 1].
             params: the environment's parameters (default: ``default_params``).
 
         Returns:
-            ``(obs [11], state, reward, terminated, truncated, info)``; gymnax's ``done`` is
-            ``terminated | truncated``.
+            ``(obs [11], state, reward, terminated, truncated, info)``, gymnax 1.0's.
         """
-        params = self._params if params is None else params
-        return self._step(key, state, action, params)
+        if not isinstance(action, jax.core.Tracer):
+            a = np.asarray(action)
+            if a.shape != (2,) or not np.all(np.isfinite(a)):
+                raise ValueError(
+                    f"action must be 2 finite wheel speeds (left, right) in [-1, 1], got {a!r}"
+                )
+        return self._step(key, state, action, self._checked(params))
 
-    def _step_impl(self, key, state, action, params):
+    @functools.partial(jax.jit, static_argnames="self")
+    def _step(self, key, state, action, params):
         k_step, k_reset = jax.random.split(key)
-        obs, new, reward, terminated, truncated, info = self.step_env(k_step, state, action, params)
+        obs, new, reward, terminated, info = self.step_env(k_step, state, action, params)
+        truncated = self.is_truncated(new, params)
+        info = {**info, "terminated": terminated, "truncated": truncated, "final_observation": obs}
         if self.auto_reset:
-            # A real branch when unbatched; under vmap both sides run (a select).
-            obs, new = jax.lax.cond(
-                terminated | truncated,
-                lambda: self.reset_env(k_reset, params),
-                lambda: (obs, new),
+            # A gather and a select (the starts were drawn by reset), the pool left out of both.
+            i = jax.random.randint(k_reset, (), 0, self.reset_pool)
+            start_obs, start = jax.tree.map(lambda x: x[i], state.starts)
+            done = terminated | truncated
+            obs, new = jax.tree.map(
+                lambda a, b: jnp.where(done, a, b),
+                (start_obs, _fresh(start)),
+                (obs, new.replace(starts=None)),
             )
+            new = new.replace(starts=state.starts)
         return obs, new, reward, terminated, truncated, info
 
     def reset_env(self, key: jax.Array, params: EnvParams) -> tuple[jax.Array, EnvState]:
-        """:meth:`reset` without jit and without defaults (gymnax's name)."""
+        """:meth:`reset` without jit, defaults or checks (gymnax's name)."""
+        obs, state = self._start(key, params)
+        if self.auto_reset:
+            keys = jax.random.split(jax.random.fold_in(key, 1), self.reset_pool)
+            pool_obs, pool = jax.vmap(self._start, in_axes=(0, None))(keys, params)
+            state = state.replace(starts=(pool_obs, pool.sim))
+        return obs, state
+
+    def _start(self, key: jax.Array, params: EnvParams) -> tuple[jax.Array, EnvState]:
         k_reset, k_obs = jax.random.split(key)
-        sim = sim_reset(k_reset, params.world, params.sim)
-        ob = observe(k_obs, sim, params.world, params.sim)
-        state = EnvState(
-            sim=sim,
-            collisions=jnp.zeros((), jnp.int32),
-            free=jnp.ones((), bool),
-            streak=jnp.zeros((), jnp.int32),
-        )
-        return features(ob), state
+        state = _fresh(sim_reset(k_reset, params.world, params.sim))
+        return self.observe(k_obs, state, None, params), state
+
+    def observe(self, key: jax.Array, state: EnvState, action: Any, params: EnvParams) -> jax.Array:
+        """The observation [11] of ``state`` with sensor noise from ``key`` (gymnax's hook)."""
+        return features(sim_observe(key, state.sim, params.world, params.sim))
 
     def step_env(
         self, key: jax.Array, state: EnvState, action: jax.Array, params: EnvParams
-    ) -> tuple[jax.Array, EnvState, jax.Array, jax.Array, jax.Array, dict[str, jax.Array]]:
-        """One step without auto-reset (gymnax's name); arguments and results as :meth:`step`."""
+    ) -> tuple[jax.Array, EnvState, jax.Array, jax.Array, dict[str, jax.Array]]:
+        """One step, no reset, no checks: ``(obs, state, reward, terminated, info)`` (gymnax's)."""
         wheels = jnp.clip(jnp.asarray(action, jnp.float32), -1.0, 1.0) * params.sim.max_speed
         sim, ob = sim_step(key, state.sim, wheels, params.world, params.sim)
         before, after = goal_distance(state.sim), goal_distance(sim)
@@ -268,13 +319,14 @@ class EpuckEnv:
         collisions = state.collisions + counted.astype(jnp.int32)
         streak = jnp.where(ob.goal_pixels > params.finish_pixels, state.streak + 1, 0)
         terminated = streak >= params.finish_streak
-        truncated = (sim.t >= params.max_steps) & ~terminated
         reward = (
             params.progress_scale * (before - after)
             - params.collision_penalty * counted
             + params.finish_bonus * terminated
         ).astype(jnp.float32)
-        new = EnvState(sim=sim, collisions=collisions, free=free, streak=streak.astype(jnp.int32))
+        new = state.replace(
+            sim=sim, collisions=collisions, free=free, streak=streak.astype(jnp.int32)
+        )
         info = {
             "collisions": collisions,
             "distance": after,
@@ -282,25 +334,26 @@ class EpuckEnv:
             "max_ir": ob.vm,
             "discount": jnp.where(terminated, 0.0, 1.0).astype(jnp.float32),
         }
-        return features(ob), new, reward, terminated, truncated, info
+        return features(ob), new, reward, terminated, info
 
-    def is_terminal(self, state: EnvState, params: EnvParams | None = None) -> jax.Array:
-        """Whether ``state`` ends an episode (terminated or truncated)."""
-        params = self._params if params is None else params
-        return (state.streak >= params.finish_streak) | (state.sim.t >= params.max_steps)
+    def is_terminated(self, state: EnvState, params: EnvParams) -> jax.Array:
+        """Whether the target was found: the natural end (gymnax's ``is_terminal``)."""
+        return state.streak >= params.finish_streak
 
-    def discount(self, state: EnvState, params: EnvParams | None = None) -> jax.Array:
-        """0.0 once the target is found, else 1.0 (gymnax's ``discount``)."""
-        params = self._params if params is None else params
-        return jnp.where(state.streak >= params.finish_streak, 0.0, 1.0)
+    def is_truncated(self, state: EnvState, params: EnvParams) -> jax.Array:
+        """Whether ``max_steps_in_episode`` steps ran without finding the target."""
+        return (state.sim.t >= params.max_steps_in_episode) & ~self.is_terminated(state, params)
+
+    def __deepcopy__(self, memo: dict) -> EpuckEnv:
+        # Immutable; a copy (gymnax's GymnaxToGymWrapper makes one) would only compile reset and
+        # step again, its identity being part of their compiled programs' keys.
+        return self
 
     def __repr__(self) -> str:
-        return f"EpuckEnv({self._params.world.name!r}, max_steps={self._params.max_steps})"
+        return f"EpuckEnv({self.name!r}, max_steps_in_episode={self._params.max_steps_in_episode})"
 
 
-_PARAM_NAMES = tuple(
-    f.name for f in dataclasses.fields(EnvParams) if f.name not in ("world", "sim")
-)
+_INTEGERS = tuple(name for name, (_, _, integer) in _RANGES.items() if integer)
 
 
 def make(
@@ -308,6 +361,7 @@ def make(
     *,
     sim_params: SimParams | None = None,
     auto_reset: bool = True,
+    reset_pool: int = RESET_POOL,
     **overrides: float,
 ) -> EpuckEnv:
     """The environment of a world: a built-in name (``world1``, ``world2``, ``real``,
@@ -316,26 +370,39 @@ def make(
     Args:
         world: which world.
         sim_params: the robot's constants (default: ``default_params()``).
-        auto_reset: whether ``step`` starts a new episode when one ends (gymnax does).
-        **overrides: :class:`EnvParams` fields, e.g. ``max_steps=2000``, ``collision_penalty=5``.
+        auto_reset: whether ``step`` starts a new episode when one ends (gymnax's does).
+        reset_pool: episode starts ``reset`` draws for the auto-reset.
+        **overrides: :class:`EnvParams` fields, e.g. ``max_steps_in_episode=2000``.
 
     Raises:
         WorldError: the world file is missing or malformed.
-        ValueError: an unknown or invalid override.
+        ValueError: an unknown or out-of-range parameter.
     """
-    unknown = sorted(set(overrides) - set(_PARAM_NAMES))
+    unknown = sorted(set(overrides) - set(_RANGES))
     if unknown:
         raise ValueError(
-            f"unknown environment parameter(s): {', '.join(unknown)} "
-            f"(known: {', '.join(_PARAM_NAMES)})"
+            f"unknown environment parameter(s): {', '.join(unknown)} (known: {', '.join(_RANGES)})"
         )
-    for name in ("max_steps", "finish_streak"):
-        if name in overrides and (int(overrides[name]) != overrides[name] or overrides[name] < 1):
-            raise ValueError(f"{name} must be a positive integer, got {overrides[name]!r}")
+    if sim_params is not None and not isinstance(sim_params, SimParams):
+        raise ValueError(
+            f"sim_params must be a SimParams (envs.default_params(...)), "
+            f"got {type(sim_params).__name__}"
+        )
+    if not isinstance(reset_pool, int | np.integer) or reset_pool < 1:
+        raise ValueError(f"reset_pool must be a positive integer, got {reset_pool!r}")
     w = world if isinstance(world, World) else load_world(world)
     sim = default_params() if sim_params is None else sim_params
-    fields = {"max_steps": round(PAPER_TIME_CAP / sim.dt), **overrides}
-    for name in ("max_steps", "finish_pixels", "finish_streak"):
-        if name in fields:
-            fields[name] = int(fields[name])
-    return EpuckEnv(EnvParams(world=w, sim=sim, **fields), auto_reset=auto_reset)
+    fields = {"max_steps_in_episode": round(PAPER_TIME_CAP / sim.dt), **overrides}
+    params = check_params(EnvParams(world=w, sim=sim, **fields))
+    params = params.replace(**{name: int(getattr(params, name)) for name in _INTEGERS})
+    return EpuckEnv(params, auto_reset=auto_reset, reset_pool=int(reset_pool))
+
+
+def register_gymnax() -> tuple[str, ...]:
+    """Add every built-in world to gymnax's registry as ``jaxais/{world}`` (once); returns the
+    names. ``gymnax.make(name, **kwargs)`` then calls ``make(world, **kwargs)``."""
+    names = tuple(f"jaxais/{world}" for world in BUILTIN_WORLDS)
+    for name, world in zip(names, BUILTIN_WORLDS, strict=True):
+        if name not in gymnax.registered_envs:
+            gymnax.register(name, functools.partial(make, world))
+    return names

@@ -17,6 +17,12 @@ CAMERA_COLUMNS = 15
 """Camera width in pixels [paper]."""
 CAMERA_ROWS = 3
 """Camera height in pixels [paper]."""
+PIXELS = CAMERA_COLUMNS * CAMERA_ROWS
+"""Camera pixels (45): pixel counts in the gymnax observation are divided by it."""
+IR_FULL_SCALE = 4095.0
+"""The IR reading at contact: IR readings in the gymnax observation are divided by it."""
+OBS_NAMES = tuple(f"ps{k}" for k in range(N_IR)) + ("blue", "centroid", "goal")
+"""Names of the gymnax observation's entries, in order (``jaxais.envs.gymnax``)."""
 
 # Materials of surfaces, as seen by the camera.
 NONE, WALL, MARKER, GOAL = 0, 1, 2, 3

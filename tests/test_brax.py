@@ -96,8 +96,8 @@ def test_step_keeps_metrics_it_did_not_create():
 def test_registry_accepts_brax_backend_argument():
     names = register()
     assert "jaxais_world1" in names
-    env = brax_envs.get_environment("jaxais_world1", backend="mjx", max_steps=100)
-    assert isinstance(env, BraxEnv) and env.env.default_params.max_steps == 100
+    env = brax_envs.get_environment("jaxais_world1", backend="mjx", max_steps_in_episode=100)
+    assert isinstance(env, BraxEnv) and env.env.default_params.max_steps_in_episode == 100
     assert env.backend == "jaxais"
 
 

@@ -1,18 +1,25 @@
-"""The gymnax-style environment (``jaxais.envs.make``); its brax face: tests/test_brax.py.
+"""The gymnax environment (``jaxais.envs.make``, ``gymnax.make("jaxais/world1")``), gymnax's
+wrappers on it, its cheap auto-reset, its checks of bad input;
+its brax face: tests/test_brax.py.
 
 Every test shares one environment per auto-reset setting, so each compiled function (reset,
 step, step without auto-reset, its vmapped batch) compiles once. Parameters that
-a test changes (``max_steps``) are traced leaves: they reuse the same programs.
+a test changes (``max_steps_in_episode``) are traced leaves: they reuse the same programs.
 """
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
+import gymnax
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _python import run_python
+from gymnax.environments import environment, spaces
+from gymnax.wrappers import GymnaxToGymWrapper, LegacyStepAPIWrapper
 
 from jaxais import envs
 from jaxais.envs import gymnax as genv
@@ -42,19 +49,21 @@ def _placed(env, key, pose, goal=None) -> genv.EnvState:
 
 
 def test_make_and_spaces(env):
-    assert isinstance(env, envs.EpuckEnv)
-    assert env.num_actions == 2 and env.name == "jaxais-world1"
+    assert isinstance(env, envs.EpuckEnv) and isinstance(env, environment.Environment)
+    assert env.num_actions == 2 and env.name == "jaxais/world1"
     params = env.default_params
-    assert params.max_steps == 125_000  # the paper's 4000 s at 32 ms
+    assert params.max_steps_in_episode == 125_000  # the paper's 4000 s at 32 ms
     assert params.world.name == "world1"
-    assert envs.make("world1", max_steps=100).default_params.max_steps == 100
+    small = envs.make("world1", max_steps_in_episode=100).default_params
+    assert small.max_steps_in_episode == 100
     with pytest.raises(ValueError, match="unknown environment parameter"):
-        envs.make("world1", max_step=100)
-    with pytest.raises(ValueError, match="max_steps"):
-        envs.make("world1", max_steps=0)
+        envs.make("world1", max_steps=100)
+    with pytest.raises(ValueError, match="max_steps_in_episode"):
+        envs.make("world1", max_steps_in_episode=0)
     with pytest.raises(envs.WorldError):
         envs.make("no_such_world.toml")
     obs_space, act_space = env.observation_space(params), env.action_space(params)
+    assert isinstance(obs_space, spaces.Box) and isinstance(act_space, spaces.Box)
     assert obs_space.shape == (len(genv.OBS_NAMES),) == (11,)
     assert act_space.shape == (2,)
     np.testing.assert_array_equal(act_space.low, -1.0)
@@ -77,6 +86,8 @@ def test_reset_step_shapes_match_spaces(env):
     assert terminated.shape == truncated.shape == () and terminated.dtype == jnp.bool_
     assert truncated.dtype == jnp.bool_
     assert {"collisions", "distance", "goal_pixels", "max_ir", "discount"} <= set(info)
+    assert {"terminated", "truncated", "final_observation"} <= set(info)
+    np.testing.assert_array_equal(info["final_observation"], obs)  # no episode ended
     assert int(state.sim.t) == 1
     # The IR part of the observation is the raw reading / 4095.
     np.testing.assert_allclose(float(jnp.max(obs[:8])) * 4095.0, float(info["max_ir"]), rtol=1e-5)
@@ -162,13 +173,19 @@ def test_terminated_after_three_goal_steps(env):
     # Standing still: no progress, so the rewards are the finish bonus alone.
     assert [float(o[2]) for o in out] == [0.0, 0.0, env.default_params.finish_bonus]
     assert float(out[2][5]["discount"]) == 0.0
-    # Auto-reset: the episode that finished is replaced by a fresh one.
-    assert int(state.sim.t) == 0 and int(state.streak) == 0
+    # Auto-reset: the episode that finished is replaced by one of the starts reset drew; the
+    # info keeps the observation that ended it.
+    assert int(state.sim.t) == 0 and int(state.streak) == 0 and bool(state.free)
+    pool_obs, pool = out[2][1].starts
+    i = int(np.argmax(np.all(np.asarray(pool.pose) == np.asarray(state.sim.pose), axis=1)))
+    np.testing.assert_array_equal(pool.pose[i], state.sim.pose)
+    np.testing.assert_array_equal(pool_obs[i], out[2][0])
+    assert float(out[2][5]["final_observation"][10]) * 45 > 40  # the goal filled the camera
 
 
 def test_truncated_at_max_steps(env):
-    params = env.default_params.replace(max_steps=5)
-    size = env._step._cache_size()
+    params = env.default_params.replace(max_steps_in_episode=5)
+    size = genv.EpuckEnv._step._cache_size()
     _, state = env.reset(jax.random.key(13), params)
     flags = []
     for t in range(5):
@@ -177,6 +194,104 @@ def test_truncated_at_max_steps(env):
         if t < 4:
             state = new
     assert flags == [(False, False)] * 4 + [(False, True)]
-    assert bool(env.is_terminal(state.replace(sim=state.sim.replace(t=5)), params))
+    ended = state.replace(sim=state.sim.replace(t=5))
+    assert bool(env.is_truncated(ended, params)) and not bool(env.is_terminal(ended, params))
     assert int(new.sim.t) == 0  # auto-reset
-    assert env._step._cache_size() == size  # max_steps is traced: no new compilation
+    # max_steps_in_episode is traced: no new compilation.
+    assert genv.EpuckEnv._step._cache_size() == size
+
+
+def test_first_episode_does_not_depend_on_the_pool(env, env_no_reset):
+    # reset draws the auto-reset's starts from a key of their own: the first episode is the same
+    # with or without them.
+    key = jax.random.key(21)
+    obs, state = env.reset(key)
+    obs0, state0 = env_no_reset.reset(key)
+    np.testing.assert_array_equal(obs, obs0)
+    for x, y in zip(jax.tree.leaves(state.sim), jax.tree.leaves(state0.sim), strict=True):
+        np.testing.assert_array_equal(x, y)
+    pool_obs, pool = state.starts
+    assert state0.starts is None and pool_obs.shape == (genv.RESET_POOL, 11)
+    assert len(np.unique(np.asarray(pool.pose), axis=0)) == genv.RESET_POOL  # distinct starts
+
+
+def test_auto_reset_costs_about_nothing_under_vmap(env, env_no_reset):
+    # Under vmap no reset is skipped: gymnax's own step (a fresh reset_env every step, as this
+    # environment's step ran one before) costs several steps; ours picks a start reset drew.
+    # XLA's flop counts of the programs (traced and lowered, not compiled), not a timing.
+    n, p = 4, env.default_params
+    keys = jax.random.split(jax.random.key(0), n)
+    _, states = jax.eval_shape(jax.vmap(env.reset, in_axes=(0, None)), keys, p)
+
+    def flops(step, states):
+        batched = jax.jit(jax.vmap(step, in_axes=(0, 0, 0, None)))
+        return batched.lower(keys, states, jnp.zeros((n, 2)), p).cost_analysis()["flops"]
+
+    step_env = flops(env.step_env, states)
+    assert flops(env.step, states) < 1.2 * step_env
+    gymnax_step = functools.partial(environment.Environment.step, env_no_reset)
+    assert flops(gymnax_step, states.replace(starts=None)) > 3 * step_env
+
+
+def test_gymnax_registry_and_wrappers_run_unmodified(env):
+    names = envs.register_gymnax()
+    assert "jaxais/world1" in names and envs.register_gymnax() == names  # once
+    made, made_params = gymnax.make("jaxais/world2", max_steps_in_episode=7, reset_pool=2)
+    assert isinstance(made, envs.EpuckEnv) and made.name == "jaxais/world2"
+    assert made_params.max_steps_in_episode == 7 and made.reset_pool == 2
+    # gymnasium's API through gymnax's wrapper (whose deep copy is the environment itself:
+    # it is immutable, and a copy would compile reset and step again).
+    gym_env = GymnaxToGymWrapper(env, env.default_params.replace(max_steps_in_episode=3))
+    obs, _ = gym_env.reset(seed=1)
+    assert gym_env.observation_space.shape == (11,) and gym_env.action_space.shape == (2,)
+    assert gym_env.observation_space.contains(np.asarray(obs))
+    flags = [gym_env.step(np.array([0.2, 0.2], np.float32))[2:4] for _ in range(3)]
+    assert [(bool(a), bool(b)) for a, b in flags] == [(False, False)] * 2 + [(False, True)]
+    # Tools written for the older 5-tuple step take gymnax's LegacyStepAPIWrapper.
+    _, state = env.reset(jax.random.key(2))
+    legacy = LegacyStepAPIWrapper(env)
+    out = jax.eval_shape(legacy.step, jax.random.key(3), state, jnp.zeros(2), env.default_params)
+    assert len(out) == 5 and out[3].dtype == jnp.bool_ and out[0].shape == (11,)
+
+
+def test_bad_input_is_one_line_naming_it_outside_jit(env):
+    def refused(match, fn, *args, **kwargs):
+        with pytest.raises(ValueError, match=match) as info:
+            fn(*args, **kwargs)
+        assert "\n" not in str(info.value)
+
+    refused("^sim_params must be a SimParams", envs.make, "world1", sim_params="x")
+    refused("EnvParams.progress_scale must be a finite number, got nan", envs.make,
+            progress_scale=float("nan"))  # fmt: skip
+    refused(r"EnvParams.finish_pixels must be an integer in \[0, 45\], got -1", envs.make,
+            finish_pixels=-1)  # fmt: skip
+    refused(r"EnvParams.collision_level .* in \[0, 4095\], got -5", envs.make, collision_level=-5)
+    refused("reset_pool must be a positive integer", envs.make, reset_pool=0)
+    key, params = jax.random.key(0), env.default_params
+    refused("params must be an EnvParams", env.reset, key, {"max_steps_in_episode": 3})
+    refused("EnvParams.finish_streak must be an integer >= 1", env.reset, key,
+            params.replace(finish_streak=0))  # fmt: skip
+    _, state = env.reset(key)
+    refused("EnvParams.clear_level", env.step, key, state, jnp.zeros(2),
+            params.replace(clear_level=float("nan")))  # fmt: skip
+    refused(r"action must be 2 finite wheel speeds .*0\.3", env.step, key, state, [0.1, 0.2, 0.3])
+    refused("action must be 2 finite wheel speeds .*nan", env.step, key, state, [np.nan, 0.0])
+    # Inside jit (traced values) nothing is checked: what an optimiser proposes runs as given.
+    bad = params.replace(finish_pixels=-1, progress_scale=jnp.nan)
+    out = jax.eval_shape(env.step, key, state, jnp.array([jnp.nan, 0.0]), bad)
+    assert out[0].shape == (11,)
+
+
+def test_simulator_and_task_loop_do_not_import_gymnax():
+    # Importing gymnax takes seconds: the simulator, the task loop and the trials load without
+    # it; the gymnax face loads it on first use.
+    code = (
+        "import sys\n"
+        "import jaxais.baselines.neural, jaxais.envs as envs, jaxais.loop, jaxais.trials\n"
+        "print('gymnax' in sys.modules)\n"
+        "envs.make\n"
+        "print('gymnax' in sys.modules)\n"
+    )
+    out = run_python(code)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["False", "True"]

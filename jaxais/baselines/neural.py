@@ -30,7 +30,7 @@ from jax.flatten_util import ravel_pytree
 from jaxais import distributed, envs
 from jaxais.baselines.config import TrainConfig
 from jaxais.controllers import Controller, Percept, no_learning, no_state
-from jaxais.envs.gymnax import IR_FULL_SCALE, PIXELS
+from jaxais.envs.params import IR_FULL_SCALE, PIXELS
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.immune.behaviours import MAX_WHEEL_SPEED
 from jaxais.io import UserError, atomic_write, atomic_write_json, read_json_object

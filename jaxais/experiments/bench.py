@@ -313,6 +313,42 @@ def bench_jax(b: Bench) -> None:
     b.results["jax_runs"] = runs
 
 
+def bench_env(b: Bench) -> None:
+    """``env_steps_per_s``: the gymnax environment (``envs.make``), 64 envs under ``vmap`` in a
+    scan of random actions and 50-step episodes: ``step_env`` (no reset) and ``step``
+    (auto-reset)."""
+    import jax
+
+    from jaxais import envs
+
+    env, n, key = envs.make(b.config.world, max_steps_in_episode=50), 64, jax.random.key(0)
+    p = env.default_params
+    _, state = jax.jit(jax.vmap(env.reset, in_axes=(0, None)))(jax.random.split(key, n), p)
+
+    def rollout(step):
+        v_step = jax.vmap(step, in_axes=(0, 0, 0, None))
+
+        def run(s, p):
+            def body(s, k):
+                actions = jax.random.uniform(k, (n, 2), minval=-1.0, maxval=1.0)
+                return v_step(jax.random.split(k, n), s, actions, p)[1], None
+
+            return jax.lax.scan(body, s, jax.random.split(key, b.config.steps))[0]
+
+        return jax.jit(run)
+
+    rates = {}
+    for name in ("step_env", "step"):
+        run = rollout(getattr(env, name))
+        best = _timed(lambda run=run: run(state, p), b.config.repeats)["best_s"]
+        rates[name] = n * b.config.steps / best
+    b.results["env_steps_per_s"] = rates
+    b.notes.append(
+        f"gymnax env, {n} envs: step (auto-reset) {rates['step']:,.0f} env-steps/s, step_env "
+        f"{rates['step_env']:,.0f} (x{rates['step_env'] / rates['step']:.2f})"
+    )
+
+
 def bench_sharded(b: Bench) -> None:
     """``jax_steps_per_s_sharded``: the batch axis sharded over all devices (when > 1)."""
     import jax
@@ -537,6 +573,7 @@ def bench_scripts(b: Bench) -> None:
 BENCHMARKS: list[tuple[str, Callable[[Bench], None]]] = [
     ("machine", bench_machine),
     ("jax simulator", bench_jax),
+    ("gymnax env auto-reset", bench_env),
     ("sharded simulator", bench_sharded),
     ("numpy reference", bench_numpy),
     ("STL controller + simulator", bench_controller),

@@ -1,0 +1,57 @@
+"""The gymnax examples run at tiny budgets, as a user runs them (``python examples/NAME.py
+--tiny``): examples/gymnax_ppo.py (PureJaxRL's PPO) and examples/evosax_policy.py (evosax's
+OpenAI-ES through its GymnaxProblem), third-party training code on ``gymnax.make("jaxais/world1")``.
+
+Both run in one fresh interpreter with XLA's fast-compile options (tests/conftest.py's): each
+compiles its whole training run once, which is most of its time.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from _python import run_python
+from conftest import fast_compile_options
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+
+
+@pytest.fixture(scope="module")
+def output() -> str:
+    flags = " ".join(f"--{k}={str(v).lower()}" for k, v in fast_compile_options().items())
+    code = (
+        "import runpy, sys\n"
+        "for name in ('gymnax_ppo', 'evosax_policy'):\n"
+        "    sys.argv = [name, '--tiny']\n"
+        f"    runpy.run_path(f'{EXAMPLES}/{{name}}.py', run_name='__main__')\n"
+    )
+    env = {**os.environ, "JAX_PLATFORMS": "cpu", "XLA_FLAGS": flags}
+    proc = run_python(code, env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return proc.stdout
+
+
+def test_purejaxrl_style_ppo_trains_on_gymnax_make(output):
+    # 256 steps of 4 envs in 2 updates, episodes of at most 16 steps: at least 16 ended, and
+    # gymnax's LogWrapper saw them through the auto-reset.
+    found = re.search(
+        r"^PPO on jaxais/world1: 2 updates, (\d+) episodes, mean return (\S+), last loss (\S+)$",
+        output,
+        re.MULTILINE,
+    )
+    assert found, output
+    assert int(found[1]) >= 16 and np.isfinite(float(found[2])) and np.isfinite(float(found[3]))
+
+
+def test_evosax_evolves_a_policy_on_gymnax_make(output):
+    found = re.search(
+        r"^OpenES on jaxais/world1: 3 generations of 4, mean return (\S+) -> (\S+)$",
+        output,
+        re.MULTILINE,
+    )
+    assert found, output
+    assert np.isfinite(float(found[1])) and np.isfinite(float(found[2]))

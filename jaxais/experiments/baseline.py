@@ -18,7 +18,7 @@ from typing import Any
 
 from jaxais.baselines.config import NN_LABEL, TrainConfig
 from jaxais.experiments import protocol
-from jaxais.io import atomic_write_json, atomic_write_text
+from jaxais.io import atomic_write_json, atomic_write_text, open_run
 
 REFERENCE = ("SIE", "HDC")
 """The paper's systems it runs beside."""
@@ -225,6 +225,53 @@ def evaluate_baseline(
     atomic_write_json(out / "evaluation.json", stats.jsonable(doc))
     atomic_write_text(out / "evaluation.md", _table(doc, info))
     return doc
+
+
+def baseline(
+    out: str | Path,
+    config: TrainConfig | None = None,
+    *,
+    train: bool = True,
+    evaluate: bool = True,
+    seed: int = 0,
+    eval_seed: int = 0,
+    weights: str | Path | None = None,
+    seeds: str | Path | None = None,
+    log_every: int = 10,
+    command: str | None = None,
+    into_checkpoints: bool = False,
+    resume: bool = False,
+) -> tuple[dict[str, Any] | None, dict[str, Any] | None]:
+    """``scripts/train_baseline.py``: :func:`train_baseline` (``train``) and then
+    :func:`evaluate_baseline` (``evaluate``) of the new weights, or of ``weights`` (None: the
+    shipped ones) without ``train``, into ``out`` (missing or empty). Each stage is a unit of
+    ``out/manifest.json`` (:func:`jaxais.io.open_run`): ``resume=True`` finishes an interrupted
+    run with the same arguments, skipping a finished stage.
+
+    Returns:
+        (config.json's document or None, evaluation.json's or None).
+    """
+    config = TrainConfig() if config is None else config
+    out = _output_dir(out, into_checkpoints)
+    settings = {"train": dataclasses.asdict(config) if train else None, "seed": seed,
+                "evaluate": evaluate, "eval_seed": eval_seed, "seeds": seeds and str(seeds),
+                "weights": weights and str(weights)}  # fmt: skip
+    folder = open_run(out, "train_baseline", settings, resume=resume)
+    info = doc = None
+    if train and "train" in folder.units:  # finished before an interruption
+        info = json.loads((out / "config.json").read_text())
+    elif train:
+        info = train_baseline(out, config, seed=seed, log_every=log_every, command=command,
+                              into_checkpoints=into_checkpoints)  # fmt: skip
+        folder.finish("train")
+    if evaluate and "evaluate" in folder.units:
+        doc = json.loads((out / "evaluation.json").read_text())
+    elif evaluate:
+        doc = evaluate_baseline(out if train else weights, out, seed=eval_seed, seeds=seeds,
+                                command=command, into_checkpoints=into_checkpoints)  # fmt: skip
+        folder.finish("evaluate")
+    folder.complete()
+    return info, doc
 
 
 def _p(p: float) -> str:

@@ -205,7 +205,9 @@ def open_run(
         raise UserError(f"{out}: no run to resume (no {MANIFEST}); start it without --resume")
     if old is not None and not resume:
         how = "finish it with --resume, or" if old["status"] == "partial" else "remove it or"
-        raise UserError(f"{out} holds a {old['status']} {old['kind']} run: {how} give a fresh --out")
+        raise UserError(
+            f"{out} holds a {old['status']} {old['kind']} run: {how} give a fresh --out"
+        )
     if old is not None and old["kind"] != kind:
         raise UserError(f"{out} holds a {old['kind']} run, not a {kind} run: give its --out")
     if old is not None:

@@ -711,12 +711,11 @@ def ablate(
     settings = dict(worlds=worlds, variants=[v.name for v in chosen], trials=trials, seed=seed,
                     seeds=None if seeds is None else str(seeds), tau_cap=tau_cap,
                     collision_cap=collision_cap, share=share)  # fmt: skip
+    started = time.perf_counter()
+    # Read once, and early: a missing or corrupt seed fails before anything is written.
+    ltl_seed, seed_info = load_ltl_seed(seeds)
     folder = open_run(out, "ablate", settings, resume=resume)
     out = folder.out
-
-    started = time.perf_counter()
-    # Read once, and early: a missing or corrupt seed fails before any trial runs.
-    ltl_seed, seed_info = load_ltl_seed(seeds)
     base = dataclasses.replace(STL_CONFIG, tau_cap=tau_cap, collision_cap=collision_cap)
     n_trials = {w: protocol.trials_for_world(w) if trials is None else trials for w in worlds}
     with tqdm(unit="run", file=sys.stderr, desc="ablation") as bar:  # run_ablation sets the total

@@ -35,6 +35,11 @@ def _output_dir(out: str | Path, into_checkpoints: bool) -> Path:
     return out
 
 
+def _check_weights(weights: str | Path | None) -> None:
+    if weights is not None and not (Path(weights) / "params.npz").is_file():
+        raise ValueError(f"{weights}: no params.npz to evaluate (train first)")
+
+
 def _versions() -> dict[str, str]:
     """The run's versions (:func:`jaxais.experiments.records.versions`) and optax's."""
     import optax
@@ -168,8 +173,7 @@ def evaluate_baseline(
     """
     if not 0 <= seed < 2**32:
         raise ValueError(f"--eval-seed must be in [0, 2**32), got {seed}")
-    if weights is not None and not (Path(weights) / "params.npz").is_file():
-        raise ValueError(f"{weights}: no params.npz to evaluate (train first)")
+    _check_weights(weights)
     out = _output_dir(out, into_checkpoints)
     import numpy as np
     from tqdm import tqdm
@@ -252,6 +256,8 @@ def baseline(
         (config.json's document or None, evaluation.json's or None).
     """
     config = TrainConfig() if config is None else config
+    if evaluate and not train:
+        _check_weights(weights)  # before anything is written
     out = _output_dir(out, into_checkpoints)
     settings = {"train": dataclasses.asdict(config) if train else None, "seed": seed,
                 "evaluate": evaluate, "eval_seed": eval_seed, "seeds": seeds and str(seeds),

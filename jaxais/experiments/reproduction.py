@@ -163,6 +163,19 @@ def reproduce(
 
     # Process 0 of a multi-process run writes (and checks the folder); the others read it.
     lead = not jax.distributed.is_initialized() or jax.process_index() == 0
+    from jaxais.baselines.neural import load_params
+    from jaxais.experiments.records import load_ltl_seed
+
+    # Read first: a missing or corrupt seed (or baseline) fails before anything is written.
+    loaded = None if evolve else load_ltl_seed(seeds)
+    nn = None
+    if baseline is not False:
+        try:
+            nn_params, nn_info = load_params(None if baseline is True else baseline)
+        except ValueError as err:
+            raise ValueError(f"--baseline: {err}") from None
+        # What made the weights (train_baseline.py's config.json holds the rest).
+        nn = nn_params, {"config": nn_info.get("config"), "seed": nn_info.get("seed")}
     config = {"trials": trials, "seed": seed, "seeds": None if seeds is None else str(seeds),
               "evolve": evolve, "generations": generations, "baseline": baseline if isinstance(
               baseline, bool) else str(baseline), "worlds": names, "tau_cap": tau_cap,
@@ -184,28 +197,29 @@ def reproduce(
             run.finish("ltl", {"ltl_s": time.perf_counter() - t})
         timings["ltl_s"] = run.units["ltl"]["ltl_s"]
         seeds = ltl / "seed"
-    return _run(run, names, trials, seed, seeds, baseline, tau_cap, collision_cap,
+        loaded = load_ltl_seed(seeds)
+    return _run(run, names, trials, seed, seeds, loaded, nn, tau_cap, collision_cap,
                 progress=progress, command=command, started=started, timings=timings,
                 lead=lead)  # fmt: skip
 
 
 def _run(run: Run, worlds: list[str], n_trials: int | None, seed: int,
-         seeds: str | os.PathLike[str] | None, baseline: str | os.PathLike[str] | bool,
-         tau_cap: float, collision_cap: int, *, progress: bool, command: str, started: float,
+         seeds: str | os.PathLike[str] | None, loaded: tuple, nn: tuple | None, tau_cap: float,
+         collision_cap: int, *, progress: bool, command: str, started: float,
          timings: dict[str, float], lead: bool) -> dict[str, Any] | None:  # fmt: skip
-    """:func:`reproduce` once its arguments are checked and the LTL has run (``timings`` holds
-    its time, ``started`` the call's start): every world not finished in ``run`` runs here."""
+    """:func:`reproduce` once its arguments are checked, the seed (``loaded``) and baseline
+    (``nn``: weights and what made them, or None) read and the LTL run (``timings`` holds its
+    time, ``started`` the call's start): every world not finished in ``run`` runs here."""
     import numpy as np
     from tqdm import tqdm
 
     from jaxais import envs
     from jaxais.baselines.config import NN_LABEL
-    from jaxais.baselines.neural import NEURAL, load_params
+    from jaxais.baselines.neural import NEURAL
     from jaxais.experiments import claims, report, stats
     from jaxais.experiments.plotting import draw_world
     from jaxais.experiments.records import (
         build_systems,
-        load_ltl_seed,
         portable_command,
         results_document,
         run_config,
@@ -218,15 +232,7 @@ def _run(run: Run, worlds: list[str], n_trials: int | None, seed: int,
 
     out = run.out
     seeds_dir = Path(seeds) if seeds else default_seed_dir()
-    # Read once, and early: a missing or corrupt seed (or baseline) fails before any trial runs.
-    loaded = load_ltl_seed(seeds_dir)
-    if baseline is not False:
-        try:
-            nn_params, nn_info = load_params(None if baseline is True else baseline)
-        except ValueError as err:
-            raise ValueError(f"--baseline: {err}") from None
-        # What made the weights (train_baseline.py's config.json holds the rest).
-        nn_info = {"config": nn_info.get("config"), "seed": nn_info.get("seed")}
+    nn_params, nn_info = nn or (None, None)
 
     network = NetworkParams()
     params = envs.default_params()
@@ -249,9 +255,9 @@ def _run(run: Run, worlds: list[str], n_trials: int | None, seed: int,
         hold1_cfg = {**cfg, "readings": {**cfg["readings"], "hold": 1}}
         # The run's config without the network's parts, with what made the weights.
         nn_cfg = {k: v for k, v in cfg.items() if k not in ("network", "readings", "ltl_seed")}
-        nn_cfg["baseline"] = nn_info if baseline is not False else None
+        nn_cfg["baseline"] = nn_info
         files = {label: (label, cfg) for label in labels} | {"SIE_hold1": (CALIBRATED, hold1_cfg)}
-        files |= {NN_LABEL: (NN_LABEL, nn_cfg)} if baseline is not False else {}
+        files |= {NN_LABEL: (NN_LABEL, nn_cfg)} if nn is not None else {}
         if name in run.units:  # a finished world: its trials and examples from its files
             if not lead:
                 continue
@@ -267,12 +273,12 @@ def _run(run: Run, worlds: list[str], n_trials: int | None, seed: int,
             sie = systems["SIE"]
             hold1 = {CALIBRATED: sie.replace(readings=sie.readings.replace(hold=np.int32(1)))}
             world_t = {}
-            k = len(labels) + 1 + (baseline is not False)
+            k = len(labels) + 1 + (nn is not None)
             with tqdm(total=n * k, desc=f"{name}: {k} systems x {n} trials", unit="run",
                       file=sys.stderr, disable=not (lead and progress)) as bar:  # fmt: skip
                 sets = run_trials(world, systems | hold1, n, seed, config, params, bar, world_t)
                 sets["SIE_hold1"] = sets.pop(CALIBRATED)
-                if baseline is not False:
+                if nn is not None:
                     sets |= run_trials(
                         world, {NN_LABEL: nn_params}, n, seed, config, params, bar, world_t,
                         controller=NEURAL,
@@ -299,7 +305,7 @@ def _run(run: Run, worlds: list[str], n_trials: int | None, seed: int,
             timings[key] = timings.get(key, 0.0) + value
         results_by_world[name] = {k: records[k] for k in labels}
         calibration_by_world[name] = {"SIE": records["SIE_hold1"]}
-        if baseline is not False:
+        if nn is not None:
             baseline_by_world[name] = {NN_LABEL: records[NN_LABEL]}
 
     if not lead:

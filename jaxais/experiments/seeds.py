@@ -200,7 +200,7 @@ def markdown(summary: Mapping[str, Any]) -> str:
     """``seeds.md``: per-seed table, per-claim frequencies, hypotheses, and how it was made."""
     rows, hyps = summary["seeds"], list(summary["hypotheses"])
     worlds = list(dict.fromkeys(w for r in rows.values() for w in r["failure_pct"]))
-    status = "complete" if summary["complete"] else "partial: run the command again to go on"
+    status = "complete" if summary["complete"] else "partial: run it again with --resume"
     held = summary["claims_held"]
     held_line = "Claims held: no seed done yet."
     if rows:
@@ -459,9 +459,13 @@ def ltl_ledger(
             raise
         note(f"seed {s}: done; {headline(write())}")
 
+    def on_signal() -> None:  # what a signal that ends the script at once must still do
+        procs.stop()
+        lock.acquire(timeout=2)  # a worker's write in flight ends (its temporary files go)
+
     write()
     pool, errors = ThreadPoolExecutor(max_workers=jobs), []
-    ON_SIGNAL.append(procs.stop)  # a signal that ends the script at once stops the children too
+    ON_SIGNAL.append(on_signal)
     try:
         futures = [pool.submit(pipeline, s) for s in seeds]
         for future in as_completed(futures):
@@ -474,7 +478,7 @@ def ltl_ledger(
         procs.stop()
         raise
     finally:
-        ON_SIGNAL.remove(procs.stop)
+        ON_SIGNAL.remove(on_signal)
         pool.shutdown(wait=True, cancel_futures=True)
     if errors:
         raise errors[0]

@@ -453,13 +453,6 @@ def sweep(
         raise ValueError(f"--noise scales must be finite and >= 0, got {list(noise)}")
     elif set(noise_kinds) - set(NOISE_KINDS):
         raise ValueError(f"--noise-kinds: one or more of {', '.join(NOISE_KINDS)}")
-    # Every process runs every step (and computes the same numbers); process 0 reports and writes.
-    lead = jax.process_index() == 0
-    settings = dict(grid=grid, noise=noise, noise_kinds=noise_kinds, system=names, world=world,
-                    trials=trials, seed=seed, seeds=None if seeds is None else str(seeds),
-                    tau_cap=tau_cap, collision_cap=collision_cap, slots=slots)  # fmt: skip
-    run = open_run(out, "sweep", settings, resume=resume, write=lead)
-
     loaded = envs.load_world(world)
     config = EpisodeConfig(
         tau_cap=protocol.TAU_CAP if tau_cap is None else tau_cap,
@@ -474,6 +467,12 @@ def sweep(
         total, unit = trials * len(points), "run"
     else:
         total, unit = len(noise), "level"
+    # Every process runs every step (and computes the same numbers); process 0 reports and writes.
+    lead = jax.process_index() == 0
+    settings = dict(grid=grid, noise=noise, noise_kinds=noise_kinds, system=names, world=world,
+                    trials=trials, seed=seed, seeds=None if seeds is None else str(seeds),
+                    tau_cap=tau_cap, collision_cap=collision_cap, slots=slots)  # fmt: skip
+    run = open_run(out, "sweep", settings, resume=resume, write=lead)
     start = time.perf_counter()
     desc = f"{','.join(names)} in {loaded.name}"
     with tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, disable=not lead) as bar:

@@ -172,8 +172,8 @@ def test_ablate_killed_after_a_batch_and_resumed_gives_the_same_ablation(tmp_pat
     ref, out = tmp_path / "ref", tmp_path / "out"
     finish(start("ablate.py", *args, "--out", ref, env=cache))
     kill_after(start("ablate.py", *args, "--out", out, env=cache), out, 1, signal.SIGTERM)
-    bad = finish(start("ablate.py", *args[:-1], ref, "--out", out, "--resume"), 2)[1]
-    assert "--seeds: the run in" in bad and bad.count("\n") == 1  # another seed: refused
+    bad = finish(start("ablate.py", *args[:5], 3, *args[6:], "--out", out, "--resume"), 2)[1]
+    assert "--trials: the run in" in bad and bad.count("\n") == 1  # other settings: refused
     finish(start("ablate.py", *args, "--out", out, "--resume", env=cache))
     for name in ("ablation.json", "ablation.md", "batches/0.json", "batches/1.json"):
         assert (ref / name).read_text() == (out / name).read_text(), name

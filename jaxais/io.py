@@ -6,6 +6,9 @@ the target's directory, which then replaces the target with :func:`os.replace`. 
 interrupted write leaves the earlier file (if any) as it was. The command-line layer
 (:mod:`jaxais.cli`) removes the temporary files still in flight when a signal ends a script, after
 running :data:`ON_SIGNAL`.
+
+A results folder says what it holds (:func:`open_run`): a complete run, or a partial one whose
+finished units ``--resume`` keeps; a run never starts over another one or a user's files.
 """
 
 from __future__ import annotations

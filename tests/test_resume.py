@@ -208,6 +208,7 @@ def test_train_baseline_killed_and_resumed_trains_the_same_weights(tmp_path, cac
         err = finish(proc, 2)[1]
         assert err.startswith("train_baseline.py: error: ") and err.count("\n") == 1
         assert message in err
+    assert not (tmp_path / "none").exists()
 
 
 LEDGER = """

@@ -24,12 +24,15 @@ REFERENCE = ("SIE", "HDC")
 """The paper's systems it runs beside."""
 
 
-def _output_dir(out: str | Path, into_checkpoints: bool) -> Path:
-    """``out``, created and writable; refused inside the shipped checkpoints/ unless asked."""
+def _output_dir(out: str | Path, into_checkpoints: bool, make: bool = True) -> Path:
+    """``out``, created and writable (``make``); refused inside the shipped checkpoints/ unless
+    asked."""
     out = Path(out)
     shipped = Path(str(resources.files("jaxais.checkpoints"))).resolve()
     if not into_checkpoints and shipped in (out.resolve(), *out.resolve().parents):
         raise ValueError(f"{out}: in the shipped checkpoints/ (--into-checkpoints to write there)")
+    if not make:
+        return out
     out.mkdir(parents=True, exist_ok=True)
     tempfile.TemporaryFile(dir=out).close()  # writable: fail now, not after the work
     return out
@@ -258,7 +261,7 @@ def baseline(
     config = TrainConfig() if config is None else config
     if evaluate and not train:
         _check_weights(weights)  # before anything is written
-    out = _output_dir(out, into_checkpoints)
+    out = _output_dir(out, into_checkpoints, make=False)  # open_run makes it
     settings = {"train": dataclasses.asdict(config) if train else None, "seed": seed,
                 "evaluate": evaluate, "eval_seed": eval_seed, "seeds": seeds and str(seeds),
                 "weights": weights and str(weights)}  # fmt: skip

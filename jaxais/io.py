@@ -6,11 +6,15 @@ the target's directory, which then replaces the target with :func:`os.replace`. 
 interrupted write leaves the earlier file (if any) as it was. The command-line layer
 (:mod:`jaxais.cli`) removes the temporary files still in flight when a signal ends a script, after
 running :data:`ON_SIGNAL`.
+
+A results folder says what it holds (:func:`open_run`): a complete run, or a partial one whose
+finished units ``--resume`` keeps; a run never starts over another one or a user's files.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import tempfile
@@ -175,3 +179,97 @@ def check_output_file(
         # os.replace would succeed anyway (it needs only the directory); refuse to be surprising.
         raise UserError(f"{p}: file exists and is not writable")
     return p
+
+
+MANIFEST = "manifest.json"
+"""A results folder's manifest (:class:`Run`)."""
+_FIELDS = [str, str, dict, dict]
+
+
+@dataclasses.dataclass
+class Run:
+    """A results folder that says what it holds: ``DIR/manifest.json`` records the driver
+    (``kind``), the settings that decide its results (``config``), its status ("partial" or
+    "complete") and its finished units (name -> what the driver needs to use the unit again).
+    It is rewritten atomically after every unit, so a folder a kill left is a partial run that
+    ``resume`` finishes. Made by :func:`open_run`; ``write`` is False on the processes of a
+    multi-process run that do not write."""
+
+    out: Path
+    kind: str
+    config: dict[str, Any]
+    units: dict[str, Any]
+    write: bool = True
+
+    def finish(self, unit: str, info: Any = None) -> None:
+        """Record ``unit`` (its files already written) as finished, with ``info``."""
+        self.units[unit] = info
+        self._save("partial")
+
+    def complete(self) -> None:
+        """Record the run as complete (every output written)."""
+        self._save("complete")
+
+    def _save(self, status: str) -> None:
+        if self.write:
+            doc = {"kind": self.kind, "status": status, "config": self.config,
+                   "units": self.units}  # fmt: skip
+            atomic_write_json(self.out / MANIFEST, doc)
+
+
+def open_run(
+    out: str | os.PathLike[str], kind: str, config: dict[str, Any], *, resume: bool = False,
+    write: bool = True,
+) -> Run:  # fmt: skip
+    """Start a run of ``kind`` into ``out`` (created if missing), or resume the one there.
+
+    A fresh run needs a missing or empty folder; ``resume`` needs a run of the same kind and
+    ``config`` there (its finished units are kept). On a process that does not write
+    (``write=False``) nothing is checked or written; with ``resume`` its units are read.
+
+    Raises:
+        UserError: one line saying what is in the way and how to go on (``--resume``, a fresh
+            ``--out``), or naming the first setting that differs from the run being resumed.
+    """
+    out = Path(out)
+    config = json.loads(json.dumps(config))  # as it reads back: tuples as lists
+    path, old = out / MANIFEST, None
+    if path.is_file():
+        try:
+            old = json.loads(path.read_text())
+            if [type(old.get(k)) for k in ("kind", "status", "config", "units")] != _FIELDS:
+                raise ValueError("no kind, status, config and units")
+        except (OSError, ValueError, AttributeError) as err:
+            raise UserError(f"{path}: not a run manifest ({err}); use a fresh --out") from None
+    if not write:
+        return Run(out, kind, config, dict(old["units"]) if resume and old else {}, False)
+    if resume and old is None:
+        raise UserError(f"{out}: no run to resume (no {MANIFEST}); start it without --resume")
+    if old is not None and not resume:
+        how = "finish it with --resume, or" if old["status"] == "partial" else "remove it or"
+        raise UserError(
+            f"{out} holds a {old['status']} {old['kind']} run: {how} give a fresh --out"
+        )
+    if old is not None and old["kind"] != kind:
+        raise UserError(f"{out} holds a {old['kind']} run, not a {kind} run: give its --out")
+    if old is not None:
+        for key in sorted(config.keys() | old["config"].keys()):
+            was, now = old["config"].get(key), config.get(key)
+            if was != now:
+                raise UserError(
+                    f"--{key.replace('_', '-')}: the run in {out} has {json.dumps(was)}, not "
+                    f"{json.dumps(now)}; resume it with the same settings, or give a fresh --out"
+                )
+    elif out.is_dir() and any(out.iterdir()):
+        raise UserError(f"{out} is not empty and holds no run: give a fresh or empty --out")
+    elif out.exists() and not out.is_dir():
+        raise UserError(f"{out}: not a directory")
+    out.mkdir(parents=True, exist_ok=True)
+    check_writable_dir(out)
+    for tmp in [*out.glob(".*"), *out.glob("*/.*")] if old else ():
+        if tmp.is_file() and tmp.name.count(".") >= 2:  # an atomic write that a SIGKILL cut
+            tmp.unlink()
+    run = Run(out, kind, config, dict(old["units"]) if old else {})
+    if old is None:
+        run._save("partial")  # the folder says at once what it holds
+    return run

@@ -7,7 +7,8 @@ Variants (jaxais.experiments.ablation.VARIANTS): "ours", one per [ours] reading 
 switched to the earlier literal reading, and "literal" (every old reading together); each runs
 every system in every world with the paper's trial counts and common random numbers. Writes
 DIR/ablation.json, ablation.md (the table), ablation.png and run.json (config, seeds, versions,
-batches, timings); jaxais.experiments.ablation.ablate.
+batches, timings); jaxais.experiments.ablation.ablate. --resume finishes an interrupted run
+from the batches DIR/manifest.json lists.
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ from jaxais.experiments import protocol
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = ArgumentParser(prog="ablate.py", description=__doc__.split("\n\n")[0])
     # fmt: off
-    p.add_argument("--out", required=True, help="output directory (created if missing)")
+    p.add_argument("--out", required=True, help="output directory (missing or empty)")
+    p.add_argument("--resume", action="store_true", help="finish the interrupted run in --out")
     p.add_argument("--trials", type=int, default=None,
                    help=f"trials per system and world (default: the paper's "
                    f"{protocol.SIMULATED_TRIALS}, {protocol.REAL_TRIALS} in {protocol.REAL_WORLD})")
@@ -55,6 +57,7 @@ def main(argv: list[str] | None = None) -> None:
         tau_cap=args.tau_cap,
         collision_cap=args.collision_cap,
         share=not args.no_share,
+        resume=args.resume,
     )
     print(ablation.markdown(doc), end="")
     out = Path(args.out)

@@ -7,7 +7,8 @@
 Runs :func:`jaxais.experiments.reproduce` (the paper's protocol, SPEC 9), sharded over every
 process's devices with the jax.distributed flags (as in scripts/sweep.py; process 0 writes).
 Writes DIR/tables.json, DIR/claims.json, DIR/report.md (figures in DIR/figures/), every trial in
-DIR/trials/ and DIR/run.json (the config, seeds and timings needed to regenerate it all).
+DIR/trials/ and DIR/run.json (the config, seeds and timings needed to regenerate it all);
+DIR/manifest.json says which worlds are done: --resume finishes an interrupted run.
 """
 
 from __future__ import annotations
@@ -24,7 +25,8 @@ from jaxais.experiments.reproduction import LTLRunError, check_reproduce, headli
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = ArgumentParser(prog="reproduce.py", description=__doc__.split("\n\n")[0])
     # fmt: off
-    p.add_argument("--out", required=True, help="output directory (created if missing)")
+    p.add_argument("--out", required=True, help="output directory (missing or empty)")
+    p.add_argument("--resume", action="store_true", help="finish the interrupted run in --out")
     p.add_argument("--trials", type=int, default=None,
                    help=f"trials per system and world (default: the paper's "
                    f"{protocol.SIMULATED_TRIALS}, {protocol.REAL_TRIALS} in {protocol.REAL_WORLD})")
@@ -66,7 +68,8 @@ def main(argv: list[str] | None = None) -> None:
     distributed.initialize(args)  # before JAX computes anything
     result = reproduce(
         args.out, baseline=not args.no_baseline if args.baseline is None else args.baseline,
-        command="reproduce.py " + " ".join(sys.argv[1:] if argv is None else argv), **kw,
+        command="reproduce.py " + " ".join(w for w in argv or sys.argv[1:] if w != "--resume"),
+        resume=args.resume, **kw,
     )  # fmt: skip
     if result is not None:  # the writing process
         print(headline(result))

@@ -8,9 +8,8 @@ DIR/ltl/seed_s --seed s (the LTL, its defaults), then scripts/reproduce.py --see
 DIR/ltl/seed_s/seed --out DIR/stl/seed_s --seed s --no-baseline.
 Writes DIR/seeds.json and DIR/seeds.md (per seed: claims held, H1-H4, SIE's and SRL's failure
 rates and lock-up times, SIE's difference rate; per claim: on how many seeds it holds), rebuilt
-after every seed, and DIR/run.json. Run the same command again to go on after an interruption:
-finished seeds are kept, an interrupted LTL resumes exactly, an interrupted STL runs again
-(jaxais.experiments.seeds says how a seed is judged done).
+after every seed, and DIR/run.json. Add --resume to go on after an interruption: finished seeds
+are kept, an interrupted LTL or STL resumes exactly (jaxais.experiments.seeds says how).
 """
 
 from __future__ import annotations
@@ -25,7 +24,8 @@ from jaxais.experiments.seeds import MAX_SEED, SeedRunError, headline, ltl_ledge
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = ArgumentParser(prog="seeds.py", description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", required=True, help="output directory (created if missing)")
+    p.add_argument("--out", required=True, help="output directory (missing or empty)")
+    p.add_argument("--resume", action="store_true", help="finish the interrupted run in --out")
     p.add_argument("--seeds", type=int, default=10, help="how many LTL seeds (default 10)")
     p.add_argument("--first", type=int, default=0, help="the first seed (default 0)")
     p.add_argument(
@@ -45,13 +45,14 @@ def main(argv: list[str] | None = None) -> None:
         raise UserError(f"--first must be in [0, {MAX_SEED - args.seeds + 1}], got {args.first}")
     from jaxais.experiments.records import portable_command
 
-    words = sys.argv[1:] if argv is None else argv
+    words = [w for w in argv or sys.argv[1:] if w != "--resume"]  # the command that remakes it
     summary = ltl_ledger(
         args.out,
         range(args.first, args.first + args.seeds),
         trials=args.trials,
         jobs=args.jobs,
         command=portable_command("seeds.py " + " ".join(words)),
+        resume=args.resume,
     )
     print(f"{headline(summary)}; wrote {Path(args.out) / 'seeds.md'}")
 

@@ -3,8 +3,8 @@
     python scripts/sweep.py --grid k1=0:2:11 --grid k2=0:2:11 --system SIE --out sweep/
     python scripts/sweep.py --noise 0,0.5,1,2,4 --system SIE,SRL,HDC --world real --out gap/
 
-Writes DIR/sweep.json and sweep.png, or DIR/reality_gap.json and reality_gap.png
-(jaxais.experiments.sweep): the same numbers on one process or several (--coordinator).
+Writes DIR/sweep.json and sweep.png or DIR/reality_gap.json and .png, the same on one process or
+several (--coordinator); --resume finishes an interrupted run (DIR/manifest.json's chunks).
 """
 
 from __future__ import annotations
@@ -38,7 +38,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--seeds", default=None, help="LTL seed directory (default: the shipped one)")
     protocol.add_cap_arguments(p)
     p.add_argument("--slots", type=int, default=1024, help="runs live at once (default 1024)")
-    p.add_argument("--out", required=True, help="output directory (created if missing)")
+    p.add_argument("--out", required=True, help="output directory (missing or empty)")
+    p.add_argument("--resume", action="store_true", help="finish the interrupted run in --out")
     # fmt: on
     distributed.add_arguments(p)
     return p.parse_args(argv)
@@ -57,12 +58,12 @@ def main(argv: list[str] | None = None) -> None:
 
     from jaxais.experiments.sweeps import sweep
 
-    command = "sweep.py " + " ".join(sys.argv[1:] if argv is None else argv)
+    command = "sweep.py " + " ".join(w for w in argv or sys.argv[1:] if w != "--resume")
     doc = sweep(
         args.out, grid=args.grid, noise=noise, noise_kinds=args.noise_kinds,
         system=args.system, random_set=args.random_set, world=args.world, trials=args.trials,
-        seed=args.seed, seeds=args.seeds, tau_cap=args.tau_cap,
-        collision_cap=args.collision_cap, slots=args.slots, command=command,
+        seed=args.seed, seeds=args.seeds, tau_cap=args.tau_cap, collision_cap=args.collision_cap,
+        slots=args.slots, command=command, resume=args.resume,
     )  # fmt: skip
     if jax.process_index() != 0:  # process 0 reports
         return
@@ -70,10 +71,8 @@ def main(argv: list[str] | None = None) -> None:
     if args.grid:
         its = doc["robot_iterations_per_s"] / 1e6
         what, name = f"{doc['runs']} runs ({its:.2f} M robot-iterations/s)", "sweep.json"
-    print(
-        f"{doc['system']} in {doc['world']}: {what} in {doc['wall_s_total']:.0f} s, compile "
-        f"included; wrote {Path(args.out) / name} and its figure"
-    )
+    print(f"{doc['system']} in {doc['world']}: {what} in {doc['wall_s_total']:.0f} s, compile "
+          f"included; wrote {Path(args.out) / name} and its figure")  # fmt: skip
 
 
 if __name__ == "__main__":

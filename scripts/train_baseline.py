@@ -6,7 +6,8 @@
     python scripts/train_baseline.py --collect checkpoints/neural runs/nn-seed1   # one table
 
 Writes params.npz, config.json, training_curve.png, evaluation.json and .md into --out: a fresh
-runs/baseline-DATE-TIME by default, checkpoints/ only if asked (jaxais.experiments.baseline).
+runs/baseline-DATE-TIME by default, checkpoints/ only if asked (jaxais.experiments.baseline);
+--resume finishes an interrupted run, skipping the stage (training) DIR/manifest.json lists.
 """
 
 from __future__ import annotations
@@ -26,7 +27,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = ArgumentParser(prog="train_baseline.py", description=__doc__.split("\n\n")[0])
     # fmt: off
     p.add_argument("--out", help="output directory (default: a fresh runs/baseline-DATE-TIME)")
-    p.add_argument("--weights", help="--eval-only's weights (default: --out, else the shipped)")
+    p.add_argument("--resume", action="store_true", help="finish the interrupted run in --out")
+    p.add_argument("--weights", help="--eval-only's weights (default: the shipped)")
     p.add_argument("--into-checkpoints", action="store_true", help="allow --out in checkpoints/")
     p.add_argument("--seed", type=int, default=0, help="PRNG seed of the training")
     p.add_argument("--eval-seed", type=int, default=0, help="PRNG seed of the trials")
@@ -58,20 +60,18 @@ def main(argv: list[str] | None = None) -> None:
     if args.eval_only and args.no_eval or args.weights and not args.eval_only:
         raise UserError("--weights goes with --eval-only, which excludes --no-eval")
     out = args.out or datetime.datetime.now().strftime("runs/baseline-%Y%m%d-%H%M%S")
-    command = "train_baseline.py " + " ".join(sys.argv[1:] if argv is None else argv)
+    words = [w for w in (sys.argv[1:] if argv is None else argv) if w != "--resume"]
     _speed.setup()  # after the flags are checked: a bad flag answers without loading JAX
-    if not args.eval_only:
-        info = driver.train_baseline(
-            out, config, seed=args.seed, log_every=args.log_every, command=command,
-            into_checkpoints=args.into_checkpoints,
-        )  # fmt: skip
+    info, _ = driver.baseline(
+        out, config, train=not args.eval_only, evaluate=not args.no_eval, seed=args.seed,
+        eval_seed=args.eval_seed, weights=args.weights, seeds=args.seeds,
+        log_every=args.log_every, command="train_baseline.py " + " ".join(words),
+        into_checkpoints=args.into_checkpoints, resume=args.resume,
+    )  # fmt: skip
+    if info is not None:
         fitness = info["final"]["center_fitness"]
         print(f"trained in {info['wall_s']:.0f} s, final centre fitness {fitness:.2f}; wrote {out}")
     if not args.no_eval:
-        driver.evaluate_baseline(
-            (args.weights or args.out) if args.eval_only else out, out, seed=args.eval_seed,
-            seeds=args.seeds, command=command, into_checkpoints=args.into_checkpoints,
-        )  # fmt: skip
         print(Path(out, "evaluation.md").read_text(), end="")
         print(f"wrote {out}/evaluation.json and {out}/evaluation.md")
 

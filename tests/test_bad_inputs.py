@@ -275,8 +275,9 @@ def _tree(path: Path) -> dict[str, bytes]:
 
 
 def test_reproduce_evolve_into_an_earlier_ltl_folder_says_what_to_do(tmp_path: Path):
-    """evolve.py would refuse the folder with advice for its own --resume, which reproduce.py
-    does not have: reproduce.py answers first, before any work, and touches nothing."""
+    """A folder an earlier run (or a user) left, without a run manifest, is refused before any
+    work, and nothing in it is touched (evolve.py would refuse it with advice for its own
+    --resume); a partial reproduce.py run is finished with reproduce.py --resume."""
     finished, unfinished = tmp_path / "finished", tmp_path / "unfinished"
     (finished / "ltl" / "seed").mkdir(parents=True)
     (finished / "ltl" / "seed" / "meta.json").write_text("{}")
@@ -284,27 +285,10 @@ def test_reproduce_evolve_into_an_earlier_ltl_folder_says_what_to_do(tmp_path: P
     (unfinished / "ltl" / "checkpoints").mkdir(parents=True)
     tiny = ("--trials", 2, "--tau-cap", 5, "--worlds", "world1", "--generations", 1)
     before = _tree(tmp_path)
-
-    proc = _reproduce("--evolve", "--out", finished, *tiny)
-    ltl = finished / "ltl"
-    _assert_one_line_exit(
-        proc,
-        "reproduce.py",
-        2,
-        f"{ltl} exists from an earlier --evolve run; remove it, or pass --seeds {ltl / 'seed'} "
-        "instead of --evolve to reuse its seed",
-    )
-    proc = _reproduce("--evolve", "--seed", 7, "--out", unfinished, *tiny)
-    ltl = unfinished / "ltl"
-    _assert_one_line_exit(
-        proc,
-        "reproduce.py",
-        2,
-        f"{ltl} holds an unfinished LTL run; remove it, or finish it with 'scripts/evolve.py "
-        f"--out {ltl} --seed 7 --generations 1 --resume' and then pass --seeds {ltl / 'seed'} "
-        "instead of --evolve",
-    )
-    assert "--resume" not in proc.stderr.replace("--generations 1 --resume'", "")
+    for out in (finished, unfinished):
+        proc = _reproduce("--evolve", "--out", out, *tiny)
+        message = f"{out} is not empty and holds no run: give a fresh or empty --out"
+        _assert_one_line_exit(proc, "reproduce.py", 2, message)
     assert _tree(tmp_path) == before
 
 

@@ -295,6 +295,7 @@ def test_reproduce_end_to_end(runs):
         assert name in report  # every figure is shown in the report
     trial_files = sorted(p.name for p in (out / "trials").iterdir())
     want = [f"world1_{label}.json" for label in (*LABELS, "NN")] + ["world1_SIE_hold1.json"]
+    want += ["world1_examples.npz"]  # the drawn trials: the world's unit, kept for --resume
     assert trial_files == sorted(want)
     # SIE with a selection every iteration: the calibration point, beside the paper's 20 %.
     hold1 = json.loads((out / "trials" / "world1_SIE_hold1.json").read_text())
@@ -344,6 +345,38 @@ def test_reproduce_user_errors(tmp_path: Path):
     )
     assert_user_error(missing, "reproduce.py", "no such seed directory")
     assert not (out / "tables.json").exists()
+
+
+def test_reproduce_killed_and_resumed_gives_the_uninterrupted_run(runs, tmp_path: Path):
+    """Killed before its world ends (SIGKILL) and after (SIGTERM, while it makes the tables and
+    report), each time resumed: the trials, tables and claims of the fixture's uninterrupted
+    run, exactly. Another --trials, a fresh start into the folder and --resume on a folder with
+    no run are refused in one line."""
+    import signal
+
+    import numpy as np
+    from test_resume import kill_after
+
+    ref, out = runs["reproduce_dir"], tmp_path / "rep"
+    args = ("--trials", 2, "--tau-cap", 10, "--worlds", "world1", "--seeds", runs["seeds"])
+    nothing = _start("reproduce.py", *args, "--out", tmp_path / "none", "--resume")
+    kill_after(_start("reproduce.py", *args, "--out", out), out, 0, signal.SIGKILL)
+    kill_after(_start("reproduce.py", *args, "--out", out, "--resume"), out, 1, signal.SIGTERM)
+    other = _start("reproduce.py", "--trials", 3, *args[2:], "--out", out, "--resume")
+    fresh = _start("reproduce.py", *args, "--out", out)
+    assert_user_error(_finish(other), "reproduce.py", f"--trials: the run in {out} has 2, not 3")
+    assert_user_error(_finish(fresh), "reproduce.py", f"{out} holds a partial reproduce run")
+    assert_user_error(_finish(nothing), "reproduce.py", "none: no run to resume")
+    assert not (tmp_path / "none").exists()
+    _ok(_finish(_start("reproduce.py", *args, "--out", out, "--resume")))
+    files = sorted(p.name for p in (ref / "trials").iterdir())
+    assert sorted(p.name for p in (out / "trials").iterdir()) == files
+    for name in ["tables.json", "claims.json", *(f"trials/{f}" for f in files if ".json" in f)]:
+        assert (ref / name).read_text() == (out / name).read_text(), name
+    examples = [np.load(d / "trials" / "world1_examples.npz") for d in (ref, out)]
+    assert examples[0].files == examples[1].files
+    assert all(np.array_equal(examples[0][k], examples[1][k]) for k in examples[0].files)
+    assert json.loads((out / "manifest.json").read_text())["status"] == "complete"
 
 
 def test_trials_script_bad_worlds_and_seeds_are_one_line(tmp_path: Path):

@@ -181,7 +181,8 @@ class FakeScripts:
                 out.parent.parent / "ltl" / f"seed_{s}" / "seed"
             )
             assert "--no-baseline" in cmd
-            out.mkdir(parents=True)  # the ledger cleared it
+            assert out.is_dir() == ("--resume" in cmd)  # the ledger cleared it, or resumes it
+            out.mkdir(parents=True, exist_ok=True)
             (out / "tables.json").write_text(json.dumps(tables_doc(s)))
             (out / "claims.json").write_text(json.dumps(claims_doc(HELD[s])))
             (out / "run.json").write_text(json.dumps({"versions": {"jax": "fake", "seed": s}}))
@@ -210,7 +211,7 @@ def test_a_signal_that_ends_the_script_would_stop_the_ledgers_children(tmp_path)
 
     before = list(io.ON_SIGNAL)
     ledger(tmp_path, Watching(), seeds=[0])
-    assert seen == [["stop"], ["stop"]] and before == io.ON_SIGNAL
+    assert seen == [["on_signal"], ["on_signal"]] and before == io.ON_SIGNAL
 
 
 def test_ledger_runs_each_seed_once_and_writes_the_ledger(tmp_path):
@@ -227,10 +228,13 @@ def test_ledger_runs_each_seed_once_and_writes_the_ledger(tmp_path):
     assert rec["versions"] == {"jax": "fake", "seed": 0}  # reproduce.py's, of the first seed
     assert rec["wall_s"]["1"]["ltl"] == 101.0 and rec["wall_s"]["1"]["stl"] >= 0
     again = FakeScripts()
-    assert ledger(tmp_path, again, seeds=[0, 1], trials=4, command="seeds.py --out x") == doc
-    assert again.calls == []  # done seeds are not rerun
-    with pytest.raises(ValueError, match="seed 0 was run with"):
-        ledger(tmp_path, again, seeds=[0, 1], trials=6)  # other settings: refused up front
+    resumed = ledger(tmp_path, again, seeds=[0, 1], trials=4, command="seeds.py --out x",
+                     resume=True)  # fmt: skip
+    assert resumed == doc and again.calls == []  # done seeds are not rerun
+    with pytest.raises(ValueError, match=r"--trials: the run in .* has 4, not 6; resume it with"):
+        ledger(tmp_path, again, seeds=[0, 1], trials=6, resume=True)  # refused up front
+    with pytest.raises(ValueError, match="holds a complete seeds run: remove it or give a fresh"):
+        ledger(tmp_path, again, seeds=[0, 1], trials=4)
     assert again.calls == []
 
 
@@ -239,8 +243,13 @@ def test_versions_before_any_seed_is_done(tmp_path):
     assert versions["jax"] and versions["jaxais"] and versions["backend"] is None
 
 
-def test_ledger_resumes_ltl_and_reruns_partial_stl(tmp_path):
-    # seed 0: finished LTL; seed 1: checkpoints only; seed 2: STL with report.md but no marker.
+def test_ledger_resumes_ltl_and_stl_and_reruns_an_stl_without_a_manifest(tmp_path):
+    # seed 0: finished LTL, STL begun (its manifest); seed 1: checkpoints only; seed 2: STL with
+    # report.md but no manifest (not reproduce.py's: removed).
+    from jaxais.io import open_run
+
+    open_run(tmp_path, "seeds", {"seeds": [0, 1, 2], "trials": None, "extra_args": []})
+    open_run(tmp_path / "stl" / "seed_0", "reproduce", {})
     for s in (0, 2):
         out = str(tmp_path / "ltl" / f"seed_{s}")
         cmd = [sys.executable, "-m", "jaxais.scripts.evolve", "--out", out, "--seed", str(s)]
@@ -251,10 +260,10 @@ def test_ledger_resumes_ltl_and_reruns_partial_stl(tmp_path):
     (stl2 / "report.md").write_text("old")
     (stl2 / "stale.json").write_text("{")
     run = FakeScripts()
-    doc = ledger(tmp_path, run, seeds=[0, 1, 2])
+    doc = ledger(tmp_path, run, seeds=[0, 1, 2], resume=True)
     assert run.stages() == [("STL", 0), ("LTL", 1), ("STL", 1), ("STL", 2)]
-    assert run.calls[1][2][-1] == "--resume"
-    assert "--trials" not in run.calls[0][2]
+    assert run.calls[0][2][-1] == "--resume" and run.calls[1][2][-1] == "--resume"
+    assert "--trials" not in run.calls[0][2] and "--resume" not in run.calls[3][2]
     assert not (stl2 / "stale.json").exists() and (stl2 / "report.md").read_text() == "# report\n"
     assert doc["done"] == 3
 
@@ -269,7 +278,7 @@ def test_failed_seed_names_it_and_keeps_earlier_seeds(tmp_path):
     assert json.loads((tmp_path / "run.json").read_text())["versions"] == {"jax": "fake", "seed": 0}
     assert "1 of 3 seeds done (partial" in (tmp_path / "seeds.md").read_text()
     rerun = FakeScripts()
-    assert ledger(tmp_path, rerun, seeds=[0, 1, 2])["complete"]
+    assert ledger(tmp_path, rerun, seeds=[0, 1, 2], resume=True)["complete"]
     assert rerun.stages() == [("STL", 1), ("LTL", 2), ("STL", 2)]
     assert not (tmp_path / "stl" / "seed_1" / "half.json").exists()
 
@@ -374,5 +383,5 @@ def test_script_flag_errors_are_one_line(tmp_path):
 def test_a_damaged_results_file_of_a_done_seed_is_named(tmp_path):
     ledger(tmp_path, FakeScripts(), seeds=[0])
     (tmp_path / "stl" / "seed_0" / "tables.json").write_bytes(b"\x00\x9f not json")
-    with pytest.raises(ValueError, match=r"seed_0/tables.json: missing or not JSON; remove .*"):
-        ledger(tmp_path, FakeScripts(), seeds=[0])
+    with pytest.raises(ValueError, match=r"seed_0/tables.json: missing or not JSON; use a fresh"):
+        ledger(tmp_path, FakeScripts(), seeds=[0], resume=True)

@@ -25,6 +25,7 @@ its batch mates (``tests/test_trials.py``), so the shared trials are those it wo
 from __future__ import annotations
 
 import dataclasses
+import json
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -41,6 +42,7 @@ from jaxais.immune.antibodies import Antibodies
 from jaxais.immune.network import NetworkParams
 from jaxais.immune.readings import ALPHA_ON_SELF, HOLD, SIGMA0_FLOOR, Readings
 from jaxais.immune.readings import readings as make_readings
+from jaxais.io import Run, atomic_write_json, atomic_write_text, open_run
 from jaxais.loop import EpisodeConfig
 from jaxais.seed import Seed
 from jaxais.systems import HAND_DESIGNED, N_SETS, hand_designed_sets, make_system, parse_label
@@ -379,6 +381,7 @@ def run_ablation(
     share: bool = True,
     progress: Any = None,
     runner: Runner | None = None,
+    folder: Run | None = None,
 ) -> Ablation:
     """Run every variant's protocol: per world, one :func:`~jaxais.trials.run_trials` per call.
 
@@ -396,6 +399,8 @@ def run_ablation(
             ``base.record``); its ``reset(total=...)``, where it has one, is called first with
             the total.
         runner: ``run_trials`` or a stand-in with its signature (tests).
+        folder: the results folder: each batch's records are a unit there (``batches/I.json``),
+            and a batch it holds already is read, not run again.
 
     Returns:
         The :class:`Ablation`.
@@ -429,7 +434,7 @@ def run_ablation(
 
     if progress is not None and hasattr(progress, "reset"):
         progress.reset(total=sum(units(n, call, batch) for _, _, n, call, batch, _ in plan))
-    for world_name, world, n, call, batch, source in plan:
+    for i, (world_name, world, n, call, batch, source) in enumerate(plan):
         first = by_name[call.variants[0]]
         sim_params = first.sim_params()
         done = _Counter(progress)
@@ -438,7 +443,18 @@ def run_ablation(
                 f"{world_name}: {', '.join(call.variants)} ({len(batch)} systems x {n})"
             )
         timings: dict[str, float] = {}
-        results = run(world, batch, n, seed, call.config, sim_params, done, timings)
+        unit = f"batch {i}"  # its records in batches/, written whole before the manifest names it
+        if folder is not None and unit in folder.units:
+            timings = folder.units[unit]
+            records = json.loads((folder.out / "batches" / f"{i}.json").read_text())
+            results = {label: TrialSet(recs, None) for label, recs in records.items()}
+        else:
+            results = run(world, batch, n, seed, call.config, sim_params, done, timings)
+            if folder is not None and folder.write:
+                (folder.out / "batches").mkdir(exist_ok=True)
+                records = {label: ts.records for label, ts in results.items()}
+                atomic_write_json(folder.out / "batches" / f"{i}.json", records)
+                folder.finish(unit, timings)
         if progress is not None:  # a batch that ended early completes its share
             progress.update(max(0, units(n, call, batch) - done.n))
         for name in call.variants:
@@ -651,10 +667,13 @@ def ablate(
     tau_cap: float = protocol.TAU_CAP,
     collision_cap: int = protocol.COLLISION_CAP,
     share: bool = True,
+    resume: bool = False,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Run the ablation (:func:`run_ablation`; ``variants`` by name, default all) and write
     ablation.json, ablation.md, ablation.png and run.json (config, seeds, versions, batches,
-    timings) into ``out``. ``trials`` defaults to the paper's counts.
+    timings) into ``out``. ``trials`` defaults to the paper's counts. ``out`` must be missing or
+    empty; ``manifest.json`` there lists the finished batches (:func:`jaxais.io.open_run`) and
+    ``resume=True`` finishes an interrupted run with the same arguments.
 
     Returns:
         (the ablation.json document, the run.json document).
@@ -664,14 +683,12 @@ def ablate(
     """
     import os
     import sys
-    import tempfile
     import time
 
     from tqdm import tqdm
 
     from jaxais.experiments.plotting import save_figure
     from jaxais.experiments.records import load_ltl_seed, versions
-    from jaxais.io import atomic_write_json, atomic_write_text
 
     worlds = list(worlds)
     unknown = sorted(set(worlds) - set(protocol.WORLDS))
@@ -691,19 +708,21 @@ def ablate(
         chosen = select(variants)
     except ValueError as err:
         raise ValueError(f"--variants: {err}") from None
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    tempfile.TemporaryFile(dir=out).close()  # writable: fail now, not after the runs
-
+    settings = dict(worlds=worlds, variants=[v.name for v in chosen], trials=trials, seed=seed,
+                    seeds=None if seeds is None else str(seeds), tau_cap=tau_cap,
+                    collision_cap=collision_cap, share=share)  # fmt: skip
     started = time.perf_counter()
-    # Read once, and early: a missing or corrupt seed fails before any trial runs.
+    # Read once, and early: a missing or corrupt seed fails before anything is written.
     ltl_seed, seed_info = load_ltl_seed(seeds)
+    folder = open_run(out, "ablate", settings, resume=resume)
+    out = folder.out
     base = dataclasses.replace(STL_CONFIG, tau_cap=tau_cap, collision_cap=collision_cap)
     n_trials = {w: protocol.trials_for_world(w) if trials is None else trials for w in worlds}
     with tqdm(unit="run", file=sys.stderr, desc="ablation") as bar:  # run_ablation sets the total
         result = run_ablation(
-            worlds, chosen, seed, ltl_seed, n_trials, base, share=share, progress=bar
-        )
+            worlds, chosen, seed, ltl_seed, n_trials, base, share=share, progress=bar,
+            folder=folder,
+        )  # fmt: skip
     wall = time.perf_counter() - started
 
     doc = document(result, chosen, n_trials)
@@ -734,4 +753,5 @@ def ablate(
         "timings_s": {"total_s": wall, "run_s": sum(c["run_s"] for c in result.calls)},
     }
     atomic_write_json(out / "run.json", run)
+    folder.complete()
     return doc, run

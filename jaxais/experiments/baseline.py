@@ -17,21 +17,29 @@ from typing import Any
 
 from jaxais.baselines.config import NN_LABEL, TrainConfig
 from jaxais.experiments import protocol
-from jaxais.io import UserError, atomic_write_json, atomic_write_text, read_json_object
+from jaxais.io import UserError, atomic_write_json, atomic_write_text, open_run, read_json_object
 
 REFERENCE = ("SIE", "HDC")
 """The paper's systems it runs beside."""
 
 
-def _output_dir(out: str | Path, into_checkpoints: bool) -> Path:
-    """``out``, created and writable; refused inside the shipped checkpoints/ unless asked."""
+def _output_dir(out: str | Path, into_checkpoints: bool, make: bool = True) -> Path:
+    """``out``, created and writable (``make``); refused inside the shipped checkpoints/ unless
+    asked."""
     out = Path(out)
     shipped = Path(str(resources.files("jaxais.checkpoints"))).resolve()
     if not into_checkpoints and shipped in (out.resolve(), *out.resolve().parents):
         raise ValueError(f"{out}: in the shipped checkpoints/ (--into-checkpoints to write there)")
+    if not make:
+        return out
     out.mkdir(parents=True, exist_ok=True)
     tempfile.TemporaryFile(dir=out).close()  # writable: fail now, not after the work
     return out
+
+
+def _check_weights(weights: str | Path | None) -> None:
+    if weights is not None and not (Path(weights) / "params.npz").is_file():
+        raise ValueError(f"{weights}: no params.npz to evaluate (train first)")
 
 
 def _versions() -> dict[str, str]:
@@ -167,8 +175,7 @@ def evaluate_baseline(
     """
     if not 0 <= seed < 2**32:
         raise ValueError(f"--eval-seed must be in [0, 2**32), got {seed}")
-    if weights is not None and not (Path(weights) / "params.npz").is_file():
-        raise ValueError(f"{weights}: no params.npz to evaluate (train first)")
+    _check_weights(weights)
     out = _output_dir(out, into_checkpoints)
     import numpy as np
     from tqdm import tqdm
@@ -224,6 +231,55 @@ def evaluate_baseline(
     atomic_write_json(out / "evaluation.json", stats.jsonable(doc))
     atomic_write_text(out / "evaluation.md", _table(doc, info))
     return doc
+
+
+def baseline(
+    out: str | Path,
+    config: TrainConfig | None = None,
+    *,
+    train: bool = True,
+    evaluate: bool = True,
+    seed: int = 0,
+    eval_seed: int = 0,
+    weights: str | Path | None = None,
+    seeds: str | Path | None = None,
+    log_every: int = 10,
+    command: str | None = None,
+    into_checkpoints: bool = False,
+    resume: bool = False,
+) -> tuple[dict[str, Any] | None, dict[str, Any] | None]:
+    """``scripts/train_baseline.py``: :func:`train_baseline` (``train``) and then
+    :func:`evaluate_baseline` (``evaluate``) of the new weights, or of ``weights`` (None: the
+    shipped ones) without ``train``, into ``out`` (missing or empty). Each stage is a unit of
+    ``out/manifest.json`` (:func:`jaxais.io.open_run`): ``resume=True`` finishes an interrupted
+    run with the same arguments, skipping a finished stage.
+
+    Returns:
+        (config.json's document or None, evaluation.json's or None).
+    """
+    config = TrainConfig() if config is None else config
+    if evaluate and not train:
+        _check_weights(weights)  # before anything is written
+    out = _output_dir(out, into_checkpoints, make=False)  # open_run makes it
+    settings = {"train": dataclasses.asdict(config) if train else None, "seed": seed,
+                "evaluate": evaluate, "eval_seed": eval_seed, "seeds": seeds and str(seeds),
+                "weights": weights and str(weights)}  # fmt: skip
+    folder = open_run(out, "train_baseline", settings, resume=resume)
+    info = doc = None
+    if train and "train" in folder.units:  # finished before an interruption
+        info = read_json_object(out / "config.json")
+    elif train:
+        info = train_baseline(out, config, seed=seed, log_every=log_every, command=command,
+                              into_checkpoints=into_checkpoints)  # fmt: skip
+        folder.finish("train")
+    if evaluate and "evaluate" in folder.units:
+        doc = read_json_object(out / "evaluation.json")
+    elif evaluate:
+        doc = evaluate_baseline(out if train else weights, out, seed=eval_seed, seeds=seeds,
+                                command=command, into_checkpoints=into_checkpoints)  # fmt: skip
+        folder.finish("evaluate")
+    folder.complete()
+    return info, doc
 
 
 def _p(p: float) -> str:

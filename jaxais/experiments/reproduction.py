@@ -11,7 +11,10 @@ every process runs its share and process 0 writes). It writes, under ``out``:
   with 95 % confidence intervals, and a summary);
 - ``report.md`` (opening with the claims ledger; figures in ``figures/``);
 - every trial in ``trials/`` and ``run.json`` (the config, seeds and timings needed to
-  regenerate it all).
+  regenerate it all);
+- ``manifest.json`` (:func:`jaxais.io.open_run`): the run's settings, whether it is complete,
+  and its finished units, a world each (its trials files and ``trials/WORLD_examples.npz``,
+  the drawn trials); ``resume=True`` finishes a partial run.
 
 Only the first trial of each system is drawn (run again with its trajectory recorded); the
 records of all trials are kept. SIE also runs with a selection every iteration (``hold=1``,
@@ -24,7 +27,7 @@ from __future__ import annotations
 
 import json
 import os
-import shlex
+import shutil
 import subprocess
 import sys
 import time
@@ -34,7 +37,7 @@ from typing import Any
 
 from jaxais.experiments import protocol
 from jaxais.experiments.one_system import command_line
-from jaxais.io import RUN_BYTES, atomic_write_json, check_memory
+from jaxais.io import RUN_BYTES, Run, atomic_write, atomic_write_json, check_memory, open_run
 
 __all__ = ["LTLRunError", "check_reproduce", "headline", "reproduce", "run_ltl"]
 
@@ -46,8 +49,9 @@ class LTLRunError(RuntimeError):
     """The LTL run (the GA) that ``evolve=True`` starts failed."""
 
 
-def run_ltl(out: Path, seed: int, generations: int | None = None) -> Path:
-    """Run the LTL (``scripts/evolve.py``'s defaults, GA seed ``seed``) into ``out``.
+def run_ltl(out: Path, seed: int, generations: int | None = None, resume: bool = False) -> Path:
+    """Run the LTL (``scripts/evolve.py``'s defaults, GA seed ``seed``) into ``out`` (continue
+    its checkpoints with ``resume``).
 
     The one place :func:`reproduce` runs the GA: a child process (``python -m
     jaxais.scripts.evolve``), which sets the GA's own XLA settings before its JAX starts.
@@ -61,7 +65,7 @@ def run_ltl(out: Path, seed: int, generations: int | None = None) -> Path:
     cmd = [sys.executable, "-m", "jaxais.scripts.evolve", "--out", str(out), "--seed", str(seed)]
     if generations is not None:
         cmd += ["--generations", str(generations)]
-    if subprocess.run(cmd).returncode != 0:
+    if subprocess.run(cmd + ["--resume"] * resume).returncode != 0:
         raise LTLRunError("the LTL run (scripts/evolve.py) failed; see its message above")
     return out / "seed"
 
@@ -77,26 +81,6 @@ def _ltl_summary(seed_dir: Path) -> dict | None:
     return None
 
 
-def _check_fresh_ltl_dir(ltl_dir: Path, seed: int, generations: int | None) -> None:
-    """Refuse to run the LTL into a folder an earlier ``evolve=True`` run left (evolve.py would
-    refuse too, with advice for its own flags), saying how to go on without losing that run."""
-    if not ltl_dir.exists() or (ltl_dir.is_dir() and not any(ltl_dir.iterdir())):
-        return
-    if not ltl_dir.is_dir():
-        raise ValueError(f"{ltl_dir} exists and is not a folder; remove it to run the LTL there")
-    if (ltl_dir / "seed").is_dir():
-        raise ValueError(
-            f"{ltl_dir} exists from an earlier --evolve run; remove it, or pass --seeds "
-            f"{ltl_dir / 'seed'} instead of --evolve to reuse its seed"
-        )
-    more = [] if generations is None else ["--generations", str(generations)]
-    resume = shlex.join(["scripts/evolve.py", "--out", str(ltl_dir), "--seed", str(seed), *more])
-    raise ValueError(
-        f"{ltl_dir} holds an unfinished LTL run; remove it, or finish it with "
-        f"'{resume} --resume' and then pass --seeds {ltl_dir / 'seed'} instead of --evolve"
-    )
-
-
 def check_reproduce(
     out: str | os.PathLike[str],
     *,
@@ -109,13 +93,9 @@ def check_reproduce(
     tau_cap: float | None = None,
     collision_cap: int | None = None,
 ) -> tuple[Path, list[str], float, int]:
-    """Check :func:`reproduce`'s arguments as it does and make ``out``, without loading JAX
-    (one-line ``ValueError``\\ s naming the script's flags): a script's check before its slow
-    start.
-
-    Returns:
-        The output folder, the worlds and the two caps, defaults filled in.
-    """
+    """Check :func:`reproduce`'s arguments as it does, without loading JAX (one-line
+    ``ValueError``\\ s naming the script's flags); returns the output folder, the worlds and the
+    two caps, defaults filled in. The folder itself is checked when the run opens it."""
     names = protocol.WORLDS if worlds is None else worlds
     names = [w for w in names.split(",") if w] if isinstance(names, str) else list(names)
     tau_cap = float(protocol.TAU_CAP if tau_cap is None else tau_cap)  # 10 and 10.0: one record
@@ -142,13 +122,7 @@ def check_reproduce(
         raise ValueError(f"--generations must be >= 1, got {generations}")
     if evolve and seeds is not None:
         raise ValueError("--seeds and --evolve exclude each other: the LTL makes the seed")
-    out = Path(out)
-    if evolve:
-        _check_fresh_ltl_dir(out / "ltl", seed, generations)
-    out.mkdir(parents=True, exist_ok=True)
-    if not os.access(out, os.W_OK | os.X_OK):
-        raise ValueError(f"{out}: directory is not writable")
-    return out, names, tau_cap, collision_cap
+    return Path(out), names, tau_cap, collision_cap
 
 
 def reproduce(
@@ -165,6 +139,7 @@ def reproduce(
     collision_cap: int | None = None,
     progress: bool = True,
     command: str | None = None,
+    resume: bool = False,
 ) -> dict[str, Any] | None:
     """Run the paper's experiments and write the tables, claims, report and every trial to ``out``.
 
@@ -182,6 +157,9 @@ def reproduce(
         progress: show a progress bar per world on stderr.
         command: the command recorded in ``run.json`` and the report (default: the
             ``reproduce.py`` command line these arguments stand for).
+        resume: finish the partial run in ``out`` (the same arguments): its finished worlds
+            (and LTL) are kept, the rest run, giving the uninterrupted run's results. Without
+            it ``out`` must be missing or empty (:func:`jaxais.io.open_run`).
 
     Returns:
         On the writing process, ``{"tables", "claims", "run", "report"}``: the documents of
@@ -189,7 +167,8 @@ def reproduce(
         other processes of a multi-process run.
 
     Raises:
-        ValueError: a bad argument, or a seed or weights that cannot be read (before any trial).
+        ValueError: a bad argument, ``out`` holding another run (or none to resume), or a seed
+            or weights that cannot be read (before any trial).
         LTLRunError: the LTL run failed.
     """
     if command is None:
@@ -203,35 +182,67 @@ def reproduce(
     out, names, tau_cap, collision_cap = check_reproduce(
         out, trials=trials, seed=seed, seeds=seeds, evolve=evolve, generations=generations,
         worlds=worlds, tau_cap=tau_cap, collision_cap=collision_cap)  # fmt: skip
+    import jax
+
+    # Process 0 of a multi-process run writes (and checks the folder); the others read it.
+    lead = not jax.distributed.is_initialized() or jax.process_index() == 0
+    from jaxais.baselines.neural import load_params
+    from jaxais.experiments.records import load_ltl_seed
+
+    # Read first: a missing or corrupt seed (or baseline) fails before anything is written.
+    loaded = None if evolve else load_ltl_seed(seeds)
+    nn = None
+    if baseline is not False:
+        try:
+            nn_params, nn_info = load_params(None if baseline is True else baseline)
+        except ValueError as err:
+            raise ValueError(f"--baseline: {err}") from None
+        # What made the weights (train_baseline.py's config.json holds the rest).
+        nn = nn_params, {"config": nn_info.get("config"), "seed": nn_info.get("seed")}
+    config = {"trials": trials, "seed": seed, "seeds": None if seeds is None else str(seeds),
+              "evolve": evolve, "generations": generations, "baseline": baseline if isinstance(
+              baseline, bool) else str(baseline), "worlds": names, "tau_cap": tau_cap,
+              "collision_cap": collision_cap}  # fmt: skip
+    run = open_run(out, "reproduce", config, resume=resume, write=lead)
 
     started = time.perf_counter()
     timings: dict[str, float] = {}
     if evolve:
-        t = time.perf_counter()
-        seeds = run_ltl(out / "ltl", seed, generations)
-        timings["ltl_s"] = time.perf_counter() - t
-    return _run(out, names, trials, seed, seeds, baseline, tau_cap, collision_cap,
-                progress=progress, command=command, started=started, timings=timings)  # fmt: skip
+        ltl = run.out / "ltl"
+        if "ltl" not in run.units:
+            from jaxais.experiments.seeds import ltl_state
+
+            t, state = time.perf_counter(), ltl_state(ltl)
+            if state == "fresh" and ltl.exists():
+                shutil.rmtree(ltl)  # this run's own LTL, killed before its first checkpoint
+            if state != "done":
+                run_ltl(ltl, seed, generations, resume=state == "resume")
+            run.finish("ltl", {"ltl_s": time.perf_counter() - t})
+        timings["ltl_s"] = run.units["ltl"]["ltl_s"]
+        seeds = ltl / "seed"
+        loaded = load_ltl_seed(seeds)
+    return _run(run, names, trials, seed, seeds, loaded, nn, tau_cap, collision_cap,
+                progress=progress, command=command, started=started, timings=timings,
+                lead=lead)  # fmt: skip
 
 
-def _run(out: Path, worlds: list[str], n_trials: int | None, seed: int,
-         seeds: str | os.PathLike[str] | None, baseline: str | os.PathLike[str] | bool,
-         tau_cap: float, collision_cap: int, *, progress: bool, command: str, started: float,
-         timings: dict[str, float]) -> dict[str, Any] | None:  # fmt: skip
-    """:func:`reproduce` once its arguments are checked and the LTL has run (``timings`` holds
-    its time, ``started`` the call's start): JAX starts here."""
-    import jax
+def _run(run: Run, worlds: list[str], n_trials: int | None, seed: int,
+         seeds: str | os.PathLike[str] | None, loaded: tuple, nn: tuple | None, tau_cap: float,
+         collision_cap: int, *, progress: bool, command: str, started: float,
+         timings: dict[str, float], lead: bool) -> dict[str, Any] | None:  # fmt: skip
+    """:func:`reproduce` once its arguments are checked, the seed (``loaded``) and baseline
+    (``nn``: weights and what made them, or None) read and the LTL run (``timings`` holds its
+    time, ``started`` the call's start): every world not finished in ``run`` runs here."""
     import numpy as np
     from tqdm import tqdm
 
     from jaxais import envs
     from jaxais.baselines.config import NN_LABEL
-    from jaxais.baselines.neural import NEURAL, load_params
+    from jaxais.baselines.neural import NEURAL
     from jaxais.experiments import claims, report, stats
     from jaxais.experiments.plotting import draw_world
     from jaxais.experiments.records import (
         build_systems,
-        load_ltl_seed,
         portable_command,
         results_document,
         run_config,
@@ -240,20 +251,11 @@ def _run(out: Path, worlds: list[str], n_trials: int | None, seed: int,
     from jaxais.immune.network import NetworkParams
     from jaxais.loop import EpisodeConfig
     from jaxais.seed import default_seed_dir
-    from jaxais.trials import run_trials
+    from jaxais.trials import Placement, run_trials
 
-    # Every process runs every trial's share (and gets every number); process 0 writes.
-    lead = jax.process_index() == 0
-    seeds_dir = Path(seeds) if seeds is not None else default_seed_dir()
-    # Read once, and early: a missing or corrupt seed (or baseline) fails before any trial runs.
-    loaded = load_ltl_seed(seeds_dir)
-    if baseline is not False:
-        try:
-            nn_params, nn_info = load_params(None if baseline is True else baseline)
-        except ValueError as err:
-            raise ValueError(f"--baseline: {err}") from None
-        # What made the weights (train_baseline.py's config.json holds the rest).
-        nn_info = {"config": nn_info.get("config"), "seed": nn_info.get("seed")}
+    out = run.out
+    seeds_dir = Path(seeds) if seeds else default_seed_dir()
+    nn_params, nn_info = nn or (None, None)
 
     network = NetworkParams()
     params = envs.default_params()
@@ -271,43 +273,63 @@ def _run(out: Path, worlds: list[str], n_trials: int | None, seed: int,
         labels = list(protocol.systems_for_world(name))
         n = n_trials if n_trials is not None else protocol.trials_for_world(name)
         systems, seed_info = build_systems(labels, seeds_dir, network, loaded)
-        sie = systems["SIE"]
-        hold1 = {CALIBRATED: sie.replace(readings=sie.readings.replace(hold=np.int32(1)))}
-        world_t: dict[str, float] = {}
-        k = len(labels) + 1 + (baseline is not False)
-        with tqdm(total=n * k, desc=f"{name}: {k} systems x {n} trials", unit="run",
-                  file=sys.stderr, disable=not (lead and progress)) as bar:  # fmt: skip
-            results = run_trials(world, systems | hold1, n, seed, config, params, bar, world_t)
-            calibration = results.pop(CALIBRATED)
-            if baseline is not False:
-                baseline_by_world[name] = run_trials(
-                    world, {NN_LABEL: nn_params}, n, seed, config, params, bar, world_t,
-                    controller=NEURAL,
-                )  # fmt: skip
-        first = run_trials(world, systems, 1, seed, example, params, None, world_t)
+        cfg = run_config(world, name, config, network, params, seed_info)
+        configs[name] = cfg
+        hold1_cfg = {**cfg, "readings": {**cfg["readings"], "hold": 1}}
+        # The run's config without the network's parts, with what made the weights.
+        nn_cfg = {k: v for k, v in cfg.items() if k not in ("network", "readings", "ltl_seed")}
+        nn_cfg["baseline"] = nn_info
+        files = {label: (label, cfg) for label in labels} | {"SIE_hold1": (CALIBRATED, hold1_cfg)}
+        files |= {NN_LABEL: (NN_LABEL, nn_cfg)} if nn is not None else {}
+        if name in run.units:  # a finished world: its trials and examples from its files
+            if not lead:
+                continue
+            world_t = run.units[name]
+            records = {
+                key: json.loads((out / "trials" / f"{name}_{key}.json").read_text())["trials"]
+                for key in files
+            }
+            with np.load(out / "trials" / f"{name}_examples.npz") as z:
+                trajectories[name] = {k: z[f"path:{k}"] for k in labels}
+                placements[name] = {k: Placement(z[f"boxes:{k}"], z[f"goal:{k}"]) for k in labels}
+        else:
+            sie = systems["SIE"]
+            hold1 = {CALIBRATED: sie.replace(readings=sie.readings.replace(hold=np.int32(1)))}
+            world_t = {}
+            k = len(labels) + 1 + (nn is not None)
+            with tqdm(total=n * k, desc=f"{name}: {k} systems x {n} trials", unit="run",
+                      file=sys.stderr, disable=not (lead and progress)) as bar:  # fmt: skip
+                sets = run_trials(world, systems | hold1, n, seed, config, params, bar, world_t)
+                sets["SIE_hold1"] = sets.pop(CALIBRATED)
+                if nn is not None:
+                    sets |= run_trials(
+                        world, {NN_LABEL: nn_params}, n, seed, config, params, bar, world_t,
+                        controller=NEURAL,
+                    )  # fmt: skip
+            first = run_trials(world, systems, 1, seed, example, params, None, world_t)
+            trajectories[name] = {k: v.trajectories[0][:, :2] for k, v in first.items()}
+            placements[name] = {k: v.placements[0] for k, v in first.items()}
+            if not lead:
+                continue
+            records = {key: ts.records for key, ts in sets.items()}
+            # The world's unit: every trials file and the drawn examples, then the manifest.
+            for key, (label, doc_cfg) in files.items():
+                doc = results_document(label, name, seed, sets[key], doc_cfg)
+                atomic_write_json(out / "trials" / f"{name}_{key}.json", doc)
+            arrays = {f"path:{k}": v for k, v in trajectories[name].items()}
+            for k, p in placements[name].items():
+                arrays |= {f"boxes:{k}": p.boxes, f"goal:{k}": p.goal}
+            atomic_write(
+                out / "trials" / f"{name}_examples.npz", lambda t, a=arrays: np.savez(t, **a)
+            )
+            run.finish(name, world_t)
         for key, value in world_t.items():
             timings[f"{name}_{key}"] = value
             timings[key] = timings.get(key, 0.0) + value
-        cfg = run_config(world, name, config, network, params, seed_info)
-        configs[name] = cfg
-        results_by_world[name] = {k: v.records for k, v in results.items()}
-        calibration_by_world[name] = {"SIE": calibration.records}
-        trajectories[name] = {k: v.trajectories[0][:, :2] for k, v in first.items()}
-        placements[name] = {k: v.placements[0] for k, v in first.items()}
-        if not lead:
-            continue
-        for label, trial_set in results.items():
-            doc = results_document(label, name, seed, trial_set, cfg)
-            atomic_write_json(out / "trials" / f"{name}_{label}.json", doc)
-        hold1_cfg = {**cfg, "readings": {**cfg["readings"], "hold": 1}}
-        doc = results_document(CALIBRATED, name, seed, calibration, hold1_cfg)
-        atomic_write_json(out / "trials" / f"{name}_SIE_hold1.json", doc)
-        for label, trial_set in baseline_by_world.get(name, {}).items():
-            # The run's config without the network's parts, with what made the weights.
-            nn_cfg = {k: v for k, v in cfg.items() if k not in ("network", "readings", "ltl_seed")}
-            nn_cfg["baseline"] = nn_info
-            doc = results_document(label, name, seed, trial_set, nn_cfg)
-            atomic_write_json(out / "trials" / f"{name}_{label}.json", doc)
+        results_by_world[name] = {k: records[k] for k in labels}
+        calibration_by_world[name] = {"SIE": records["SIE_hold1"]}
+        if nn is not None:
+            baseline_by_world[name] = {NN_LABEL: records[NN_LABEL]}
 
     if not lead:
         return None
@@ -318,8 +340,7 @@ def _run(out: Path, worlds: list[str], n_trials: int | None, seed: int,
         results_by_world, calibration_by_world, {"k1": network.k1, "k2": network.k2}
     )
     if baseline_by_world:
-        records = {w: {k: ts.records for k, ts in d.items()} for w, d in baseline_by_world.items()}
-        tables["baseline"] = stats.baseline_tables(results_by_world, records)
+        tables["baseline"] = stats.baseline_tables(results_by_world, baseline_by_world)
         tables["baseline"]["weights"] = nn_info
     atomic_write_json(out / "tables.json", tables)
     ledger = claims.claims(results_by_world, cis=cis)
@@ -327,7 +348,7 @@ def _run(out: Path, worlds: list[str], n_trials: int | None, seed: int,
     claims_doc = claims.document(ledger)
     atomic_write_json(out / "claims.json", claims_doc)
     timings["total_s"] = time.perf_counter() - started
-    run = {
+    run_doc = {
         "command": portable_command(command),
         "seed": seed,
         "trials": n_trials,
@@ -336,7 +357,7 @@ def _run(out: Path, worlds: list[str], n_trials: int | None, seed: int,
         "versions": versions(),
         "timings_s": timings,
     }
-    atomic_write_json(out / "run.json", run)
+    atomic_write_json(out / "run.json", run_doc)
     drawn = {name: envs.load_world(name) for name in worlds}
     report_path = report.write_report(
         out,
@@ -344,7 +365,7 @@ def _run(out: Path, worlds: list[str], n_trials: int | None, seed: int,
         results_by_world,
         report.load_paper_tables(),
         _ltl_summary(seeds_dir),
-        {k: v for k, v in run.items() if k != "timings_s"},
+        {k: v for k, v in run_doc.items() if k != "timings_s"},
         timings,
         trajectories,
         lambda ax, world_name, placement=None: draw_world(ax, drawn[world_name], placement),
@@ -352,7 +373,8 @@ def _run(out: Path, worlds: list[str], n_trials: int | None, seed: int,
         example_placements=placements,
         baseline=tables.get("baseline"),
     )
-    return {"tables": tables, "claims": claims_doc, "run": run, "report": report_path}
+    run.complete()
+    return {"tables": tables, "claims": claims_doc, "run": run_doc, "report": report_path}
 
 
 def headline(result: Mapping[str, Any]) -> str:

@@ -12,15 +12,14 @@ and tabulates which claims and hypotheses hold on how many seeds: ``OUT/seeds.js
 ``OUT/run.json`` (command, settings, versions, wall times). :func:`summarise` and
 :func:`markdown` make the ledger from the runs' files alone.
 
-Running again with the same arguments goes on where a run stopped:
+``OUT/manifest.json`` (:func:`jaxais.io.open_run`) records the settings and the finished seeds
+(a seed is finished once reproduce.py exited 0); ``resume=True`` goes on where a run stopped:
 
 - a seed's LTL is done when ``seed/seed.json`` and ``summary.json`` exist (evolve.py writes the
   seed folder whole, summary.json last); a complete checkpoint without them is continued with
   ``--resume`` (exactly the seed of an uninterrupted run); otherwise it starts afresh;
-- a seed's STL is done when the ledger's marker ``OUT/seeds/seed_s.json`` (written atomically once
-  reproduce.py exited 0) exists with the same settings, and ``report.md``, reproduce.py's last
-  file, too. Anything else in ``OUT/stl/seed_s`` is removed and the protocol runs again (it is
-  deterministic: the same bits).
+- a seed's STL that reproduce.py began (its own manifest) is finished with its ``--resume``
+  (its finished worlds kept, the same bits); a folder without one is removed and run again.
 
 Wall times: the LTL's is evolve.py's own ``wall_time_total_s`` (summed over resumes), the STL's
 the reproduce.py subprocess's. Nothing here imports JAX (the subprocesses have the device).
@@ -29,7 +28,6 @@ the reproduce.py subprocess's. Nothing here imports JAX (the subprocesses have t
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import signal
 import statistics
@@ -42,7 +40,7 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
-from jaxais.io import ON_SIGNAL, atomic_write_json, atomic_write_text
+from jaxais.io import MANIFEST, ON_SIGNAL, Run, atomic_write_json, atomic_write_text, open_run
 
 __all__ = ["SeedRunError", "headline", "ltl_ledger", "ltl_state", "markdown", "summarise"]
 
@@ -202,7 +200,7 @@ def markdown(summary: Mapping[str, Any]) -> str:
     """``seeds.md``: per-seed table, per-claim frequencies, hypotheses, and how it was made."""
     rows, hyps = summary["seeds"], list(summary["hypotheses"])
     worlds = list(dict.fromkeys(w for r in rows.values() for w in r["failure_pct"]))
-    status = "complete" if summary["complete"] else "partial: run the command again to go on"
+    status = "complete" if summary["complete"] else "partial: run it again with --resume"
     held = summary["claims_held"]
     held_line = "Claims held: no seed done yet."
     if rows:
@@ -296,33 +294,22 @@ class _Processes:
                 proc.kill()
 
 
-def _paths(out: Path, s: int) -> tuple[Path, Path, Path]:
-    """(LTL folder, STL folder, the ledger's done-marker) of seed ``s``."""
-    return out / "ltl" / f"seed_{s}", out / "stl" / f"seed_{s}", out / "seeds" / f"seed_{s}.json"
+def _paths(out: Path, s: int) -> tuple[Path, Path]:
+    """(LTL folder, STL folder) of seed ``s``."""
+    return out / "ltl" / f"seed_{s}", out / "stl" / f"seed_{s}"
 
 
-def _stl_done(out: Path, s: int, settings: dict[str, Any]) -> bool:
-    _, stl, marker = _paths(out, s)
-    mark = _read_json(marker)
-    if isinstance(mark, dict) and mark.get("settings") != settings:
-        raise ValueError(
-            f"{out}: seed {s} was run with {mark.get('settings')}, not {settings}; use the same "
-            "settings or another output folder"
-        )
-    return isinstance(mark, dict) and (stl / "report.md").is_file()
-
-
-def _documents(out: Path, s: int) -> dict[str, Any]:
-    ltl, stl, marker = _paths(out, s)
+def _documents(folder: Run, s: int) -> dict[str, Any]:
+    ltl, stl = _paths(folder.out, s)
     docs = {k: _read_json(stl / f"{k}.json") for k in ("tables", "claims")}
     for k, doc in docs.items():
         if not isinstance(doc, dict):
-            raise ValueError(f"{stl / f'{k}.json'}: missing or not JSON; remove {marker} to rerun")
+            raise ValueError(f"{stl / f'{k}.json'}: missing or not JSON; use a fresh --out")
     docs["ltl_summary"] = _read_json(ltl / "summary.json")
     docs["ltl_seed"] = _read_json(ltl / "seed" / "seed.json")
     docs["wall_s"] = {
         "ltl": _get(docs["ltl_summary"], "wall_time_total_s"),
-        "stl": _get(_read_json(marker), "stl_wall_s"),
+        "stl": folder.units[f"seed {s}"]["stl_wall_s"],
     }
     return docs
 
@@ -347,11 +334,10 @@ def _versions(out: Path, done: Iterable[int]) -> dict[str, Any]:
     return versions
 
 
-def _run_seed(out: Path, s: int, settings: dict, run: Runner, logs: bool, note, stop) -> bool:
-    """Seed ``s``'s LTL and STL, each unless done. Returns whether the STL ran."""
-    ltl, stl, marker = _paths(out, s)
-    if _stl_done(out, s, settings):
-        return False
+def _run_seed(folder: Run, s: int, settings: dict, run: Runner, logs: bool, note, stop) -> float:
+    """Seed ``s``'s LTL (unless done) and STL. Returns the STL's wall time."""
+    out = folder.out
+    ltl, stl = _paths(out, s)
 
     def log(stage: str) -> Path | None:
         return out / "logs" / f"seed_{s}.{stage}.log" if logs else None
@@ -370,25 +356,23 @@ def _run_seed(out: Path, s: int, settings: dict, run: Runner, logs: bool, note, 
         if not (ltl / "seed" / "seed.json").is_file():
             raise SeedRunError(s, "LTL", f"scripts/evolve.py exited 0 but wrote no {ltl}/seed")
     if stop.is_set():
-        return False
-    marker.unlink(missing_ok=True)
-    if stl.exists():
-        shutil.rmtree(stl)  # a partial run: reproduce.py is deterministic, so run it again
+        return -1.0
+    resume = (stl / MANIFEST).is_file()  # reproduce.py began: it finishes its own partial run
+    if stl.exists() and not resume:
+        shutil.rmtree(stl)  # killed before reproduce.py wrote anything
     cmd = [sys.executable, "-m", "jaxais.scripts.reproduce", "--seeds", str(ltl / "seed"),
            "--out", str(stl), "--seed", str(s), "--no-baseline"]  # fmt: skip
     if settings["trials"] is not None:
         cmd += ["--trials", str(settings["trials"])]
-    note(f"seed {s}: STL started ({stl})")
+    cmd += ["--resume"] * resume
+    note(f"seed {s}: STL {'resumed' if resume else 'started'} ({stl})")
     t = time.perf_counter()
     code = run(cmd + settings["extra_args"], log("stl"))
     if code != 0:
         raise failed("STL", "scripts/reproduce.py", code)
     if not (stl / "report.md").is_file():
         raise SeedRunError(s, "STL", f"scripts/reproduce.py exited 0 but wrote no {stl}/report.md")
-    marker.parent.mkdir(parents=True, exist_ok=True)
-    doc = {"seed": s, "settings": settings, "stl_wall_s": round(time.perf_counter() - t, 3)}
-    atomic_write_json(marker, doc)
-    return True
+    return round(time.perf_counter() - t, 3)
 
 
 def ltl_ledger(
@@ -401,11 +385,13 @@ def ltl_ledger(
     *,
     command: str | None = None,
     runner: Runner | None = None,
+    resume: bool = False,
 ) -> dict[str, Any]:
     """Run the LTL and the paper's protocol on every seed (each unless done) and tabulate them.
 
     Args:
-        out: the output folder (created if missing); see the module docstring for its layout.
+        out: the output folder (missing or empty, or with ``resume`` the interrupted run's);
+            see the module docstring for its layout.
         seeds: the GA seeds (each also the STL's trial seed).
         trials: reproduce.py's ``--trials`` (default: the paper's counts).
         jobs: how many seeds' pipelines run side by side; with more than one, each subprocess
@@ -414,12 +400,13 @@ def ltl_ledger(
         progress: print a line on stderr as each stage starts and each seed ends.
         command: how the ledger was started, for its records (default: this call).
         runner: runs one subprocess (tests inject one); default: a child process of this one.
+        resume: finish the interrupted run in ``out`` (the same seeds, trials and extra_args).
 
     Returns:
         The ledger (``seeds.json``'s document) over the requested seeds that are done.
 
     Raises:
-        ValueError: bad arguments, or ``out`` made with other settings.
+        ValueError: bad arguments, or ``out`` holding another run (or none to resume).
         SeedRunError: a subprocess failed (after the seeds already running finished; the
             ledger of the finished seeds is written).
     """
@@ -435,16 +422,10 @@ def ltl_ledger(
     extra = [str(a) for a in extra_args]
     if any(a.split("=")[0] in RESERVED for a in extra):
         raise ValueError(f"extra_args may not set {', '.join(RESERVED)} (the ledger sets them)")
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"{out}: not a directory")
     settings = {"trials": trials, "extra_args": extra}
     if command is None:
         command = f"ltl_ledger({str(out)!r}, seeds={seeds}, trials={trials}, extra_args={extra})"
-    out.mkdir(parents=True, exist_ok=True)
-    if not os.access(out, os.W_OK | os.X_OK):
-        raise ValueError(f"{out}: directory is not writable")
-    for s in seeds:
-        _stl_done(out, s, settings)  # other settings in out: fail before anything runs
+    folder = open_run(out, "seeds", {"seeds": seeds, **settings}, resume=resume)
     lock, stop, procs = threading.Lock(), threading.Event(), _Processes()
     run = runner or procs
 
@@ -454,7 +435,7 @@ def ltl_ledger(
 
     def write() -> dict[str, Any]:
         with lock:
-            done = {s: _documents(out, s) for s in seeds if _stl_done(out, s, settings)}
+            done = {s: _documents(folder, s) for s in seeds if f"seed {s}" in folder.units}
             summary = summarise(done, seeds) | {"command": command}
             atomic_write_json(out / "seeds.json", summary)
             atomic_write_text(out / "seeds.md", markdown(summary))
@@ -466,16 +447,25 @@ def ltl_ledger(
 
     def pipeline(s: int) -> None:
         try:
-            if stop.is_set() or not _run_seed(out, s, settings, run, jobs > 1, note, stop):
+            if stop.is_set() or f"seed {s}" in folder.units:
                 return
+            wall = _run_seed(folder, s, settings, run, jobs > 1, note, stop)
+            if wall < 0:  # stopped between its LTL and its STL
+                return
+            with lock:
+                folder.finish(f"seed {s}", {"stl_wall_s": wall})
         except BaseException:
             stop.set()  # here, before this worker takes the next seed
             raise
         note(f"seed {s}: done; {headline(write())}")
 
+    def on_signal() -> None:  # what a signal that ends the script at once must still do
+        procs.stop()
+        lock.acquire(timeout=2)  # a worker's write in flight ends (its temporary files go)
+
     write()
     pool, errors = ThreadPoolExecutor(max_workers=jobs), []
-    ON_SIGNAL.append(procs.stop)  # a signal that ends the script at once stops the children too
+    ON_SIGNAL.append(on_signal)
     try:
         futures = [pool.submit(pipeline, s) for s in seeds]
         for future in as_completed(futures):
@@ -488,8 +478,10 @@ def ltl_ledger(
         procs.stop()
         raise
     finally:
-        ON_SIGNAL.remove(procs.stop)
+        ON_SIGNAL.remove(on_signal)
         pool.shutdown(wait=True, cancel_futures=True)
     if errors:
         raise errors[0]
-    return write()
+    summary = write()
+    folder.complete()
+    return summary

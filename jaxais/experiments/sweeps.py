@@ -33,6 +33,7 @@ from scipy import stats as sps
 from jaxais import envs
 from jaxais.controllers import System, stl_for
 from jaxais.immune.readings import readings as make_readings
+from jaxais.io import Run, atomic_write_json, open_run
 from jaxais.loop import EpisodeConfig
 from jaxais.runner import run_pool, segment_length
 from jaxais.trials import _keys, stream_id
@@ -217,8 +218,10 @@ def run_sweep(
     sim_params: envs.SimParams | None = None,
     slots: int = 1024,
     progress: Callable[[int], None] | None = None,
+    run: Run | None = None,
 ) -> dict[str, Any]:
-    """Every grid point's ``n_trials`` trials of ``base`` with the point's values.
+    """Every grid point's ``n_trials`` trials of ``base`` with the point's values, in chunks of
+    about ``slots`` runs (whole points; a run's numbers do not depend on its batch mates).
 
     Args:
         world: the world. base: the system at the paper's constants. label: its label (it
@@ -226,6 +229,8 @@ def run_sweep(
         axes: (parameter name, values) per axis (:func:`parse_axis`).
         slots: runs live at once (:func:`jaxais.runner.run_pool`).
         progress: called with the number of runs that ended, after every segment.
+        run: the results folder: each chunk's point summaries are recorded there as a unit,
+            and a chunk it holds already is not run again.
 
     Returns:
         ``{"axes": {name: values}, "points": [{"values": {...}, <summarise_point>}, ...],
@@ -234,40 +239,43 @@ def run_sweep(
     sim_params = envs.default_params() if sim_params is None else sim_params
     points = grid_points(axes)
     grid = point_systems(base, points)
-    n_points = len(points)
-    trials = np.tile(np.arange(n_trials, dtype=np.uint32), n_points)
-    streams = np.full(trials.size, stream_id(label), np.uint32)
-    reset_keys, run_keys = _keys(jax.random.key(seed), streams, trials)
-    params = jax.tree.map(lambda a: np.repeat(a, n_trials, axis=0), grid)
     align = segment_length(config.chunk, int(base.network.idiotope_period))
+    per = max(1, slots // n_trials)  # points per chunk: about one pool of runs each
     start = time.perf_counter()
-    res = run_pool(
-        reset_keys,
-        run_keys,
-        params,
-        world,
-        sim_params,
-        stl_for(grid),
-        config,
-        slots=slots,
-        align=align,
-        progress=progress,
-    )
+    out_points, iterations = [], 0
+    for lo in range(0, len(points), per):
+        hi = min(lo + per, len(points))
+        unit = f"points {lo}-{hi - 1}"
+        if run is not None and unit in run.units:  # a chunk finished before a resume
+            got = run.units[unit]
+            if progress is not None:
+                progress(n_trials * (hi - lo))
+        else:
+            trials = np.tile(np.arange(n_trials, dtype=np.uint32), hi - lo)
+            streams = np.full(trials.size, stream_id(label), np.uint32)
+            reset_keys, run_keys = _keys(jax.random.key(seed), streams, trials)
+            params = jax.tree.map(lambda a, lo=lo, hi=hi: np.repeat(a[lo:hi], n_trials, 0), grid)
+            res = run_pool(reset_keys, run_keys, params, world, sim_params, stl_for(grid),
+                           config, slots=slots, align=align, progress=progress)  # fmt: skip
+            got = {"points": [], "iterations": int(np.sum(res["iterations"], dtype=np.int64))}
+            for p in range(hi - lo):
+                part = {k: v[p * n_trials : (p + 1) * n_trials] for k, v in res.items()}
+                got["points"].append({"values": points[lo + p], **summarise_point(part)})
+            if run is not None:
+                run.finish(unit, got)
+        out_points += got["points"]
+        iterations += got["iterations"]
     wall = time.perf_counter() - start
-    out_points = []
-    for p, point in enumerate(points):
-        part = {k: v[p * n_trials : (p + 1) * n_trials] for k, v in res.items()}
-        out_points.append({"values": point, **summarise_point(part)})
-    iterations = int(np.sum(res["iterations"], dtype=np.int64))
+    runs = n_trials * len(points)
     base_values = {name: _value_of(base, name) for name, _ in axes}
     return {
         "axes": {name: values.tolist() for name, values in axes},
         "base_values": base_values,
         "points": out_points,
-        "runs": int(trials.size),
+        "runs": runs,
         "robot_iterations": iterations,
         "wall_s": wall,
-        "runs_per_s": trials.size / wall,
+        "runs_per_s": runs / wall,
         "robot_iterations_per_s": iterations / wall,
     }
 
@@ -349,10 +357,11 @@ def run_noise_sweep(
     sim_params: envs.SimParams | None = None,
     kinds: Sequence[str] = tuple(NOISE_KINDS),
     progress: Callable[[int], None] | None = None,
+    run: Run | None = None,
 ) -> dict[str, Any]:
     """Every system's trials in ``world`` with its noise scaled by each of ``scales`` (1 = the
     world's own levels); one batch per scale, the same seed (common random numbers for the
-    placements and the controllers' draws).
+    placements and the controllers' draws). ``run``: as in :func:`run_sweep`, a scale a unit.
 
     Returns:
         ``{"kinds", "scales", "points": [{"scale", "levels", "systems": {label:
@@ -363,11 +372,16 @@ def run_noise_sweep(
     start = time.perf_counter()
     worlds = [noisy_world(world, s, kinds) for s in scales]  # every scale checked first
     points = []
-    for scale, w in zip(scales, worlds, strict=True):
-        res = run_trials(w, systems, n_trials, seed, config, sim_params)
-        levels = {n: float(getattr(w, n)) for names in NOISE_KINDS.values() for n in names}
-        summary = {k: summarise_point(_arrays(ts.records)) for k, ts in res.items()}
-        points.append({"scale": float(scale), "levels": levels, "systems": summary})
+    for i, (scale, w) in enumerate(zip(scales, worlds, strict=True)):
+        if run is not None and f"scale {i}" in run.units:
+            points.append(run.units[f"scale {i}"])
+        else:
+            res = run_trials(w, systems, n_trials, seed, config, sim_params)
+            levels = {n: float(getattr(w, n)) for names in NOISE_KINDS.values() for n in names}
+            summary = {k: summarise_point(_arrays(ts.records)) for k, ts in res.items()}
+            points.append({"scale": float(scale), "levels": levels, "systems": summary})
+            if run is not None:
+                run.finish(f"scale {i}", points[-1])
         if progress is not None:
             progress(1)
     return {
@@ -397,6 +411,7 @@ def sweep(
     collision_cap: int | None = None,
     slots: int = 1024,
     command: str | None = None,
+    resume: bool = False,
 ) -> dict[str, Any]:
     """A grid over the STL's parameters (``grid``: :func:`parse_axis` specs) or the reality gap
     (``noise``: scales of the world's noise, 1 = its own levels), written into ``out``.
@@ -409,11 +424,14 @@ def sweep(
     (joined by the caller) every process computes the same numbers and process 0 writes.
     Returns the document.
 
+    ``out`` must be missing or empty; it records the finished chunks of the grid (the noise
+    scales) in ``manifest.json`` (:func:`jaxais.io.open_run`), and ``resume=True`` finishes an
+    interrupted run with the same arguments, giving the uninterrupted run's numbers.
+
     Raises:
         ValueError: a bad argument (one line), before anything runs.
     """
     import sys
-    import tempfile
 
     from tqdm import tqdm
 
@@ -421,7 +439,7 @@ def sweep(
     from jaxais.experiments.records import build_systems, portable_command, run_config
     from jaxais.experiments.sweep_plots import save_noise_figure, save_sweep_figures
     from jaxais.immune.network import NetworkParams
-    from jaxais.io import RUN_BYTES, atomic_write_json, check_memory
+    from jaxais.io import RUN_BYTES, check_memory
     from jaxais.labels import SYSTEMS, label, parse_label
 
     if (grid is None) == (noise is None):
@@ -471,10 +489,6 @@ def sweep(
         raise ValueError(f"--noise-kinds: one or more of {', '.join(NOISE_KINDS)}, each once")
     pool = points if grid is not None else len(names)  # runs per trial index in one pool
     check_memory(trials, pool * RUN_BYTES, "--trials")
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    tempfile.TemporaryFile(dir=out).close()  # writable: fail now, not after the runs
-
     loaded = envs.load_world(world)
     config = EpisodeConfig(
         tau_cap=protocol.TAU_CAP if tau_cap is None else tau_cap,
@@ -491,17 +505,21 @@ def sweep(
         total, unit = len(noise), "level"
     # Every process runs every step (and computes the same numbers); process 0 reports and writes.
     lead = jax.process_index() == 0
+    settings = dict(grid=grid, noise=noise, noise_kinds=noise_kinds, system=names, world=world,
+                    trials=trials, seed=seed, seeds=None if seeds is None else str(seeds),
+                    tau_cap=tau_cap, collision_cap=collision_cap, slots=slots)  # fmt: skip
+    run = open_run(out, "sweep", settings, resume=resume, write=lead)
     start = time.perf_counter()
     desc = f"{','.join(names)} in {loaded.name}"
     with tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, disable=not lead) as bar:
         if grid is not None:
             doc = run_sweep(
                 loaded, systems[names[0]], names[0], axes, trials, seed, config, params, slots,
-                bar.update,
+                bar.update, run,
             )  # fmt: skip
         else:
             doc = run_noise_sweep(
-                loaded, systems, noise, trials, seed, config, params, kinds, bar.update
+                loaded, systems, noise, trials, seed, config, params, kinds, bar.update, run
             )
     doc["wall_s_total"] = time.perf_counter() - start
     doc |= {"system": ",".join(names), "world": loaded.name, "seed": seed, "trials": trials}
@@ -515,9 +533,10 @@ def sweep(
     doc["config"] = cfg
     if lead:
         name = "sweep" if grid is not None else "reality_gap"
-        atomic_write_json(out / f"{name}.json", doc)
+        atomic_write_json(run.out / f"{name}.json", doc)
         if grid is not None:
-            save_sweep_figures(doc, out)
+            save_sweep_figures(doc, run.out)
         else:
-            save_noise_figure(doc, out)
+            save_noise_figure(doc, run.out)
+        run.complete()
     return doc

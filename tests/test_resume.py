@@ -1,0 +1,250 @@
+"""Results folders that say what they hold, and ``--resume`` (``jaxais.io.open_run``).
+
+The manifest's rules are checked on the library alone. Each long-running script (sweep.py,
+ablate.py, train_baseline.py, the seed ledger; reproduce.py in ``tests/test_scripts_stl.py``,
+beside its reference run) is killed by a signal at a moment read from its manifest (no fixed
+sleeps), resumed, and its results compared with an uninterrupted run's, exactly. Tiny runs share
+one compilation cache, so each program compiles once.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import _stl_fixtures as F
+import numpy as np
+import pytest
+from test_seeds import FakeScripts
+
+from jaxais.io import MANIFEST, UserError, open_run
+
+ROOT = Path(__file__).resolve().parent.parent
+EXIT = {signal.SIGINT: 130, signal.SIGTERM: 143, signal.SIGKILL: -9}
+
+
+# ------------------------------------------------------------------------------- the manifest
+
+
+def _manifest(out: Path) -> dict:
+    return json.loads((out / MANIFEST).read_text())
+
+
+def test_a_fresh_run_needs_an_empty_folder_and_says_at_once_that_it_is_partial(tmp_path):
+    run = open_run(tmp_path / "new", "sweep", {"trials": 2, "grid": ("k1=1",)})
+    assert _manifest(tmp_path / "new") == {
+        "kind": "sweep", "status": "partial", "config": {"trials": 2, "grid": ["k1=1"]},
+        "units": {},
+    }  # fmt: skip
+    run.finish("points 0-0", {"mean": 1.5})
+    assert _manifest(run.out)["units"] == {"points 0-0": {"mean": 1.5}}
+    run.complete()
+    assert _manifest(run.out)["status"] == "complete"
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("a user's file")
+    with pytest.raises(UserError, match=r"mine is not empty and holds no run: give a fresh or"):
+        open_run(mine, "sweep", {})
+    assert [p.name for p in mine.iterdir()] == ["notes.txt"]
+    (tmp_path / "file").write_text("")
+    with pytest.raises(UserError, match=r"file: not a directory"):
+        open_run(tmp_path / "file", "sweep", {})
+
+
+def test_another_run_in_the_folder_is_refused_in_one_line(tmp_path):
+    out = tmp_path / "r"
+    cfg = {"trials": 2, "seed": 0}
+    run = open_run(out, "reproduce", cfg)
+    run.finish("world1", {"run_s": 1.0})
+    cases = [
+        ({}, rf"^{out} holds a partial reproduce run: finish it with --resume, or give a fresh "
+             "--out$"),
+        ({"resume": True, "config": {"trials": 4, "seed": 0}},
+         rf"^--trials: the run in {out} has 2, not 4; resume it with the same settings, or give"),
+        ({"resume": True, "config": {"trials": 2}}, r"^--seed: the run in .* has 0, not null;"),
+        ({"resume": True, "kind": "sweep"}, rf"^{out} holds a reproduce run, not a sweep run"),
+    ]  # fmt: skip
+    for kw, message in cases:
+        args = {"kind": "reproduce", "config": cfg} | kw
+        with pytest.raises(UserError, match=message):
+            open_run(out, args.pop("kind"), args.pop("config"), **args)
+    assert open_run(out, "reproduce", cfg, resume=True).units == {"world1": {"run_s": 1.0}}
+    # A process of a multi-process run that does not write checks nothing and reads the units.
+    assert open_run(out, "reproduce", {}, write=False).units == {}
+    assert open_run(out, "reproduce", {}, resume=True, write=False).units == run.units
+    run.complete()
+    with pytest.raises(UserError, match="holds a complete reproduce run: remove it or give a"):
+        open_run(out, "reproduce", cfg)
+    with pytest.raises(UserError, match=rf"^{tmp_path / 'none'}: no run to resume \(no manif"):
+        open_run(tmp_path / "none", "reproduce", cfg, resume=True)
+    assert not (tmp_path / "none").exists()
+    (out / MANIFEST).write_text('["not", "a", "manifest"]')
+    with pytest.raises(UserError, match=r"manifest.json: not a run manifest \(.*\); use a fresh"):
+        open_run(out, "reproduce", cfg, resume=True)
+
+
+def test_resume_removes_the_temporary_files_a_sigkill_left(tmp_path):
+    run = open_run(tmp_path, "ablate", {})
+    (tmp_path / "batches").mkdir()
+    cut = [tmp_path / ".run.json.k2j3h4g5.json", tmp_path / "batches" / ".0.json.abcdefgh.json"]
+    for p in cut:
+        p.write_text("{")
+    (tmp_path / "batches" / "0.json").write_text("{}")
+    open_run(tmp_path, "ablate", {}, resume=True)
+    assert not any(p.exists() for p in cut) and (tmp_path / "batches" / "0.json").exists()
+    assert run.units == {}
+
+
+# ------------------------------------------------------------------------- killing the scripts
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory) -> dict[str, str]:
+    """One compilation cache for every script run here: each program compiles once."""
+    d = tmp_path_factory.mktemp("xla_cache")
+    return {"JAXAIS_CACHE_DIR": str(d), "JAX_COMPILATION_CACHE_DIR": str(d)}
+
+
+def start(script: str, *args: object, env: dict[str, str] | None = None) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, f"scripts/{script}", *map(str, args)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "JAXAIS_DEBUG": "", **(env or {})},
+    )
+
+
+def finish(proc: subprocess.Popen, status: int = 0) -> tuple[str, str]:
+    out, err = proc.communicate(timeout=600)
+    assert proc.returncode == status, err[-3000:]
+    return out, err
+
+
+def kill_after(proc: subprocess.Popen, out: Path, units: int, sig: signal.Signals) -> None:
+    """Send ``sig`` once ``out``'s manifest lists ``units`` finished units (0: once it exists),
+    and check that the script ended by it: one line for SIGINT and SIGTERM, no temporary file."""
+    deadline = time.monotonic() + 600
+    while proc.poll() is None and time.monotonic() < deadline:
+        try:
+            if len(_manifest(out)["units"]) >= units:
+                break
+        except (OSError, ValueError):
+            pass
+        time.sleep(0.02)
+    proc.send_signal(sig)
+    _, err = finish(proc, EXIT[sig])
+    if sig != signal.SIGKILL:
+        word = "interrupted" if sig == signal.SIGINT else "terminated"
+        assert err.splitlines()[-1].endswith(f": error: {word}"), err[-2000:]
+        assert not [p for p in out.rglob(".*") if p.is_file()]
+    assert _manifest(out)["status"] == "partial"
+
+
+def test_sweep_killed_twice_and_resumed_gives_the_uninterrupted_sweep(tmp_path, cache):
+    # 4 chunks of one point each: 4 units.
+    args = ("--grid", "k1=0.85,1.6", "--grid", "k2=1.1,2", "--trials", 1, "--slots", 1,
+            "--tau-cap", 4)  # fmt: skip
+    ref, out = tmp_path / "ref", tmp_path / "out"
+    finish(start("sweep.py", *args, "--out", ref, env=cache))
+    kill_after(start("sweep.py", *args, "--out", out, env=cache), out, 1, signal.SIGINT)
+    again = start("sweep.py", *args, "--out", out, "--resume", env=cache)
+    kill_after(again, out, 2, signal.SIGKILL)
+    finish(start("sweep.py", *args, "--out", out, "--resume", env=cache))
+    a, b = (json.loads((d / "sweep.json").read_text()) for d in (ref, out))
+    for key in ("axes", "base_values", "points", "runs", "robot_iterations", "paper_point"):
+        assert a[key] == b[key], key
+    assert a["config"]["command"].replace("--out ref", "--out out") == b["config"]["command"]
+    assert _manifest(ref) == _manifest(out)  # the same units, each point's numbers exactly
+
+
+def test_ablate_killed_after_a_batch_and_resumed_gives_the_same_ablation(tmp_path, cache):
+    seeds = F.write_seed(tmp_path / "seed", seed=0)
+    # Two batches (another collision rule compiles its own program): two units.
+    args = ("--worlds", "world1", "--variants", "ours,collision_rule=entry", "--trials", 2,
+            "--tau-cap", 5, "--seeds", seeds)  # fmt: skip
+    ref, out = tmp_path / "ref", tmp_path / "out"
+    finish(start("ablate.py", *args, "--out", ref, env=cache))
+    kill_after(start("ablate.py", *args, "--out", out, env=cache), out, 1, signal.SIGTERM)
+    bad = finish(start("ablate.py", *args[:5], 3, *args[6:], "--out", out, "--resume"), 2)[1]
+    assert "--trials: the run in" in bad and bad.count("\n") == 1  # other settings: refused
+    finish(start("ablate.py", *args, "--out", out, "--resume", env=cache))
+    for name in ("ablation.json", "ablation.md", "batches/0.json", "batches/1.json"):
+        assert (ref / name).read_text() == (out / name).read_text(), name
+    runs = [json.loads((d / "run.json").read_text()) for d in (ref, out)]
+    for run in runs:
+        del run["timings_s"]
+        for call in run["calls"]:
+            del call["run_s"]
+    assert runs[0] == runs[1]
+
+
+def test_train_baseline_killed_and_resumed_trains_the_same_weights(tmp_path, cache):
+    args = ("--world", "real", "--generations", 3, "--pairs", 4, "--episodes", 2, "--steps", 60,
+            "--hidden", 8, "--no-eval")  # fmt: skip
+    ref, out = tmp_path / "ref", tmp_path / "out"
+    finish(start("train_baseline.py", *args, "--out", ref, env=cache))
+    kill_after(start("train_baseline.py", *args, "--out", out, env=cache), out, 0, signal.SIGINT)
+    finish(start("train_baseline.py", *args, "--out", out, "--resume", env=cache))
+    a, b = (json.loads((d / "config.json").read_text()) for d in (ref, out))
+    for key in ("final", "curve", "config", "seed", "parameters"):
+        assert a[key] == b[key], key
+    with np.load(ref / "params.npz") as x, np.load(out / "params.npz") as y:
+        assert x.files == y.files and all(np.array_equal(x[k], y[k]) for k in x.files)
+    # Resuming a complete run skips its finished stage; no --resume into it is refused.
+    before = (out / "params.npz").stat().st_mtime_ns
+    again = start("train_baseline.py", *args, "--out", out, "--resume", env=cache)
+    fresh = start("train_baseline.py", *args, "--out", out)
+    nothing = start("train_baseline.py", *args, "--out", tmp_path / "none", "--resume")
+    assert "trained in" in finish(again)[0] and (out / "params.npz").stat().st_mtime_ns == before
+    for proc, message in ((fresh, "holds a complete train_baseline run"),
+                          (nothing, "none: no run to resume")):  # fmt: skip
+        err = finish(proc, 2)[1]
+        assert err.startswith("train_baseline.py: error: ") and err.count("\n") == 1
+        assert message in err
+    assert not (tmp_path / "none").exists()
+
+
+LEDGER = """
+import sys, time
+sys.path.insert(0, {tests!r})
+from test_seeds import FakeScripts  # no JAX: the ledger runs none
+from jaxais.cli import main_wrapper
+from jaxais.experiments.seeds import ltl_ledger
+
+def slow(cmd, log, fake=FakeScripts()):  # a signal can land between seeds
+    time.sleep(0.2)
+    return fake(cmd, log)
+
+with main_wrapper("seeds.py"):
+    ltl_ledger({out!r}, [0, 1, 2], trials=2, runner=slow, progress=False, command="seeds.py",
+               resume={resume})
+"""
+
+
+def test_seed_ledger_killed_twice_and_resumed_gives_the_uninterrupted_ledger(tmp_path):
+    from jaxais.experiments.seeds import ltl_ledger
+
+    ref, out = tmp_path / "ref", tmp_path / "out"
+    ltl_ledger(ref, [0, 1, 2], trials=2, runner=FakeScripts(), progress=False, command="seeds.py")
+
+    def ledger(resume: bool) -> subprocess.Popen:
+        code = LEDGER.format(tests=str(Path(__file__).parent), out=str(out), resume=resume)
+        return subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)  # fmt: skip
+
+    kill_after(ledger(False), out, 1, signal.SIGTERM)
+    kill_after(ledger(True), out, 2, signal.SIGKILL)
+    finish(ledger(True))
+    a, b = (json.loads((d / "seeds.json").read_text()) for d in (ref, out))
+    for doc in (a, b):
+        for row in doc["seeds"].values():
+            del row["wall_s"]  # the fake's wall times
+    assert a == b and b["complete"]
+    assert list(_manifest(out)["units"]) == ["seed 0", "seed 1", "seed 2"]

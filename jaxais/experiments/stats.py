@@ -933,6 +933,10 @@ def build_tables(
         "trapped_s": trapped_times(...), "locked_s": locked_times(...),
         "hypotheses": hypotheses(..., alpha)}``.
     """
+    if not isinstance(results_by_world, Mapping) or not all(
+        isinstance(r, Mapping) for r in results_by_world.values()
+    ):
+        raise ValueError("results_by_world must be a dict world -> {label: [trial records]}")
     cis = table3_ci(results_by_world) if cis is None else cis
     return jsonable(
         {

@@ -32,25 +32,11 @@ from scipy import stats as sps
 
 from jaxais import envs
 from jaxais.controllers import System, stl_for
+from jaxais.immune.network import BOUNDS
 from jaxais.loop import EpisodeConfig
 from jaxais.runner import run_pool, segment_length
-from jaxais.trials import _keys, stream_id
-
-PARAMETERS: dict[str, tuple[str, type]] = {
-    "k1": ("network", float),
-    "k2": ("network", float),
-    "k3": ("network", float),
-    "b": ("network", float),
-    "Phi": ("network", float),
-    "initial_clones": ("network", float),
-    "penalty_idiotypic": ("network", float),
-    "penalty_non_idiotypic": ("network", float),
-    "hold": ("readings", int),
-    "encounter_gap": ("readings", int),
-    "sigma0_floor": ("readings", float),
-    "alpha_on_self": ("readings", bool),
-}
-"""Sweepable parameters: name -> (the System field that holds it, its type)."""
+from jaxais.systems import PARAMETERS, system_params, with_params
+from jaxais.trials import _keys, stream_id, trial_records
 
 STATIC: dict[str, str] = {
     "idiotope_period": "NetworkParams.idiotope_period is a loop schedule, fixed when the "
@@ -126,24 +112,13 @@ def point_systems(base: System, points: Sequence[dict[str, Any]]) -> System:
     Raises:
         ValueError: a value out of its parameter's range (the network's own checks).
     """
-    systems = []
-    for point in points:
-        network = {k: v for k, v in point.items() if PARAMETERS[k][0] == "network"}
-        readings = {k: v for k, v in point.items() if PARAMETERS[k][0] == "readings"}
-        system = base.replace(
-            network=base.network.replace(**network).validate(),
-            readings=base.readings.replace(**readings),
-        )
-        systems.append(system)
+    for point in points:  # checked here: with_params would clip a value out of its range
+        base.network.replace(**{k: v for k, v in point.items() if k in BOUNDS}).validate()
+    systems = [with_params(base, point) for point in points]
     # Each value in its base leaf's dtype (an int32 hold stays int32: the same program).
     return jax.tree.map(
         lambda b, *xs: np.stack([np.asarray(x, np.asarray(b).dtype) for x in xs]), base, *systems
     )
-
-
-def _value_of(system: System, name: str) -> float | int:
-    """A parameter's value in ``system`` (the operating point a sweep is drawn around)."""
-    return np.asarray(getattr(getattr(system, PARAMETERS[name][0]), name)).item()
 
 
 def _t_interval(x: np.ndarray, level: float) -> tuple[float, float, float]:
@@ -203,6 +178,7 @@ def run_sweep(
     sim_params: envs.SimParams | None = None,
     slots: int = 1024,
     progress: Callable[[int], None] | None = None,
+    records: bool = False,
 ) -> dict[str, Any]:
     """Every grid point's ``n_trials`` trials of ``base`` with the point's values.
 
@@ -212,6 +188,7 @@ def run_sweep(
         axes: (parameter name, values) per axis (:func:`parse_axis`).
         slots: runs live at once (:func:`jaxais.runner.run_pool`).
         progress: called with the number of runs that ended, after every segment.
+        records: keep each point's trial records (``"trials"``, as in a trials file).
 
     Returns:
         ``{"axes": {name: values}, "points": [{"values": {...}, <summarise_point>}, ...],
@@ -244,8 +221,11 @@ def run_sweep(
     for p, point in enumerate(points):
         part = {k: v[p * n_trials : (p + 1) * n_trials] for k, v in res.items()}
         out_points.append({"values": point, **summarise_point(part)})
+        if records:
+            out_points[-1]["trials"] = trial_records(part)
     iterations = int(np.sum(res["iterations"], dtype=np.int64))
-    base_values = {name: _value_of(base, name) for name, _ in axes}
+    base_values = system_params(base, [name for name, _ in axes])
+    base_values = {k: np.asarray(v).item() for k, v in base_values.items()}
     return {
         "axes": {name: values.tolist() for name, values in axes},
         "base_values": base_values,
@@ -383,13 +363,15 @@ def sweep(
     collision_cap: int | None = None,
     slots: int = 1024,
     command: str | None = None,
+    records: bool = False,
 ) -> dict[str, Any]:
     """A grid over the STL's parameters (``grid``: :func:`parse_axis` specs) or the reality gap
     (``noise``: scales of the world's noise, 1 = its own levels), written into ``out``.
 
     Writes sweep.json and (one or two axes) sweep.png, or reality_gap.json and reality_gap.png.
     ``system``: one label (grid; default SIE) or comma-separated labels (noise; default
-    SIE,SRL,HDC). ``world`` defaults to world1 (grid) or real (noise), ``trials`` to the paper's
+    SIE,SRL,HDC). ``records``: keep every run's record in sweep.json (:func:`run_sweep`).
+    ``world`` defaults to world1 (grid) or real (noise), ``trials`` to the paper's
     count there, the caps to the paper's. Under ``jax.distributed`` (joined by the caller) every
     process computes the same numbers and process 0 writes. Returns the document.
 
@@ -402,7 +384,7 @@ def sweep(
     from tqdm import tqdm
 
     from jaxais.experiments import protocol
-    from jaxais.experiments.records import build_systems, portable_command, run_config
+    from jaxais.experiments.records import FORMATS, build_systems, portable_command, run_config
     from jaxais.experiments.sweep_plots import save_noise_figure, save_sweep_figures
     from jaxais.immune.network import NetworkParams
     from jaxais.io import atomic_write_json
@@ -422,6 +404,8 @@ def sweep(
     for name in names:
         if name not in SYSTEMS:
             raise ValueError(f"--system: unknown system {name!r} (one of {', '.join(SYSTEMS)})")
+    if records and grid is None:
+        raise ValueError("--records keeps the runs of a --grid sweep, not of --noise")
     if grid is not None and len(names) != 1:
         raise ValueError("--grid sweeps one system: give --system NAME")
     if random_set and not {"UIE", "URL"} & set(names):
@@ -462,7 +446,7 @@ def sweep(
         if grid is not None:
             doc = run_sweep(
                 loaded, systems[names[0]], names[0], axes, trials, seed, config, params, slots,
-                bar.update,
+                bar.update, records,
             )  # fmt: skip
         else:
             doc = run_noise_sweep(
@@ -478,8 +462,9 @@ def sweep(
     cfg["processes"] = jax.process_count()
     cfg["devices"] = jax.device_count()
     doc["config"] = cfg
+    name = "sweep" if grid is not None else "reality_gap"
+    doc = {"format": FORMATS[name], **doc}  # docs/formats.md
     if lead:
-        name = "sweep" if grid is not None else "reality_gap"
         atomic_write_json(out / f"{name}.json", doc)
         if grid is not None:
             save_sweep_figures(doc, out)

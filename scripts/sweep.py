@@ -3,8 +3,7 @@
     python scripts/sweep.py --grid k1=0:2:11 --grid k2=0:2:11 --system SIE --out sweep/
     python scripts/sweep.py --noise 0,0.5,1,2,4 --system SIE,SRL,HDC --world real --out gap/
 
-Writes DIR/sweep.json and sweep.png, or DIR/reality_gap.json and reality_gap.png
-(jaxais.experiments.sweep): the same numbers on one process or several (--coordinator).
+Writes DIR/sweep.json and sweep.png, or DIR/reality_gap.json and its .png (docs/formats.md).
 """
 
 from __future__ import annotations
@@ -38,6 +37,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--seeds", default=None, help="LTL seed directory (default: the shipped one)")
     protocol.add_cap_arguments(p)
     p.add_argument("--slots", type=int, default=1024, help="runs live at once (default 1024)")
+    p.add_argument("--records", action="store_true", help="keep every run's record (--grid)")
     p.add_argument("--out", required=True, help="output directory (created if missing)")
     # fmt: on
     distributed.add_arguments(p)
@@ -62,7 +62,7 @@ def main(argv: list[str] | None = None) -> None:
         args.out, grid=args.grid, noise=noise, noise_kinds=args.noise_kinds.split(","),
         system=args.system, random_set=args.random_set, world=args.world, trials=args.trials,
         seed=args.seed, seeds=args.seeds, tau_cap=args.tau_cap,
-        collision_cap=args.collision_cap, slots=args.slots, command=command,
+        collision_cap=args.collision_cap, slots=args.slots, command=command, records=args.records,
     )  # fmt: skip
     if jax.process_index() != 0:  # process 0 reports
         return

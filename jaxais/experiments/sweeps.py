@@ -32,6 +32,7 @@ from scipy import stats as sps
 
 from jaxais import envs
 from jaxais.controllers import System, stl_for
+from jaxais.experiments.records import FORMATS
 from jaxais.immune.network import BOUNDS
 from jaxais.loop import EpisodeConfig
 from jaxais.runner import run_pool, segment_length
@@ -227,6 +228,7 @@ def run_sweep(
     base_values = system_params(base, [name for name, _ in axes])
     base_values = {k: np.asarray(v).item() for k, v in base_values.items()}
     return {
+        "format": FORMATS["sweep"],  # docs/formats.md
         "axes": {name: values.tolist() for name, values in axes},
         "base_values": base_values,
         "points": out_points,
@@ -337,6 +339,7 @@ def run_noise_sweep(
         if progress is not None:
             progress(1)
     return {
+        "format": FORMATS["reality_gap"],
         "kinds": list(kinds),
         "scales": [float(s) for s in scales],
         "points": points,
@@ -384,7 +387,7 @@ def sweep(
     from tqdm import tqdm
 
     from jaxais.experiments import protocol
-    from jaxais.experiments.records import FORMATS, build_systems, portable_command, run_config
+    from jaxais.experiments.records import build_systems, portable_command, run_config
     from jaxais.experiments.sweep_plots import save_noise_figure, save_sweep_figures
     from jaxais.immune.network import NetworkParams
     from jaxais.io import atomic_write_json
@@ -462,9 +465,8 @@ def sweep(
     cfg["processes"] = jax.process_count()
     cfg["devices"] = jax.device_count()
     doc["config"] = cfg
-    name = "sweep" if grid is not None else "reality_gap"
-    doc = {"format": FORMATS[name], **doc}  # docs/formats.md
     if lead:
+        name = "sweep" if grid is not None else "reality_gap"
         atomic_write_json(out / f"{name}.json", doc)
         if grid is not None:
             save_sweep_figures(doc, out)

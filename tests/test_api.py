@@ -259,12 +259,18 @@ def test_records_frame_reads_trials_and_sweep_files(tmp_path, monkeypatch):
     assert frame["tau_low"][0] < 20.0 < frame["tau_high"][0]
     runs = records_frame(sweep, runs=True)
     assert len(runs) == 6 and runs["k1"].tolist() == [0.5] * 3 + [1.5] * 3
+    gap_point = {"scale": 2.0, "systems": {"SIE": sweeps.summarise_point(outcome_arrays(3))}}
+    gap = {"format": FORMATS["reality_gap"], "points": [gap_point]}
+    assert records_frame(gap)[["scale", "label", "n"]].values.tolist() == [[2.0, "SIE", 3]]
     for p in points:
         del p["trials"]
     with pytest.raises(ValueError, match="kept no runs: run the sweep with --records"):
         records_frame(sweep, runs=True)
     with pytest.raises(ValueError, match="not a jaxais results file .format None"):
         records_frame({"points": []})
+    (tmp_path / "bad.json").write_text("{")
+    with pytest.raises(ValueError, match="bad.json: not JSON"):
+        records_frame(tmp_path / "bad.json")
     monkeypatch.setitem(__import__("sys").modules, "pandas", None)
     with pytest.raises(ValueError, match="records_frame needs pandas: pip install pandas"):
         records_frame(sweep)

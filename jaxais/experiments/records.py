@@ -173,9 +173,12 @@ def records_frame(source: str | Path | Mapping[str, Any], runs: bool = False):
         import pandas as pd
     except ImportError:
         raise UserError("records_frame needs pandas: pip install pandas") from None
-    doc = source if isinstance(source, Mapping) else json.loads(Path(source).read_text())
-    fmt = doc.get("format") if isinstance(doc, Mapping) else None
     where = "the document" if isinstance(source, Mapping) else str(source)
+    try:
+        doc = source if isinstance(source, Mapping) else json.loads(Path(source).read_text())
+    except ValueError as err:
+        raise UserError(f"{where}: not JSON ({err})") from None
+    fmt = doc.get("format") if isinstance(doc, Mapping) else None
     if fmt == FORMATS["trials"]:
         head = {k: doc[k] for k in ("label", "system", "world", "random_set", "seed")}
         rows = [{**head, "trial": i, **r} for i, r in enumerate(doc["trials"])]
@@ -189,12 +192,14 @@ def records_frame(source: str | Path | Mapping[str, Any], runs: bool = False):
         ]
     elif fmt == FORMATS["sweep"]:
         rows = [{**p["values"], **_flat(p)} for p in doc["points"]]
-    elif fmt == FORMATS["reality_gap"]:
+    elif fmt == FORMATS["reality_gap"] and not runs:
         rows = [
             {"scale": p["scale"], "label": k, **_flat(v)}
             for p in doc["points"]
             for k, v in p["systems"].items()
         ]
+    elif fmt == FORMATS["reality_gap"]:
+        raise UserError(f"{where}: a reality gap keeps no runs (runs=True reads a sweep's)")
     else:
         known = ", ".join(FORMATS.values())
         raise UserError(f"{where}: not a jaxais results file (format {fmt!r}; reads {known})")

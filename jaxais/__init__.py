@@ -31,8 +31,13 @@ _EXPORTS = {
     "load_seed": "seed",
     "save_seed": "seed",
     "make_system": "systems",
+    "system_params": "systems",
+    "with_params": "systems",
+    "TrialsConfig": "trials",
+    "make_trials": "trials",
     "run_trials": "trials",
     "build_tables": "experiments.stats",
+    "records_frame": "experiments.records",
 }
 __all__ = ["__version__", *sorted(_EXPORTS)]
 

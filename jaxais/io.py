@@ -28,6 +28,21 @@ class UserError(ValueError):
     script (:mod:`jaxais.cli`); a ``ValueError`` for a library caller."""
 
 
+class ArgumentTypeError(UserError, TypeError):
+    """An argument of the wrong type: a TypeError, and a UserError like every other bad
+    argument, so callers catching ValueError and the scripts see one line too."""
+
+
+def check_type(value: Any, kind: Any, name: str, what: str, hint: str = "") -> None:
+    """:class:`ArgumentTypeError` naming the argument ``name`` unless ``value`` is a ``kind``:
+    "``name`` must be ``what``, got <its type> (<a short value>)``hint``"."""
+    if not isinstance(value, kind):
+        got = type(value).__name__
+        if isinstance(value, str | int | float):
+            got += f" {value!r:.40}"
+        raise ArgumentTypeError(f"{name} must be {what}, got {got}{hint}")
+
+
 IN_FLIGHT: set[Path] = set()
 """Temporary files being written right now (removed by the CLI's signal handler)."""
 ON_SIGNAL: list[Callable[[], object]] = []

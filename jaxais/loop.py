@@ -19,6 +19,7 @@ from jaxais import envs
 from jaxais.controllers import Controller, Percept
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.immune.antigens import OBSTACLE_THRESHOLD, antigen, is_collision
+from jaxais.io import ArgumentTypeError, check_type
 
 RUNNING, FINISHED, FAILED_COLLISIONS, FAILED_TIME = 0, 1, 2, 3  # Run.status
 
@@ -60,6 +61,12 @@ class EpisodeConfig:
             raise ValueError(
                 f"collision_rule must be 'episode' or 'entry', got {self.collision_rule!r}"
             )
+        for name in ("collision_cap", "finish_pixels", "finish_streak", "chunk", "segment"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer):
+                raise ArgumentTypeError(f"EpisodeConfig.{name} must be an integer, got {value!r}")
+        for name in ("stop_at_collision_cap", "record"):
+            check_type(getattr(self, name), bool | np.bool_, f"EpisodeConfig.{name}", "a bool")
         names = ("tau_cap", "collision_cap", "finish_streak", "trap_radius", "trap_window")
         for name in (*names, "chunk", "segment"):
             value = getattr(self, name)

@@ -28,6 +28,7 @@ from jaxais.immune.antibodies import (
     to_dicts,
     within_limits,
 )
+from jaxais.io import check_type
 from jaxais.orbax_reads import forget_abandoned_reads
 
 SEED_JSON = "seed.json"
@@ -153,6 +154,8 @@ def save_seed(
     """
     import orbax.checkpoint as ocp
 
+    check_type(seed, Seed, "save_seed's seed", "a Seed")
+    check_type(provenance, dict, "provenance", "a dict (command, seed, version, ...)")
     path = Path(path).absolute()
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
@@ -185,6 +188,7 @@ def load_seed(path: str | Path | None = None) -> tuple[Seed, dict[str, Any]]:
     """
     import orbax.checkpoint as ocp
 
+    check_type(path, str | Path | None, "load_seed's path", "a seed directory or None")
     path = default_seed_dir() if path is None else Path(path)
     hint = "make one with scripts/evolve.py --out DIR and pass --seeds DIR/seed"
     if not path.is_dir():

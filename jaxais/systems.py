@@ -14,6 +14,10 @@ The names (``SYSTEMS``, ``RANDOM_SETS``, ``LABELS``, :func:`label`, :func:`parse
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
 import jax
 import numpy as np
 
@@ -22,8 +26,9 @@ from jaxais.envs.struct import device_array
 from jaxais.immune.antibodies import Antibodies, from_dicts, sample_antibodies
 from jaxais.immune.network import NetworkParams, relative_fitness, seed_paratopes
 from jaxais.immune.readings import DEFAULT, Readings
+from jaxais.io import check_type as _check
 from jaxais.labels import LABELS, RANDOM_SETS, SYSTEMS, label, parse_label  # noqa: F401 (re-export)
-from jaxais.seed import Seed
+from jaxais.seed import Seed, load_seed
 
 UNSEEDED_P = (0.25, 0.75)
 """Range of the unseeded systems' initial paratopes [paper]."""
@@ -87,22 +92,33 @@ def make_system(
 
     Args:
         name: SIE, SRL, UIE, URL or HDC (or a label such as ``UIE-R2``).
-        seed: the LTL seed (needed by SIE and SRL).
+        seed: the LTL seed (needed by SIE and SRL), or its directory (read by ``load_seed``).
         random_set: R1 or R2 (needed by UIE and URL).
-        network: network constants (default: the paper's).
+        network: network constants (default: the paper's; checked by ``validate``).
         readings: our readings of the paper's open points (default: ours,
             :data:`jaxais.immune.readings.DEFAULT`).
+
+    Raises:
+        ValueError: one line naming the bad argument (a wrong type: also a TypeError).
     """
+    _check(name, str, "make_system's name", f"one of {', '.join(LABELS)}")
     if "-" in name:
         name, random_set = parse_label(name)
-    network = NetworkParams() if network is None else network
+    if isinstance(seed, str | Path):
+        seed = load_seed(seed)[0]
+    _check(seed, Seed | None, "seed", "a Seed (load_seed()[0]), a seed directory or None")
+    _check(network, NetworkParams | None, "network", "a NetworkParams or None")
+    _check(readings, Readings | None, "readings", "a Readings (immune.readings.readings())")
+    network = NetworkParams() if network is None else network.validate()
     if name in ("SIE", "SRL"):
         if seed is None:
-            raise ValueError(f"{name} needs an LTL seed")
+            raise ValueError(f"{name} needs an LTL seed: make_system({name!r}, load_seed()[0])")
         antibodies = seed.antibodies
         P = _seeded_paratopes(seed.tau, seed.collisions, seed.L, network.rho, network.phi)
     elif name in ("UIE", "URL"):
-        antibodies, P = random_sets(random_set or "")
+        if random_set is None:
+            raise ValueError(f"{name} needs a random set: make_system({name + '-R1'!r}) or R2")
+        antibodies, P = random_sets(random_set)
     elif name == "HDC":
         antibodies, P = hand_designed_sets()
     else:
@@ -117,3 +133,59 @@ def make_system(
         network=network,
         readings=DEFAULT if readings is None else readings,
     )
+
+
+PARAMETERS: dict[str, tuple[str, type]] = {
+    "k1": ("network", float),
+    "k2": ("network", float),
+    "k3": ("network", float),
+    "b": ("network", float),
+    "Phi": ("network", float),
+    "initial_clones": ("network", float),
+    "penalty_idiotypic": ("network", float),
+    "penalty_non_idiotypic": ("network", float),
+    "hold": ("readings", int),
+    "encounter_gap": ("readings", int),
+    "sigma0_floor": ("readings", float),
+    "alpha_on_self": ("readings", bool),
+}
+"""A System's traced parameters by name (the sweep's grid axes, an optimiser's variables):
+name -> (the System field that holds it, its type). The network's valid ranges are
+:data:`jaxais.immune.network.BOUNDS`."""
+
+
+def system_params(system: System, names: Sequence[str] | None = None) -> dict[str, Any]:
+    """``system``'s parameters as a flat dict name -> value (default: every name of
+    :data:`PARAMETERS`), e.g. ``{"k1": 0.85, "k2": 1.1}``: an optimiser's starting point."""
+    names = PARAMETERS if names is None else names
+    _unknown(names)
+    return {name: getattr(getattr(system, PARAMETERS[name][0]), name) for name in names}
+
+
+def with_params(system: System, params: Mapping[str, Any]) -> System:
+    """``system`` with ``params`` (name -> value, :data:`PARAMETERS`' names), jit-safe.
+
+    Each value takes its leaf's dtype (an int32 ``hold`` stays int32: the same program), and
+    the network's constants are clipped into their valid ranges
+    (:meth:`~jaxais.immune.network.NetworkParams.clip_valid`), so values an optimiser proposes
+    never run as, e.g., a negative k1. Outside ``jit``, ``system.network.validate()`` refuses
+    such values instead.
+    """
+    _unknown(params)
+    parts = {"network": {}, "readings": {}}
+    for name, value in params.items():
+        part = PARAMETERS[name][0]
+        dtype = getattr(getattr(getattr(system, part), name), "dtype", None)
+        if dtype is not None:  # traced values stay traced, host values on the host
+            traced = isinstance(value, jax.Array)
+            value = value.astype(dtype) if traced else np.asarray(value, dtype)
+        parts[part][name] = value
+    network = system.network.replace(**parts["network"]).clip_valid()
+    return system.replace(network=network, readings=system.readings.replace(**parts["readings"]))
+
+
+def _unknown(names: Any) -> None:
+    """ValueError naming the first name that is not a :data:`PARAMETERS` name."""
+    unknown = [name for name in names if name not in PARAMETERS]
+    if unknown:
+        raise ValueError(f"unknown parameter {unknown[0]!r} (one of {', '.join(PARAMETERS)})")

@@ -28,6 +28,7 @@ import time
 import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import jax
@@ -35,7 +36,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxais import envs
-from jaxais.controllers import STL, Controller, stl_for
+from jaxais.controllers import STL, Controller, System, stl_for
+from jaxais.io import ArgumentTypeError
+from jaxais.io import check_type as _check
 from jaxais.loop import EpisodeConfig, outcome
 from jaxais.runner import advance, rollout, run_pool, segment_length, start_batch
 from jaxais.systems import LABELS
@@ -148,10 +151,64 @@ class TrialsConfig:
     episode: EpisodeConfig = dataclasses.field(default_factory=lambda: STL_CONFIG)
 
     def __post_init__(self):
-        if isinstance(self.n_trials, bool) or not isinstance(self.n_trials, int):
-            raise ValueError(f"n_trials must be an integer, got {self.n_trials!r}")
-        if self.n_trials < 1:
-            raise ValueError(f"n_trials must be >= 1, got {self.n_trials}")
+        _check(self.world, str | Path, "TrialsConfig.world", "a world's name or TOML path")
+        object.__setattr__(self, "n_trials", _integer(self.n_trials, "TrialsConfig.n_trials"))
+        _check(self.controller, Controller, "TrialsConfig.controller", "a Controller")
+        _check(self.episode, EpisodeConfig, "TrialsConfig.episode", "an EpisodeConfig")
+        if self.controller is STL:
+            _check_label(self.label, "TrialsConfig.label")
+
+
+def _integer(value: Any, name: str, high: int | None = None) -> int:
+    """``value`` as an int >= 1, or in [0, high) (NumPy integers are integers; 2.0 and True
+    are not)."""
+    _check(value, int | np.integer, name, "an integer")
+    if isinstance(value, bool):
+        raise ArgumentTypeError(f"{name} must be an integer, got {value!r}")
+    if value < 1 if high is None else not 0 <= value < high:
+        rule = ">= 1" if high is None else f"in [0, 2**{high.bit_length() - 1})"
+        raise ValueError(f"{name} must be {rule}, got {value!r}")
+    return int(value)
+
+
+def _check_label(label: Any, name: str) -> None:
+    """ValueError unless ``label`` is one of the STL's labels (a variant tag allowed)."""
+    _check(label, str, name, "a system label")
+    if base_label(label) not in LABELS:
+        raise ValueError(f"{name}: unknown system label {label!r} (one of {', '.join(LABELS)})")
+
+
+def _check_run(world, systems, n_trials, seed, config, sim_params, progress, controller):
+    """:func:`run_trials`' arguments checked, one line naming the first bad one.
+
+    Returns:
+        label -> its number of trials.
+    """
+    hint = f": build it with envs.load_world({world!r})" if isinstance(world, str) else ""
+    _check(world, envs.World, "world", "an envs.World", hint)
+    _check(systems, Mapping, "systems", "a dict label -> params (a System for the STL)")
+    if not systems:
+        raise ValueError("systems is empty: give at least one label -> params")
+    if isinstance(n_trials, Mapping):
+        missing = [k for k in systems if k not in n_trials]
+        if missing:
+            raise ValueError(f"n_trials has no count for {missing[0]!r}")
+        counts = {k: _integer(n_trials[k], f"n_trials[{k!r}]") for k in systems}
+    else:
+        counts = dict.fromkeys(systems, _integer(n_trials, "n_trials"))
+    _integer(seed, "seed", 2**32)  # batch_keys would wrap a larger seed onto another
+    _check(config, EpisodeConfig, "config", "an EpisodeConfig (e.g. trials.STL_CONFIG)")
+    _check(sim_params, envs.SimParams | None, "sim_params", "an envs.SimParams or None")
+    _check(controller, Controller | None, "controller", "a Controller or None")
+    if progress is not None and not callable(getattr(progress, "update", None)):
+        raise ArgumentTypeError(f"progress must have an update(n) method (tqdm), got {progress!r}")
+    for name, system in systems.items():
+        if controller is None:  # the STL network: its labels and its params
+            _check_label(name, "systems")
+            hint = f": build it with make_system({base_label(name)!r}, ...)"
+            _check(system, System, f"systems[{name!r}]", "a System", hint)
+            system.network.validate()
+    return counts
 
 
 def make_trials(config: TrialsConfig):
@@ -173,6 +230,7 @@ def make_trials(config: TrialsConfig):
         out = run(jax.random.key(0), make_system("SIE", load_seed()[0]))
         out["tau"].mean()
     """
+    _check(config, TrialsConfig, "make_trials' config", "a TrialsConfig")
     world = envs.load_world(config.world)
     episode = config.episode
     n = config.n_trials
@@ -198,7 +256,10 @@ def make_trials(config: TrialsConfig):
         return out
 
     def run(key: jax.Array, params: Any, sim_params: envs.SimParams | None = None):
+        if config.controller is STL:
+            _check(params, System, "params", "a System (make_system)")
         sim_params = envs.default_params() if sim_params is None else sim_params
+        _check(sim_params, envs.SimParams, "sim_params", "an envs.SimParams")
         # The world is an argument of the program, not constants folded into it: folded, XLA
         # rounds some products differently, and a run's path (chaotic over thousands of
         # steps) would then differ from run_trials'.
@@ -244,19 +305,11 @@ def run_trials(
         label -> :class:`TrialSet`.
 
     Raises:
-        ValueError: an unknown STL label, fewer than one trial, or a seed outside [0, 2**32).
+        ValueError: one line naming the bad argument, before anything runs (a wrong type, e.g.
+            a world's name for ``world``: :class:`ArgumentTypeError`, also a TypeError).
     """
+    counts = _check_run(world, systems, n_trials, seed, config, sim_params, progress, controller)
     sim_params = envs.default_params() if sim_params is None else sim_params
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
-        raise ValueError(f"seed must be an integer, got {seed!r}")
-    if not 0 <= seed < 2**32:  # batch_keys would wrap it onto another seed
-        raise ValueError(f"seed must be in [0, 2**32), got {seed}")
-    counts = {k: n_trials if isinstance(n_trials, int) else n_trials[k] for k in systems}
-    for name, n in counts.items():
-        if controller is None and base_label(name) not in LABELS:
-            raise ValueError(f"unknown system label {name!r} (one of {', '.join(LABELS)})")
-        if n < 1:
-            raise ValueError(f"trials must be >= 1, got {n} for {name}")
     reset_keys, run_keys = batch_keys(seed, tuple((name, counts[name]) for name in systems))
     # Each system's parameters repeated for its trials, assembled on the host (no device work).
     params = jax.tree.map(
@@ -292,38 +345,45 @@ def run_trials(
         )  # fmt: skip
     if timings is not None:
         timings["run_s"] = timings.get("run_s", 0.0) + time.perf_counter() - t
-    placed_boxes, placed_goal = np.asarray(res.pop("boxes")), np.asarray(res.pop("goal"))
-    del res["status"]  # the records say it by failed_time and the iterations
+    placed_boxes, placed_goal = np.asarray(res["boxes"]), np.asarray(res["goal"])
 
     out, start = {}, 0
     for name in systems:
-        records, trajectories, placements = [], [], []
-        for i in range(start, start + counts[name]):
-            by_c, by_t = bool(res["failed_collisions"][i]), bool(res["failed_time"][i])
-            record = {
-                "tau": float(res["tau"][i]),
-                "collisions": int(res["collisions"][i]),
-                "collisions_capped": int(res["collisions_capped"][i]),
-                "fitness": float(res["fitness"][i]),
-                "failed": by_c or by_t,
-                "failed_collisions": by_c,
-                "failed_time": by_t,
-                "failed_by": [cap for cap, on in (("collisions", by_c), ("time", by_t)) if on],
-                "trapped_s": float(res["trapped_s"][i]),
-                "locked_s": float(res["locked_s"][i]),
-                "iterations": int(res["iterations"][i]),
-            }
-            # The rest are the controller's stats; NaN (does not apply) is None.
-            for key in sorted(set(res) - set(record)):
-                value = res[key][i].item()
-                record[key] = None if isinstance(value, float) and np.isnan(value) else value
-            records.append(record)
-            if config.record:
-                trajectories.append(poses[i, : chunks[i] + 2])
-            placements.append(Placement(boxes=placed_boxes[i], goal=placed_goal[i]))
-        out[name] = TrialSet(records, trajectories if config.record else None, placements)
+        part = range(start, start + counts[name])
+        records = trial_records({k: v[start : part.stop] for k, v in res.items()})
+        trajectories = [poses[i, : chunks[i] + 2] for i in part] if config.record else None
+        placements = [Placement(boxes=placed_boxes[i], goal=placed_goal[i]) for i in part]
+        out[name] = TrialSet(records, trajectories, placements)
         start += counts[name]
     return out
+
+
+def trial_records(res: Mapping[str, np.ndarray]) -> list[dict[str, Any]]:
+    """The records (:class:`TrialSet`) of trials' outcome arrays [n]: :func:`~jaxais.loop.outcome`
+    and the controller's stats (the placement and ``status`` are not recorded: failed_time and
+    the iterations say the status)."""
+    records = []
+    for i in range(len(res["tau"])):
+        by_c, by_t = bool(res["failed_collisions"][i]), bool(res["failed_time"][i])
+        record = {
+            "tau": float(res["tau"][i]),
+            "collisions": int(res["collisions"][i]),
+            "collisions_capped": int(res["collisions_capped"][i]),
+            "fitness": float(res["fitness"][i]),
+            "failed": by_c or by_t,
+            "failed_collisions": by_c,
+            "failed_time": by_t,
+            "failed_by": [cap for cap, on in (("collisions", by_c), ("time", by_t)) if on],
+            "trapped_s": float(res["trapped_s"][i]),
+            "locked_s": float(res["locked_s"][i]),
+            "iterations": int(res["iterations"][i]),
+        }
+        # The rest are the controller's stats; NaN (does not apply) is None.
+        for key in sorted(set(res) - set(record) - {"boxes", "goal", "status"}):
+            value = res[key][i].item()
+            record[key] = None if isinstance(value, float) and np.isnan(value) else value
+        records.append(record)
+    return records
 
 
 def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:

@@ -3,8 +3,8 @@
     python scripts/sweep.py --grid k1=0:2:11 --grid k2=0:2:11 --system SIE --out sweep/
     python scripts/sweep.py --noise 0,0.5,1,2,4 --system SIE,SRL,HDC --world real --out gap/
 
-Writes DIR/sweep.json and sweep.png or DIR/reality_gap.json and .png, the same on one process or
-several (--coordinator); --resume finishes an interrupted run (DIR/manifest.json's chunks).
+Writes DIR/sweep.json and sweep.png or DIR/reality_gap.json and .png (docs/formats.md), the
+same on one process or several (--coordinator); --resume finishes an interrupted run.
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--seeds", default=None, help="LTL seed directory (default: the shipped one)")
     protocol.add_cap_arguments(p)
     p.add_argument("--slots", type=int, default=1024, help="runs live at once (default 1024)")
+    p.add_argument("--records", action="store_true", help="keep every run's record (--grid)")
     p.add_argument("--out", required=True, help="output directory (missing or empty)")
     p.add_argument("--resume", action="store_true", help="finish the interrupted run in --out")
     # fmt: on
@@ -63,7 +64,7 @@ def main(argv: list[str] | None = None) -> None:
         args.out, grid=args.grid, noise=noise, noise_kinds=args.noise_kinds,
         system=args.system, random_set=args.random_set, world=args.world, trials=args.trials,
         seed=args.seed, seeds=args.seeds, tau_cap=args.tau_cap, collision_cap=args.collision_cap,
-        slots=args.slots, command=command, resume=args.resume,
+        slots=args.slots, command=command, resume=args.resume, records=args.records,
     )  # fmt: skip
     if jax.process_index() != 0:  # process 0 reports
         return

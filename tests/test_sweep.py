@@ -172,13 +172,19 @@ def test_sweep_refuses_what_it_would_run_wrongly_or_not_at_all(tmp_path):
 def test_sweep_points_are_plain_trials_with_the_points_constants():
     sie = F.systems()["SIE"]
     axes = [("k1", np.array([0.85, 1.6]))]
-    doc = sweep.run_sweep(F.world(), sie, "SIE", axes, N, 3, F.CONFIG, F.sim_params(), slots=1)
+    doc = sweep.run_sweep(
+        F.world(), sie, "SIE", axes, N, 3, F.CONFIG, F.sim_params(), slots=1, records=True
+    )
+    assert doc["format"] == "jaxais-sweep/1"
     assert doc["runs"] == 2 * N and [p["values"] for p in doc["points"]] == [
         {"k1": 0.85}, {"k1": 1.6}
     ]  # fmt: skip
     for point in doc["points"]:
         system = sie.replace(network=sie.network.replace(k1=point["values"]["k1"]))
         plain = jax.device_get(F.sie_trials(N)(jax.random.key(3), system))
+        # Each run's record (sweep.py --records) is its plain trial's.
+        assert [r["iterations"] for r in point["trials"]] == plain["iterations"].tolist()
+        assert [r["collisions"] for r in point["trials"]] == plain["collisions"].tolist()
         assert point["tau"]["mean"] == pytest.approx(float(np.mean(plain["tau"])), rel=1e-6)
         assert point["f"]["mean"] == pytest.approx(float(np.mean(plain["fitness"])), rel=1e-6)
         rate = float(np.mean(plain["idiotypic_difference_rate"]))

@@ -9,7 +9,9 @@ where, and how many times, is :mod:`jaxais.experiments.protocol`'s.
 from __future__ import annotations
 
 import dataclasses
+import json
 import platform
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -20,11 +22,19 @@ from jaxais import envs
 from jaxais.controllers import System
 from jaxais.immune.network import NetworkParams
 from jaxais.immune.readings import DEFAULT, Readings
+from jaxais.io import UserError
 from jaxais.loop import EpisodeConfig
 from jaxais.seed import Seed, default_seed_dir, load_seed
 from jaxais.systems import make_system, parse_label
 from jaxais.trials import TrialSet, summarise
 
+FORMATS = {
+    "trials": "jaxais-trials/1",
+    "sweep": "jaxais-sweep/1",
+    "reality_gap": "jaxais-reality-gap/1",
+}
+"""The ``format`` tag of each results file this version writes: a trials file
+(:func:`results_document`), sweep.json and reality_gap.json (docs/formats.md)."""
 SHIPPED_SEED = "shipped (checkpoints/default)"
 """How records name the shipped LTL seed (not by where this machine installed it)."""
 
@@ -135,6 +145,7 @@ def results_document(
     except ValueError:
         system, random_set = label, None
     return {
+        "format": FORMATS["trials"],
         "system": system,
         "label": label,
         "world": world_name,
@@ -144,3 +155,63 @@ def results_document(
         "trials": trials.records,
         "summary": summarise(trials.records),
     }
+
+
+def records_frame(source: str | Path | Mapping[str, Any], runs: bool = False):
+    """A results file (a path or its parsed JSON) as a ``pandas.DataFrame`` (docs/formats.md).
+
+    Rows: a trials file's trials (label, system, world, random_set, seed, trial, then each
+    record's fields); a sweep's grid points (the axes' values, n, and per metric its mean and
+    ``<metric>_low``, ``<metric>_high``: the 95 % interval), or with ``runs`` its runs (a sweep
+    that kept them: the point's values, trial, the record's fields); a reality gap's
+    (scale, label) pairs, with the columns of a sweep's points.
+
+    Raises:
+        ValueError: pandas missing, not a jaxais results file, or no runs kept (one line).
+    """
+    try:
+        import pandas as pd
+    except ImportError:
+        raise UserError("records_frame needs pandas: pip install pandas") from None
+    where = "the document" if isinstance(source, Mapping) else str(source)
+    try:
+        doc = source if isinstance(source, Mapping) else json.loads(Path(source).read_text())
+    except ValueError as err:
+        raise UserError(f"{where}: not JSON ({err})") from None
+    fmt = doc.get("format") if isinstance(doc, Mapping) else None
+    if fmt == FORMATS["trials"]:
+        head = {k: doc[k] for k in ("label", "system", "world", "random_set", "seed")}
+        rows = [{**head, "trial": i, **r} for i, r in enumerate(doc["trials"])]
+    elif fmt == FORMATS["sweep"] and runs:
+        if any("trials" not in p for p in doc["points"]):
+            raise UserError(f"{where} kept no runs: run the sweep with --records")
+        rows = [
+            {**p["values"], "trial": i, **r}
+            for p in doc["points"]
+            for i, r in enumerate(p["trials"])
+        ]
+    elif fmt == FORMATS["sweep"]:
+        rows = [{**p["values"], **_flat(p)} for p in doc["points"]]
+    elif fmt == FORMATS["reality_gap"] and not runs:
+        rows = [
+            {"scale": p["scale"], "label": k, **_flat(v)}
+            for p in doc["points"]
+            for k, v in p["systems"].items()
+        ]
+    elif fmt == FORMATS["reality_gap"]:
+        raise UserError(f"{where}: a reality gap keeps no runs (runs=True reads a sweep's)")
+    else:
+        known = ", ".join(FORMATS.values())
+        raise UserError(f"{where}: not a jaxais results file (format {fmt!r}; reads {known})")
+    return pd.DataFrame(rows)
+
+
+def _flat(summary: Mapping[str, Any]) -> dict[str, Any]:
+    """A point's summary (:func:`jaxais.experiments.sweeps.summarise_point`) as flat columns."""
+    out = {}
+    for k, v in summary.items():
+        if isinstance(v, Mapping) and "ci" in v:
+            out |= {k: v["mean"], f"{k}_low": v["ci"][0], f"{k}_high": v["ci"][1]}
+        elif k not in ("values", "trials"):
+            out[k] = v  # n, or None (no idiotypic rate for a system without selection)
+    return out

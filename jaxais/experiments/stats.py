@@ -664,6 +664,10 @@ def build_tables(
     results_by_world: ResultsByWorld, alpha: float = protocol.ALPHA, cis: CIs | None = None
 ) -> dict[str, Any]:
     """Every table of the report as JSON (``cis``: :func:`table3_ci`, computed when None)."""
+    if not isinstance(results_by_world, Mapping) or not all(
+        isinstance(r, Mapping) for r in results_by_world.values()
+    ):
+        raise ValueError("results_by_world must be a dict world -> {label: [trial records]}")
     cis = table3_ci(results_by_world) if cis is None else cis
     return jsonable(
         {

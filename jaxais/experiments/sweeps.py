@@ -32,27 +32,15 @@ from scipy import stats as sps
 
 from jaxais import envs
 from jaxais.controllers import System, stl_for
+from jaxais.experiments.records import FORMATS
+from jaxais.immune.network import BOUNDS
 from jaxais.immune.readings import readings as make_readings
 from jaxais.io import Run, atomic_write_json, open_run
 from jaxais.loop import EpisodeConfig
 from jaxais.runner import run_pool, segment_length
-from jaxais.trials import _keys, stream_id
+from jaxais.systems import PARAMETERS, system_params, with_params
+from jaxais.trials import _keys, stream_id, trial_records
 
-PARAMETERS: dict[str, tuple[str, type]] = {
-    "k1": ("network", float),
-    "k2": ("network", float),
-    "k3": ("network", float),
-    "b": ("network", float),
-    "Phi": ("network", float),
-    "initial_clones": ("network", float),
-    "penalty_idiotypic": ("network", float),
-    "penalty_non_idiotypic": ("network", float),
-    "hold": ("readings", int),
-    "encounter_gap": ("readings", int),
-    "sigma0_floor": ("readings", float),
-    "alpha_on_self": ("readings", bool),
-}
-"""Sweepable parameters: name -> (the System field that holds it, its type)."""
 _IDIOTYPIC = ("k1", "k2", "k3", "b", "Phi", "initial_clones", "penalty_idiotypic", "alpha_on_self")
 USED_BY: dict[str, tuple[str, ...]] = {
     **dict.fromkeys(_IDIOTYPIC, ("SIE", "UIE")),
@@ -140,25 +128,16 @@ def point_systems(base: System, points: Sequence[dict[str, Any]]) -> System:
     Raises:
         ValueError: a value out of its parameter's range (the network's and readings' checks).
     """
-    systems = []
-    for point in points:
-        network = {k: v for k, v in point.items() if PARAMETERS[k][0] == "network"}
-        readings = {k: v for k, v in point.items() if PARAMETERS[k][0] == "readings"}
+    for point in points:  # checked here: with_params would clip a value out of its range
+        base.network.replace(**{k: v for k, v in point.items() if k in BOUNDS}).validate()
         ours = {name: np.asarray(v).item() for name, v in vars(base.readings).items()}
-        system = base.replace(
-            network=base.network.replace(**network).validate(),
-            readings=make_readings(**(ours | readings)),  # its checks, hold >= 1 ...
-        )
-        systems.append(system)
+        readings = {k: v for k, v in point.items() if PARAMETERS[k][0] == "readings"}
+        make_readings(**(ours | readings))  # the readings' own checks: hold >= 1 ...
+    systems = [with_params(base, point) for point in points]
     # Each value in its base leaf's dtype (an int32 hold stays int32: the same program).
     return jax.tree.map(
         lambda b, *xs: np.stack([np.asarray(x, np.asarray(b).dtype) for x in xs]), base, *systems
     )
-
-
-def _value_of(system: System, name: str) -> float | int:
-    """A parameter's value in ``system`` (the operating point a sweep is drawn around)."""
-    return np.asarray(getattr(getattr(system, PARAMETERS[name][0]), name)).item()
 
 
 def _t_interval(x: np.ndarray, level: float) -> tuple[float, float, float]:
@@ -219,6 +198,7 @@ def run_sweep(
     slots: int = 1024,
     progress: Callable[[int], None] | None = None,
     run: Run | None = None,
+    records: bool = False,
 ) -> dict[str, Any]:
     """Every grid point's ``n_trials`` trials of ``base`` with the point's values, in chunks of
     about ``slots`` runs (whole points; a run's numbers do not depend on its batch mates).
@@ -231,6 +211,7 @@ def run_sweep(
         progress: called with the number of runs that ended, after every segment.
         run: the results folder: each chunk's point summaries are recorded there as a unit,
             and a chunk it holds already is not run again.
+        records: keep each point's trial records (``"trials"``, as in a trials file).
 
     Returns:
         ``{"axes": {name: values}, "points": [{"values": {...}, <summarise_point>}, ...],
@@ -261,14 +242,18 @@ def run_sweep(
             for p in range(hi - lo):
                 part = {k: v[p * n_trials : (p + 1) * n_trials] for k, v in res.items()}
                 got["points"].append({"values": points[lo + p], **summarise_point(part)})
+                if records:
+                    got["points"][-1]["trials"] = trial_records(part)
             if run is not None:
                 run.finish(unit, got)
         out_points += got["points"]
         iterations += got["iterations"]
     wall = time.perf_counter() - start
     runs = n_trials * len(points)
-    base_values = {name: _value_of(base, name) for name, _ in axes}
+    base_values = system_params(base, [name for name, _ in axes])
+    base_values = {k: np.asarray(v).item() for k, v in base_values.items()}
     return {
+        "format": FORMATS["sweep"],  # docs/formats.md
         "axes": {name: values.tolist() for name, values in axes},
         "base_values": base_values,
         "points": out_points,
@@ -385,6 +370,7 @@ def run_noise_sweep(
         if progress is not None:
             progress(1)
     return {
+        "format": FORMATS["reality_gap"],
         "kinds": list(kinds),
         "scales": [float(s) for s in scales],
         "points": points,
@@ -412,6 +398,7 @@ def sweep(
     slots: int = 1024,
     command: str | None = None,
     resume: bool = False,
+    records: bool = False,
 ) -> dict[str, Any]:
     """A grid over the STL's parameters (``grid``: :func:`parse_axis` specs) or the reality gap
     (``noise``: scales of the world's noise, 1 = its own levels), written into ``out``.
@@ -419,7 +406,8 @@ def sweep(
     Writes sweep.json and (one or two axes) sweep.png, or reality_gap.json and reality_gap.png.
     ``system``: one label (grid; default SIE) or comma-separated labels (noise; default
     SIE,SRL,HDC); ``noise_kinds`` (noise only; names or one comma-separated string) default to
-    every kind of :data:`NOISE_KINDS`. ``world`` defaults to world1 (grid) or real (noise),
+    every kind of :data:`NOISE_KINDS`; ``records``: keep every run's record in sweep.json
+    (:func:`run_sweep`). ``world`` defaults to world1 (grid) or real (noise),
     ``trials`` to the paper's count there, the caps to the paper's. Under ``jax.distributed``
     (joined by the caller) every process computes the same numbers and process 0 writes.
     Returns the document.
@@ -460,6 +448,8 @@ def sweep(
             raise ValueError(f"--system: unknown system {name!r} (one of {', '.join(SYSTEMS)})")
     if len(set(names)) < len(names):
         raise ValueError(f"--system names a system twice: {','.join(names)}")
+    if records and grid is None:
+        raise ValueError("--records keeps the runs of a --grid sweep, not of --noise")
     if grid is not None and len(names) != 1:
         raise ValueError("--grid sweeps one system: give --system NAME")
     if random_set and not {"UIE", "URL"} & set(names):
@@ -515,7 +505,7 @@ def sweep(
         if grid is not None:
             doc = run_sweep(
                 loaded, systems[names[0]], names[0], axes, trials, seed, config, params, slots,
-                bar.update, run,
+                bar.update, run, records,
             )  # fmt: skip
         else:
             doc = run_noise_sweep(

@@ -24,7 +24,9 @@ from jaxais.envs.struct import pytree_dataclass, static_field
 @pytree_dataclass
 class NetworkParams:
     """Constants of the idiotypic network [paper, SPEC 7]: traced leaves (a batch of constants
-    is one vmap) but for the static ``idiotope_period``. Build with :func:`network_params`.
+    is one vmap) but for the static ``idiotope_period``. Build with :func:`network_params`, which
+    validates (concrete values, outside jit); inside jit, :meth:`clip_valid` keeps proposed values
+    in :data:`BOUNDS`.
 
     Attributes:
         b, k3: clone production and death rate of eq (5). k1, k2: eqs (7), (8).
@@ -53,29 +55,44 @@ class NetworkParams:
         Raises:
             ValueError: one line naming the first bad field.
         """
-        for name, (ok, rule) in _FLOAT_RULES.items():
-            value = np.asarray(getattr(self, name), dtype=np.float64)
-            # Written as "not ok" so NaN fails every rule.
-            if not np.all(ok(value)):
+        for name, (low, high) in BOUNDS.items():
+            try:
+                value = np.asarray(getattr(self, name), dtype=np.float64)
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f"NetworkParams.{name} must be a number, got {getattr(self, name)!r:.40}"
+                ) from None
+            if not np.all((value >= low) & (value <= high)):  # NaN fails too
+                rule = "> 0" if low == _POSITIVE else f">= {low:g}"
+                rule = f"in [{low:g}, {high:g}]" if high < np.inf else rule
                 raise ValueError(f"NetworkParams.{name} must be {rule}, got {value}")
         period = self.idiotope_period
         if isinstance(period, bool) or not isinstance(period, int | np.integer) or period < 1:
             raise ValueError(f"NetworkParams.idiotope_period must be an int >= 1, got {period!r}")
         return self
 
+    def clip_valid(self) -> NetworkParams:
+        """A copy with each float constant clipped into :data:`BOUNDS`: jit-safe, for values an
+        optimiser proposes (NaN stays NaN); host values stay on the host."""
+        clip = lambda v, lo, hi: (jnp if isinstance(v, jax.Array) else np).clip(v, lo, hi)
+        return self.replace(**{k: clip(getattr(self, k), *BOUNDS[k]) for k in BOUNDS})
 
-_FLOAT_RULES = {
-    "b": (lambda v: v >= 0, ">= 0"),
-    "k1": (lambda v: v >= 0, ">= 0"),
-    "k2": (lambda v: v >= 0, ">= 0"),
-    "k3": (lambda v: (v >= 0) & (v <= 1), "in [0, 1]"),
-    "Phi": (lambda v: v > 0, "> 0"),
-    "rho": (lambda v: v >= 0, ">= 0"),
-    "phi": (lambda v: v > 0, "> 0"),
-    "initial_clones": (lambda v: v > 0, "> 0"),
-    "penalty_idiotypic": (lambda v: v >= 0, ">= 0"),
-    "penalty_non_idiotypic": (lambda v: v >= 0, ">= 0"),
+
+_POSITIVE = float(np.finfo(np.float32).tiny)  # "> 0" as a closed bound
+BOUNDS: dict[str, tuple[float, float]] = {
+    "b": (0.0, np.inf),
+    "k1": (0.0, np.inf),
+    "k2": (0.0, np.inf),
+    "k3": (0.0, 1.0),
+    "Phi": (_POSITIVE, np.inf),
+    "rho": (0.0, np.inf),
+    "phi": (_POSITIVE, np.inf),
+    "initial_clones": (_POSITIVE, np.inf),
+    "penalty_idiotypic": (0.0, np.inf),
+    "penalty_non_idiotypic": (0.0, np.inf),
 }
+"""Each float constant's valid range [low, high] (float32's smallest normal number for "> 0"):
+what ``validate`` checks, ``clip_valid`` clips to, and an optimiser may read."""
 
 
 def network_params(**overrides: float | int) -> NetworkParams:

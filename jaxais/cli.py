@@ -48,11 +48,8 @@ def _one_line(text: str) -> str:
 
 def error_message(err: BaseException) -> str:
     """``err`` in one line; an ``OSError`` names its file (``out/x.png: Permission denied``)."""
-    if isinstance(err, KeyboardInterrupt):
-        return "interrupted"
     if isinstance(err, OSError) and err.strerror:
-        where = err.filename if err.filename is not None else ""
-        return _one_line(f"{where}: {err.strerror}" if where else err.strerror)
+        return _one_line(f"{err.filename}: {err.strerror}" if err.filename else err.strerror)
     return _one_line(str(err)) or type(err).__name__
 
 
@@ -106,14 +103,14 @@ def _signal_handler(prog: str) -> Callable[[int, Any], None]:
 
 
 class main_wrapper(contextlib.ContextDecorator):  # noqa: N801 (used like a function)
-    """Decorator or context manager: ``ValueError`` (``WorldError`` too), ``OSError`` and
+    """Decorator or context manager: ``ValueError`` (``UserError``, ``WorldError``), ``OSError`` and
     ``extra`` types give one line and status 2; SIGINT/SIGTERM (main thread; one ignored at start,
     as under ``nohup``, stays ignored) one line and 130/143. Other exceptions (bugs) and
     ``SystemExit`` pass through; ``JAXAIS_DEBUG=1`` catches nothing."""
 
     def __init__(self, prog: str, extra: tuple[type[BaseException], ...] = ()):
         self.prog = prog
-        self.handled: tuple[type[BaseException], ...] = (UserError, ValueError, OSError, *extra)
+        self.handled: tuple[type[BaseException], ...] = (ValueError, OSError, *extra)
         self._previous: list[dict[int, Any]] = []  # a stack: the decorated main may recurse
 
     def __enter__(self) -> main_wrapper:

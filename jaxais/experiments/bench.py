@@ -26,16 +26,8 @@ from jaxais.io import atomic_write_json
 SCHEMA = "jaxais-bench/1"
 DEVICE_FLAG = "--xla_force_host_platform_device_count"
 
-QUICK = dict(
-    steps=50,
-    repeats=2,
-    batches=(1, 30, 1000),
-    numpy_robots=4,
-    numpy_steps=5,
-    matmul=512,
-    controller_batches=(30,),
-    controller_steps=50,
-)
+QUICK = dict(steps=50, repeats=2, batches=(1, 30, 1000), numpy_robots=4, numpy_steps=5,
+             matmul=512, controller_batches=(30,), controller_steps=50)  # fmt: skip
 SPEEDUP_BATCH = 30  # compared with NumPy: a population of 30, as in the GA
 RESET_CHUNK = 1000  # robots reset in one call; larger batches repeat them (same work per step)
 SHARDING_HELPS = 1.1  # sharding "helps" when this much faster at the largest batch (noise)
@@ -255,7 +247,7 @@ def bench_machine(b: Bench) -> None:
     }
 
 
-def _bench_batches(b: Bench, batches: list[int], sharding_for=None) -> dict[str, dict]:
+def _bench_batches(b: Bench, batches: list[int], sharding: Any = None) -> dict[str, dict]:
     """Compile and time the rollout at each batch size; {batch: {compile_s, best, median}}."""
     import jax
 
@@ -264,7 +256,6 @@ def _bench_batches(b: Bench, batches: list[int], sharding_for=None) -> dict[str,
     steps = b.config.steps
     for n in batches:
         state, obs = initial(b, n)
-        sharding = sharding_for(n) if sharding_for is not None else None
         # On the device(s) before timing: no host-to-device copy inside the timed calls.
         state, obs = jax.device_put((state, obs), sharding)
         rollout = make_rollout(steps, sharding)
@@ -344,7 +335,7 @@ def bench_sharded(b: Bench) -> None:
         b.notes.append(f"no batch size divisible by {n_dev} devices: sharded benchmark skipped")
         return
     # The task loop's own batch sharding (jaxais.runner shards the same way).
-    runs = _bench_batches(b, usable, sharding_for=lambda n: batch_sharding())
+    runs = _bench_batches(b, usable, batch_sharding())
     sharded = {k: v["steps_per_s"] for k, v in runs.items()}
     b.results["jax_steps_per_s_sharded"] = sharded
     b.results["compile_s_sharded"] = {k: v["compile_s"] for k, v in runs.items()}

@@ -283,9 +283,6 @@ class EpuckEnv(environment.Environment):
         return f"EpuckEnv({self.name!r}, max_steps_in_episode={self._params.max_steps_in_episode})"
 
 
-_INTEGERS = tuple(name for name, (_, _, integer) in _RANGES.items() if integer)
-
-
 def make(
     world: str | Path | World = "world1",
     *,
@@ -312,7 +309,7 @@ def make(
     sim = default_params() if sim_params is None else sim_params
     fields = {"max_steps_in_episode": round(PAPER_TIME_CAP / sim.dt), **overrides}
     params = check_params(EnvParams(world=w, sim=sim, **fields))
-    params = params.replace(**{name: int(getattr(params, name)) for name in _INTEGERS})
+    params = params.replace(**{k: int(getattr(params, k)) for k, r in _RANGES.items() if r[2]})
     return EpuckEnv(params, auto_reset=auto_reset, reset_pool=int(reset_pool))
 
 

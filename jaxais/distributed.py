@@ -70,7 +70,7 @@ def check(args: argparse.Namespace) -> None:
                 "--coordinator HOST:PORT --num-processes N --process-id I"
             )
         return
-    if args.coordinator in (None, ""):
+    if not args.coordinator:
         if args.num_processes or args.process_id is not None:
             raise ValueError("--num-processes and --process-id need --coordinator HOST:PORT")
         return
@@ -92,7 +92,7 @@ def initialize(args: argparse.Namespace) -> bool:
     computes anything: waits ``args.timeout_s`` at most, then compares every process's flags
     (but :data:`PER_PROCESS`). One-line ``ValueError`` on bad flags, a failed join or a mismatch."""
     check(args)
-    if args.coordinator in (None, ""):
+    if not args.coordinator:
         return False
     import jax
     from jax._src import distributed as state  # the runtime's client: its key-value store

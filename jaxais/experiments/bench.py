@@ -396,13 +396,6 @@ def bench_numpy(b: Bench) -> None:
     b.results["numpy"] = {"robots": n_r, "steps": n_t, "seconds": seconds}
 
 
-def _cost(compiled: Any) -> dict[str, float]:
-    ca = compiled.cost_analysis()
-    if isinstance(ca, list | tuple):  # older jax: one dict per computation
-        ca = ca[0] if ca else {}
-    return {k: float(v) for k, v in (ca or {}).items()}
-
-
 def bench_flops(b: Bench) -> None:
     """``flops_per_step``: XLA's cost analysis of the compiled batched single-step program."""
     import jax
@@ -416,7 +409,10 @@ def bench_flops(b: Bench) -> None:
     state, _ = initial(b, n)
     keys = jax.random.split(jax.random.key(3), n)
     wheels = jnp.full((n, 2), CRUISE, jnp.float32)
-    cost = _cost(v_step.lower(keys, state, wheels, b.world, b.params).compile())
+    ca = v_step.lower(keys, state, wheels, b.world, b.params).compile().cost_analysis()
+    if isinstance(ca, list | tuple):  # older jax: one dict per computation
+        ca = ca[0] if ca else {}
+    cost = {k: float(v) for k, v in (ca or {}).items()}
     per_robot = {
         k: cost[k] / n for k in ("flops", "transcendentals", "bytes accessed") if k in cost
     }

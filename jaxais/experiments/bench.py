@@ -614,17 +614,12 @@ def run_bench(
         params=envs.default_params(),
         environ=dict(os.environ if environ is None else environ),
     )
+    names = ("steps", "batches", "repeats", "quick", "numpy_robots", "numpy_steps", "scripts")
     b.results.update(
         schema=SCHEMA,
         config={
             "world": b.world.name,
-            "steps": config.steps,
-            "batches": list(config.batches),
-            "repeats": config.repeats,
-            "quick": config.quick,
-            "numpy_robots": config.numpy_robots,
-            "numpy_steps": config.numpy_steps,
-            "scripts": config.scripts,
+            **{k: getattr(config, k) for k in names},
             "timing": "best of `repeats` timed calls after one warm-up call (median also given)",
             "policy": f"wheels = {CRUISE:g} -/+ {GAIN:g} * (ir0 + ir1 - ir6 - ir7)",
         },

@@ -1,21 +1,18 @@
-"""The e-puck simulator: a pure-JAX 2D ray-cast world (installed as ``jaxais.envs``).
+"""The e-puck simulator, a pure-JAX 2D ray-cast world (``jaxais.envs``; never imports jaxais).
 
-This package never imports the rest of jaxais: physics sits at the bottom of the stack. Its gymnax
-face (``make``, ``EpuckEnv``, ``EnvParams``, ``EnvState``, ``register_gymnax``: ``envs.gymnax``)
-loads on first use: importing gymnax takes seconds, which the simulator and the task loop skip.
+Its gymnax face (``envs.gymnax``: ``make``, ``EpuckEnv``, ...) loads on first use: importing
+gymnax takes seconds, which the simulator and the task loop skip.
 """
 
 import importlib
 from typing import Any
 
-from .geometry import Scene, cast_rays, disc_gaps, min_gap
+from .geometry import Scene, cast_rays, min_gap
 from .params import (
     CAMERA_COLUMNS,
     CAMERA_ROWS,
     GOAL,
     MARKER,
-    MATERIAL_NAMES,
-    MATERIALS,
     N_IR,
     NONE,
     WALL,
@@ -41,8 +38,6 @@ __all__ = [
     "CAMERA_ROWS",
     "GOAL",
     "MARKER",
-    "MATERIALS",
-    "MATERIAL_NAMES",
     "N_IR",
     "NONE",
     "WALL",
@@ -60,7 +55,6 @@ __all__ = [
     "build_scene",
     "cast_rays",
     "default_params",
-    "disc_gaps",
     "load_world",
     "make",
     "min_gap",

@@ -1,32 +1,15 @@
-"""The environment of :mod:`jaxais.envs.gymnax` as a brax ``Env``, for brax's training code.
+"""The :mod:`jaxais.envs.gymnax` environment as a brax ``Env`` (``pip install 'jaxais[brax]'``).
 
-Needs brax (``pip install 'jaxais[brax]'``); nothing else in jaxais imports this module. brax's
-trainers take it as it is: ``ppo.train(BraxEnv("world1"), ...)`` (``examples/brax_ppo.py``).
-
-brax's ``step(state, action)`` takes no key: the wrapper keeps one in ``state.info["rng"]``
-(split from the reset's key) and splits it every step. The brax ``State`` holds:
-
-- ``pipeline_state``: the gymnax-style :class:`~jaxais.envs.gymnax.EnvState`;
-- ``obs`` [11], ``reward``: as :class:`~jaxais.envs.gymnax.EpuckEnv` defines them;
-- ``done``: 1.0 when the episode terminated (target found) or was truncated at
-  ``max_steps_in_episode``; ``info["truncation"]`` is 1.0 in the second case (brax's convention;
-  brax's ``EpisodeWrapper`` overwrites it with its own ``episode_length`` cap, so keep
-  ``max_steps_in_episode`` at or above that, as the default of 125,000 steps is);
-- ``metrics`` (:data:`METRICS`), per step as brax's ``EpisodeWrapper`` sums them:
-  ``collision`` (1.0 on the step that counted a collision), ``progress`` (metres of approach
-  to the goal this step) and ``found`` (1.0 on the step that found the target); keys added by
-  brax's wrappers (``reward``) are kept.
-
-Auto-reset: brax's ``AutoResetWrapper`` (``brax.envs.training.wrap``, used by its trainers)
-restarts a finished episode from ``info["first_pipeline_state"]``. So that episodes do not all
-restart from their environment's first placement, ``reset`` samples ``resets`` placements (16 by
-default; the first is the episode's) into ``info["placements"]`` and every ``step`` writes a
-random one of them into ``info["first_pipeline_state"]``/``info["first_obs"]`` when those keys
-are there: a gather, not a reset (which under ``vmap`` would run every step). ppo's
-``num_resets_per_eval`` draws new pools; ``resets=0`` keeps brax's behaviour.
-
-:func:`register` adds every built-in world to brax's registry (``brax.envs.create(
-"jaxais_world1", episode_length=...)``, ``brax.envs.get_environment(name, backend=...)``).
+``ppo.train(BraxEnv("world1"), ...)`` (``examples/brax_ppo.py``); :func:`register` adds the
+built-in worlds to brax's registry as ``jaxais_{world}``. ``step`` takes no key: one rides in
+``info["rng"]``. ``pipeline_state`` is the :class:`~jaxais.envs.gymnax.EnvState`; ``done`` is 1.0
+when terminated or truncated, ``info["truncation"]`` 1.0 in the second case (brax's
+``EpisodeWrapper`` overwrites it with its ``episode_length`` cap: keep ``max_steps_in_episode``
+above that). ``metrics`` (:data:`METRICS`) per step: ``collision`` (1.0 when one is counted),
+``progress`` (m toward the goal), ``found``. brax's ``AutoResetWrapper`` restarts from
+``info["first_pipeline_state"]``: so that episodes do not all restart from one placement,
+``reset`` draws ``resets`` placements and ``step`` writes a random one there (a gather, not a
+reset); ``resets=0`` keeps brax's behaviour.
 """
 
 from __future__ import annotations
@@ -54,36 +37,25 @@ except ImportError as err:  # brax is optional
 __all__ = ["METRICS", "BraxEnv", "BraxState", "register"]
 
 
-METRICS = ("collision", "progress", "found")
-"""Entries of ``State.metrics``, per step (float32)."""
+METRICS = ("collision", "progress", "found")  # State.metrics, float32 per step
 
 
 def _device_put_replicated(x: Any, devices: list) -> Any:
-    """``x`` stacked once per device, sharded over ``devices``: brax's own replacement."""
+    """``x`` stacked once per device, sharded over ``devices`` (brax main's definition)."""
     mesh = jax.sharding.Mesh(np.array(devices), ("replicas",))
     sharding = jax.NamedSharding(mesh, jax.P("replicas"))
     stack = lambda a: (jnp if isinstance(a, jax.Array) else np).stack([a] * len(devices))
     return jax.tree.map(lambda a: jax.device_put(stack(a), sharding), x)
 
 
-try:
-    jax.device_put_replicated  # noqa: B018
-except AttributeError:
-    # brax 0.14.2 (the newest release) calls jax.device_put_replicated, which jax 0.10 removed;
-    # brax's main branch inlines this definition (commit 303d89d). Drop when brax > 0.14.2.
-    jax.device_put_replicated = _device_put_replicated
+# brax 0.14.2 (the newest release) calls jax.device_put_replicated, which jax 0.10 removed;
+# brax's main branch inlines the definition above (commit 303d89d). Drop when brax > 0.14.2.
+jax.device_put_replicated = getattr(jax, "device_put_replicated", _device_put_replicated)
 
 
 class BraxEnv(_BraxEnvBase):
-    """A jaxais world as a brax ``Env`` (``reset(rng)``, ``step(state, action)``).
-
-    Args:
-        world: a built-in world name, a world file's path, a loaded ``World``, or an
-            :class:`~jaxais.envs.gymnax.EpuckEnv` (its default parameters are used).
-        params: the environment's parameters (default: the environment's defaults).
-        resets: placements sampled per ``reset`` for brax's auto-reset to draw from (0: none).
-        **overrides: as for :func:`jaxais.envs.make` (``max_steps_in_episode``, ...).
-    """
+    """A world (as :func:`~jaxais.envs.gymnax.make` takes it, with its ``overrides``, or an
+    ``EpuckEnv``) as a brax ``Env``; ``resets``: placements drawn per ``reset`` (0: none)."""
 
     def __init__(
         self,
@@ -105,7 +77,6 @@ class BraxEnv(_BraxEnvBase):
 
     @property
     def env(self) -> EpuckEnv:
-        """The gymnax-style environment underneath."""
         return self._env
 
     def reset(self, rng: jax.Array) -> BraxState:
@@ -173,8 +144,6 @@ def _factory(world: str, backend: str | None = None, **kwargs: Any) -> BraxEnv:
 
 def register(prefix: str = "jaxais_") -> tuple[str, ...]:
     """Add every built-in world to brax's registry as ``{prefix}{world}``; returns the names."""
-    names = []
     for world in BUILTIN_WORLDS:
         _brax_envs.register_environment(prefix + world, functools.partial(_factory, world))
-        names.append(prefix + world)
-    return tuple(names)
+    return tuple(prefix + world for world in BUILTIN_WORLDS)

@@ -1,62 +1,23 @@
-"""The STL task as a gymnax environment: ``make("world1")`` or ``gymnax.make("jaxais/world1")``.
+"""The STL task as a gymnax 1.0 environment: ``make("world1")`` or ``gymnax.make("jaxais/world1")``.
 
-Drive an e-puck to the blue goal in a world without crashing. :class:`EpuckEnv` is a
-``gymnax.environments.environment.Environment`` (gymnax 1.0's API, its ``spaces.Box``)::
+Drive an e-puck to the blue goal without crashing (README "gymnax"). ``register_gymnax()`` adds
+the built-in worlds to gymnax's registry (evosax's ``GymnaxProblem`` finds them); gymnax's
+wrappers take the env as it is, 5-tuple tools take ``gymnax.wrappers.LegacyStepAPIWrapper(env)``.
 
-    from jaxais import envs
+- obs [11] float32 (``OBS_NAMES``): IR ps0..ps7 / 4095; blue pixels / 45; blue centroid column
+  in [-1, 1] (0 when none seen); goal pixels / 45.
+- action [2]: (left, right) wheel speeds, clipped to [-1, 1], times ``SimParams.max_speed``.
+- reward: ``progress_scale`` x metres gained toward the goal, minus ``collision_penalty`` per
+  counted collision (one per contact episode, SPEC 9), plus ``finish_bonus`` on finding it.
+- terminated: the paper's finish rule; truncated: ``max_steps_in_episode`` steps; never both.
+- info: ``collisions``, ``distance`` (m), ``goal_pixels``, ``max_ir``, ``discount``; ``step``
+  adds gymnax's ``terminated``, ``truncated``, ``final_observation``.
 
-    env = envs.make("world1", max_steps_in_episode=2000)
-    params = env.default_params
-    obs, state = env.reset(key, params)
-    obs, state, reward, terminated, truncated, info = env.step(key, state, action, params)
-
-``envs.register_gymnax()`` adds every built-in world to gymnax's registry, so that
-``env, params = gymnax.make("jaxais/world1")`` (and evosax's ``GymnaxProblem``) finds it; its
-keyword arguments are :func:`make`'s. gymnax's wrappers (``LogWrapper``,
-``FlattenObservationWrapper``, ``GymnaxToGymWrapper``) take the environment as it is; tools
-written for the older 5-tuple ``step`` (``done`` = terminated or truncated; rejax 0.1,
-PureJaxRL's own wrappers) take ``gymnax.wrappers.LegacyStepAPIWrapper(env)``.
-
-**Observation** (``OBS_NAMES``): a float32 vector [11]: 0-7, the IR readings ps0..ps7 / 4095
-(1 is touching, about 0.016 with nothing in range); 8, blue pixels seen (marker or goal) / 45;
-9, the blue centroid column in [-1, 1] (+1 = rightmost column), 0 when no blue is seen; 10,
-goal pixels / 45.
-
-**Action**: float32 [2], (left, right) wheel speeds in [-1, 1], clipped to that range and scaled
-to the e-puck's +-1000 speed units (``SimParams.max_speed``).
-
-**Reward** per step (:class:`EnvParams`' defaults): ``progress_scale`` (10) x the decrease of the
-distance from the robot's centre to the goal's centre (m); minus ``collision_penalty`` (1.0) when
-a collision is counted: the maximum IR reading reaches ``collision_level`` (2400, the paper's
-threshold) after the robot was clear (maximum IR below ``clear_level``, 250) since the last
-counted one: one penalty per contact episode (SPEC 9); plus ``finish_bonus`` (10) on the step that
-finds the target.
-
-**Terminated** (``is_terminal``, the natural end): more than ``finish_pixels`` (40) goal pixels
-on ``finish_streak`` (3) consecutive steps, the paper's finish rule. **Truncated**
-(``is_truncated``): ``max_steps_in_episode`` steps (default 125,000 = the paper's 4000 s at
-32 ms) without terminating; never both.
-
-**Info**: ``collisions`` (so far this episode), ``distance`` (robot to goal, m, after the step),
-``goal_pixels``, ``max_ir`` (raw, 0..4095), ``discount`` (0.0 when terminated); from ``step``
-also gymnax's ``terminated``, ``truncated`` and ``final_observation`` (the observation that
-ended the episode: the returned one is the next episode's).
-
-**Auto-reset**: ``step`` starts a new episode when one ends, as gymnax's does, but cheaply:
-``reset`` also draws ``reset_pool`` (8) starts (placements and first observations) into the
-state, and an episode that ends restarts from one of them, picked by the step's key. gymnax's
-own ``step`` runs a fresh ``reset_env`` on every step, which under ``vmap`` cost 10-15x a step
-(placing boxes, goal and robots by trial and error); a gather and a select cost about nothing.
-A batch of envs thus restarts from ``reset_pool`` x batch placements until the next ``reset``.
-``make(..., auto_reset=False)``: ``step`` never resets (fixed-length rollouts; a robot parked
-at the target keeps terminating), ``reset`` draws no pool.
-
-**Bad input**: outside jit, ``make``, ``reset`` and ``step`` raise a one-line ``ValueError``
-naming an :class:`EnvParams` field out of range, or an action that is not 2 finite numbers.
-Inside jit or ``vmap`` (traced values) nothing is checked: out-of-range values run as given.
-
-Everything is jit- and vmap-able; the only randomness is the keys passed in. ``reset`` and
-``step`` are jitted, so that a plain Python loop runs at compiled speed.
+Auto-reset is cheap: ``reset`` also draws ``reset_pool`` starts into the state and an ended
+episode restarts from one (a gather and a select), where gymnax's ``step`` runs ``reset_env``
+every step (10-15x a step under ``vmap``). ``auto_reset=False``: ``step`` never resets.
+Outside jit, ``make``, ``reset`` and ``step`` reject out-of-range ``EnvParams`` fields and bad
+actions with a one-line ``ValueError``; traced values are not checked.
 """
 
 from __future__ import annotations
@@ -87,22 +48,11 @@ RESET_POOL = 8
 
 @pytree_dataclass
 class EnvParams:
-    """The world, the robot and the task's constants (every field a traced leaf).
-
-    A batch of parameters is one ``vmap``; worlds loaded with one ``Capacity`` (and equal static
-    fields) share one compiled program.
-
-    Attributes:
-        world: the world (``load_world``). sim: the robot's constants (``default_params``).
-        max_steps_in_episode: truncated after this many steps [paper: 4000 s = 125,000].
-        progress_scale: reward per metre of approach to the goal.
-        collision_penalty: subtracted once per counted collision (contact episode).
-        finish_bonus: added on the step that finds the target.
-        collision_level: maximum IR reading that makes a contact, 0..4095 [paper: 2400].
-        clear_level: maximum IR reading below which the robot is clear, 0..4095 [paper: 250].
-        finish_pixels: more than this many goal pixels (0..45) ... [paper: 40]
-        finish_streak: ... on this many consecutive steps finish the episode [paper: 3].
-    """
+    """The world, the robot and the task's constants, every field a traced leaf (one ``vmap``
+    batches them). Truncated after ``max_steps_in_episode`` [paper: 4000 s = 125,000 steps]; a
+    contact is max IR >= ``collision_level`` [paper: 2400] after max IR < ``clear_level``
+    [paper: 250]; found is > ``finish_pixels`` goal pixels [paper: 40] on ``finish_streak``
+    consecutive steps [paper: 3]."""
 
     world: World
     sim: SimParams
@@ -130,8 +80,7 @@ _RANGES = {
 
 
 def check_params(params: Any) -> EnvParams:
-    """``params`` if every concrete field is in range, else a one-line ``ValueError`` naming the
-    field. Traced fields (inside jit or ``vmap``) are not checked."""
+    """``params``, or a one-line ``ValueError`` naming a concrete field out of range."""
     if not isinstance(params, EnvParams):
         raise ValueError(
             f"params must be an EnvParams (env.default_params.replace(...)), "
@@ -159,16 +108,9 @@ def check_params(params: Any) -> EnvParams:
 
 @pytree_dataclass
 class EnvState:
-    """One episode in progress.
-
-    Attributes:
-        sim: the simulator's state (pose, wanderers, goal, boxes; ``sim.t`` counts the steps).
-        collisions: int32, collisions counted so far (one per contact episode).
-        free: bool, no obstacle seen (max IR < clear_level) since the last counted collision.
-        streak: int32, consecutive steps with more than finish_pixels goal pixels.
-        starts: the auto-reset's episode starts, ``(obs [K, 11], sim State with leaves [K, ...])``
-            drawn by ``reset``; None without auto-reset.
-    """
+    """One episode: ``sim`` (``sim.t`` counts steps), int32 ``collisions`` so far, bool ``free``
+    (clear since the last counted one), int32 ``streak`` of finish-rule steps, and the auto-reset's
+    ``starts`` ``(obs [K, 11], sim State [K, ...])`` (None without auto-reset)."""
 
     sim: State
     collisions: jnp.ndarray
@@ -198,11 +140,8 @@ def _fresh(sim: State) -> EnvState:
 
 
 class EpuckEnv(environment.Environment):
-    """The STL task (reach the goal, avoid collisions) as a gymnax 1.0 environment.
-
-    Build it with :func:`make`; the module docstring says what it observes, does and rewards.
-    ``params=None`` means ``default_params``.
-    """
+    """The STL task as a gymnax 1.0 environment (build it with :func:`make`); ``params=None``
+    means ``default_params``."""
 
     def __init__(self, params: EnvParams, auto_reset: bool = True, reset_pool: int = RESET_POOL):
         self._params = params
@@ -219,7 +158,6 @@ class EpuckEnv(environment.Environment):
 
     @property
     def num_actions(self) -> int:
-        """Size of the (continuous) action vector: the two wheel speeds."""
         return 2
 
     def observation_space(self, params: EnvParams | None = None) -> spaces.Box:
@@ -250,16 +188,8 @@ class EpuckEnv(environment.Environment):
         action: jax.Array,
         params: EnvParams | None = None,
     ) -> tuple[jax.Array, EnvState, jax.Array, jax.Array, jax.Array, dict[str, jax.Array]]:
-        """One 32 ms step; a new episode after the last (unless ``auto_reset=False``).
-
-        Args:
-            key: PRNG key (the simulator's noise, and the start picked if the episode ends).
-            state: the episode's state. action: [2] wheel speeds in [-1, 1].
-            params: the environment's parameters (default: ``default_params``).
-
-        Returns:
-            ``(obs [11], state, reward, terminated, truncated, info)``, gymnax 1.0's.
-        """
+        """One 32 ms step of wheel speeds ``action`` [2], a new episode after the last (with
+        auto-reset): ``(obs [11], state, reward, terminated, truncated, info)``."""
         if not isinstance(action, jax.core.Tracer):
             a = np.asarray(action)
             if a.shape != (2,) or not np.all(np.isfinite(a)):
@@ -275,7 +205,7 @@ class EpuckEnv(environment.Environment):
         truncated = self.is_truncated(new, params)
         info = {**info, "terminated": terminated, "truncated": truncated, "final_observation": obs}
         if self.auto_reset:
-            # A gather and a select (the starts were drawn by reset), the pool left out of both.
+            # A gather and a select (the starts were drawn by reset), the pool kept out of both.
             i = jax.random.randint(k_reset, (), 0, self.reset_pool)
             start_obs, start = jax.tree.map(lambda x: x[i], state.starts)
             done = terminated | truncated
@@ -353,9 +283,6 @@ class EpuckEnv(environment.Environment):
         return f"EpuckEnv({self.name!r}, max_steps_in_episode={self._params.max_steps_in_episode})"
 
 
-_INTEGERS = tuple(name for name, (_, _, integer) in _RANGES.items() if integer)
-
-
 def make(
     world: str | Path | World = "world1",
     *,
@@ -364,20 +291,8 @@ def make(
     reset_pool: int = RESET_POOL,
     **overrides: float,
 ) -> EpuckEnv:
-    """The environment of a world: a built-in name (``world1``, ``world2``, ``real``,
-    ``ga_maze``), a world file's path, or a loaded :class:`World`.
-
-    Args:
-        world: which world.
-        sim_params: the robot's constants (default: ``default_params()``).
-        auto_reset: whether ``step`` starts a new episode when one ends (gymnax's does).
-        reset_pool: episode starts ``reset`` draws for the auto-reset.
-        **overrides: :class:`EnvParams` fields, e.g. ``max_steps_in_episode=2000``.
-
-    Raises:
-        WorldError: the world file is missing or malformed.
-        ValueError: an unknown or out-of-range parameter.
-    """
+    """The environment of a world (built-in name, file path or :class:`World`); ``overrides``
+    are :class:`EnvParams` fields. Raises ``WorldError``/``ValueError`` (one line) on bad input."""
     unknown = sorted(set(overrides) - set(_RANGES))
     if unknown:
         raise ValueError(
@@ -394,13 +309,12 @@ def make(
     sim = default_params() if sim_params is None else sim_params
     fields = {"max_steps_in_episode": round(PAPER_TIME_CAP / sim.dt), **overrides}
     params = check_params(EnvParams(world=w, sim=sim, **fields))
-    params = params.replace(**{name: int(getattr(params, name)) for name in _INTEGERS})
+    params = params.replace(**{k: int(getattr(params, k)) for k, r in _RANGES.items() if r[2]})
     return EpuckEnv(params, auto_reset=auto_reset, reset_pool=int(reset_pool))
 
 
 def register_gymnax() -> tuple[str, ...]:
-    """Add every built-in world to gymnax's registry as ``jaxais/{world}`` (once); returns the
-    names. ``gymnax.make(name, **kwargs)`` then calls ``make(world, **kwargs)``."""
+    """Register the built-in worlds with gymnax as ``jaxais/{world}`` (``make``'s kwargs)."""
     names = tuple(f"jaxais/{world}" for world in BUILTIN_WORLDS)
     for name, world in zip(names, BUILTIN_WORLDS, strict=True):
         if name not in gymnax.registered_envs:

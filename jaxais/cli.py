@@ -1,34 +1,14 @@
-"""The command-line layer: flags in, one library call, one-line errors out.
+"""The command-line layer (imported by ``scripts/*.py`` only): flags in, one call, one line out.
 
-Imported by the entry points (``scripts/*.py``, installed as ``jaxais.scripts``) only; the
-library never imports it. Every script keeps the same contract:
+- A user's mistake (bad flag value, bad world file, unwritable output) ends the run with ONE
+  line on stderr, ``"{prog}: error: {message}"``, and exit status 2, never a traceback.
+- SIGINT ends it with ``"{prog}: error: interrupted"`` and 130, SIGTERM with ``terminated`` and
+  143, wherever the signal lands: the handler runs :data:`jaxais.io.ON_SIGNAL`, removes the temp
+  files of writes in flight (:data:`jaxais.io.IN_FLIGHT`) and exits at once. Outputs are atomic
+  and checkpoints whole, so nothing is half-written and a resumable run resumes.
 
-- A mistake by the user (a bad flag value, a missing or malformed world file, an output
-  directory that cannot be written) ends the run with ONE line on stderr,
-  ``"{prog}: error: {message}"``, and exit status 2 (argparse's shape), never a traceback.
-- Ctrl-C (SIGINT) ends it with ``"{prog}: error: interrupted"`` and status 130, SIGTERM with
-  ``"{prog}: error: terminated"`` and 143, wherever the signal lands: the handler runs
-  :data:`jaxais.io.ON_SIGNAL`, removes the temporary files of writes in flight
-  (:data:`jaxais.io.IN_FLIGHT`) and ends the process at once. Every output is written
-  atomically (:mod:`jaxais.io`) and checkpoints are saved whole, so nothing is half-written and a
-  resumable run resumes from its last checkpoint.
-
-Typical use::
-
-    from jaxais.cli import UserError, main_wrapper, run_script
-
-    @main_wrapper("evolve.py")
-    def main(argv=None):
-        args = parse_args(argv)
-        if args.generations <= 0:
-            raise UserError(f"--generations must be positive, got {args.generations}")
-        ...
-
-    if __name__ == "__main__":
-        run_script(main)
-
-Scripts import JAX inside ``main``, so a bad flag is reported (and ``XLA_FLAGS`` set) before
-JAX starts. Set ``JAXAIS_DEBUG=1`` to let errors propagate with their traceback instead.
+Scripts wrap ``main`` in ``@main_wrapper("name.py")``, run it with :func:`run_script` and import
+JAX inside ``main`` (a bad flag is reported before JAX starts). ``JAXAIS_DEBUG=1`` re-raises.
 """
 
 from __future__ import annotations
@@ -43,40 +23,18 @@ from collections.abc import Callable
 from typing import Any, NoReturn
 
 from jaxais import distributed, io
-from jaxais.io import (
+
+# The scripts' (and tests') names for these, with the CLI's own.
+from jaxais.io import (  # noqa: F401
     UserError,
     atomic_write,
     atomic_write_json,
-    atomic_write_text,
     check_output_file,
     check_writable_dir,
 )
 
-__all__ = [
-    "ArgumentParser",
-    "EXIT_INTERRUPTED",
-    "EXIT_TERMINATED",
-    "EXIT_USAGE",
-    "UserError",
-    "atomic_write",
-    "atomic_write_json",
-    "atomic_write_text",
-    "check_output_file",
-    "check_writable_dir",
-    "error_message",
-    "fail",
-    "main_wrapper",
-    "run_script",
-]
-
-EXIT_USAGE = 2
-"""Exit status of a user error (as argparse uses for bad flags)."""
-EXIT_INTERRUPTED = 130
-"""Exit status after Ctrl-C (128 + SIGINT, the shell convention)."""
-EXIT_TERMINATED = 143
-"""Exit status after SIGTERM (128 + SIGTERM)."""
-DEBUG_ENV = "JAXAIS_DEBUG"
-"""Environment variable: when set to a non-empty value other than 0, errors are re-raised."""
+EXIT_USAGE, EXIT_INTERRUPTED, EXIT_TERMINATED = 2, 130, 143  # argparse's; 128 + the signal
+DEBUG_ENV = "JAXAIS_DEBUG"  # set (not to 0): errors propagate with their traceback
 _STATUS = {
     signal.SIGINT: (EXIT_INTERRUPTED, "interrupted"),
     signal.SIGTERM: (EXIT_TERMINATED, "terminated"),
@@ -89,21 +47,14 @@ def _one_line(text: str) -> str:
 
 
 def error_message(err: BaseException) -> str:
-    """A one-line description of ``err`` for ``"{prog}: error: {message}"``.
-
-    ``OSError`` messages name the file (``out/x.png: Permission denied``); others use ``str``.
-    """
-    if isinstance(err, KeyboardInterrupt):
-        return "interrupted"
+    """``err`` in one line; an ``OSError`` names its file (``out/x.png: Permission denied``)."""
     if isinstance(err, OSError) and err.strerror:
-        where = err.filename if err.filename is not None else ""
-        return _one_line(f"{where}: {err.strerror}" if where else err.strerror)
+        return _one_line(f"{err.filename}: {err.strerror}" if err.filename else err.strerror)
     return _one_line(str(err)) or type(err).__name__
 
 
 def _error_line(prog: str, message: str) -> str:
-    """``"{prog}: error: {message}"`` as written to stderr: on a line of its own even when a
-    progress bar (tqdm, which leaves the cursor at the end of its line) is on the screen."""
+    """``"{prog}: error: {message}"`` for stderr, on a line of its own under an open tqdm bar."""
     bars = getattr(sys.modules.get("tqdm"), "tqdm", None)
     open_bar = any(not getattr(bar, "disable", True) for bar in getattr(bars, "_instances", ()))
     return ("\n" if open_bar else "") + f"{prog}: error: {_one_line(message)}\n"
@@ -120,8 +71,8 @@ def fail(prog: str, message: str, status: int = EXIT_USAGE) -> NoReturn:
 
 
 class ArgumentParser(argparse.ArgumentParser):
-    """``argparse.ArgumentParser`` whose errors are one line: ``"{prog}: error: {message}
-    (see --help)"`` and exit status 2, instead of a usage block."""
+    """An ``argparse.ArgumentParser`` whose errors are one line (``... (see --help)``), not a
+    usage block."""
 
     def error(self, message: str) -> NoReturn:
         fail(self.prog, f"{message} (see --help)")
@@ -132,10 +83,9 @@ def _debug() -> bool:
 
 
 def _signal_handler(prog: str) -> Callable[[int, Any], None]:
-    """A handler that ends the process at once with the signal's one line, after the library's
-    :data:`jaxais.io.ON_SIGNAL` (e.g. stopping child processes) and removing the temporary files
-    of writes in flight. Nothing unwinds, so no interrupt can land half-way in
-    an import, a ``__del__`` or a C extension and come out as a traceback or a crash."""
+    """A handler that runs :data:`jaxais.io.ON_SIGNAL`, removes the temp files in flight and ends
+    the process at once with the signal's line: nothing unwinds, so no interrupt lands half-way
+    in an import, a ``__del__`` or a C extension as a traceback or a crash."""
 
     def handler(signum: int, frame: Any) -> None:
         status, message = _STATUS[signum]
@@ -153,23 +103,14 @@ def _signal_handler(prog: str) -> Callable[[int, Any], None]:
 
 
 class main_wrapper(contextlib.ContextDecorator):  # noqa: N801 (used like a function)
-    """Turn user errors and signals into one line on stderr and an exit status.
-
-    Usable as a decorator (``@main_wrapper("render.py")``) or as a context manager:
-
-    - :class:`UserError`, ``ValueError`` (bad parameter values; ``jaxais.envs.WorldError`` is
-      one), ``OSError`` and any type in ``extra``: one line, exit status 2;
-    - SIGINT and SIGTERM (main thread only; a signal the process started with ignored, as
-      ``nohup`` does, stays ignored): one line, status 130 or 143, at once (see
-      :func:`_signal_handler`). The previous handlers are restored on the way out.
-
-    ``SystemExit`` (argparse's usage errors, ``--help``) passes through, as do other exceptions
-    (a bug shows its traceback). With ``JAXAIS_DEBUG=1`` nothing is caught.
-    """
+    """Decorator or context manager: ``ValueError`` (``UserError``, ``WorldError``), ``OSError`` and
+    ``extra`` types give one line and status 2; SIGINT/SIGTERM (main thread; one ignored at start,
+    as under ``nohup``, stays ignored) one line and 130/143. Other exceptions (bugs) and
+    ``SystemExit`` pass through; ``JAXAIS_DEBUG=1`` catches nothing."""
 
     def __init__(self, prog: str, extra: tuple[type[BaseException], ...] = ()):
         self.prog = prog
-        self.handled: tuple[type[BaseException], ...] = (UserError, ValueError, OSError, *extra)
+        self.handled: tuple[type[BaseException], ...] = (ValueError, OSError, *extra)
         self._previous: list[dict[int, Any]] = []  # a stack: the decorated main may recurse
 
     def __enter__(self) -> main_wrapper:
@@ -195,7 +136,6 @@ class main_wrapper(contextlib.ContextDecorator):  # noqa: N801 (used like a func
 
 
 def run_script(main: Callable[[], object]) -> NoReturn:
-    """Run a script's ``main()`` and exit: status 0 when it returns (its value is for in-process
-    callers such as tests), or that of a ``SystemExit`` it raises."""
+    """Run a script's ``main()`` and exit 0 (its value is for in-process callers: tests)."""
     main()
     raise SystemExit(0)

@@ -1,22 +1,11 @@
-"""Runs across processes and machines with JAX's own multi-process runtime (``jax.distributed``).
+"""Runs across processes and machines with JAX's multi-process runtime (``jax.distributed``).
 
-Every process runs the same script with the same arguments; :func:`initialize` joins them into
-one JAX runtime, after which ``jax.devices()`` lists every process's devices. A batch of runs is
-then sharded over a 1-D mesh of all of them (:func:`batch_sharding`): each device runs its share
-of the runs, and the readouts every host needs come back replicated, so every process follows
-the same host logic and writes the same results. A run's numbers do not depend on where it ran:
-the results are those of one process, bit for bit.
-
-Tell a process where it stands by flags (:func:`add_arguments`: ``--coordinator HOST:PORT
---num-processes N --process-id I --timeout-s S``) or by environment variables
-(``JAXAIS_COORDINATOR``, ``JAXAIS_NUM_PROCESSES``, ``JAXAIS_PROCESS_ID``, ``JAXAIS_TIMEOUT_S``).
-Under SLURM or Open MPI, ``--coordinator auto`` lets JAX read the cluster's own variables. On
-CPUs the processes exchange data through gloo.
-
-Joining fails fast and says why, in one line (a ``ValueError``): a process that does not find
-all the others within the timeout, or whose flags differ from another's (every process
-publishes its flags, and each compares them all), stops with the cause and the fix. While it
-waits it says so on stderr every few seconds, and Ctrl-C ends it (the scripts' handler).
+Every process runs the same script and flags (:func:`add_arguments`, or ``JAXAIS_*`` variables;
+``--coordinator auto`` under SLURM or Open MPI; gloo on CPUs); :func:`initialize` joins them, and
+a batch of runs is sharded over a 1-D mesh of every device (:func:`batch_sharding`) with the
+readouts replicated, so every process writes the same results, bit for bit those of one process.
+Joining fails fast with one line (a ``ValueError``) naming the cause and the fix: a process
+missing after the timeout, or flags that differ between processes; waiting is reported on stderr.
 """
 
 from __future__ import annotations
@@ -30,21 +19,14 @@ import threading
 import time
 
 ENV = {
-    "coordinator": "JAXAIS_COORDINATOR",
-    "num_processes": "JAXAIS_NUM_PROCESSES",
-    "process_id": "JAXAIS_PROCESS_ID",
-    "timeout_s": "JAXAIS_TIMEOUT_S",
+    k: "JAXAIS_" + k.upper() for k in ("coordinator", "num_processes", "process_id", "timeout_s")
 }
-TIMEOUT_S = 60.0
-"""How long a process waits for the others by default (seconds)."""
-PER_PROCESS = ("process_id", "timeout_s", "out", "plot")
-"""Flags that may differ between the processes of a run (the others write nothing)."""
-AUTO = ("SLURM_STEP_NODELIST", "OMPI_MCA_orte_hnp_uri")
-"""What ``--coordinator auto`` (JAX's detection) needs: SLURM's variable under ``srun`` or Open
-MPI's under ``mpirun``."""
+TIMEOUT_S = 60.0  # seconds a process waits for the others by default
+PER_PROCESS = ("process_id", "timeout_s", "out", "plot")  # may differ (the others write nothing)
+AUTO = ("SLURM_STEP_NODELIST", "OMPI_MCA_orte_hnp_uri")  # what JAX's cluster detection reads
 ABANDONED: list = []
-"""The runtime of a join that timed out, mid-way in its thread: a process holding one ends with
-``os._exit`` (:func:`jaxais.cli.fail`), as its teardown at exit would wait on it or abort."""
+"""Runtimes of joins that timed out mid-way: :func:`jaxais.cli.fail` then ends with ``os._exit``,
+as the teardown at exit would wait on them or abort."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -67,7 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _env(name: str, kind: type, default=None):
     value = os.environ.get(ENV[name])
-    if value is None or value == "":
+    if not value:
         return default
     try:
         return kind(value)
@@ -88,7 +70,7 @@ def check(args: argparse.Namespace) -> None:
                 "--coordinator HOST:PORT --num-processes N --process-id I"
             )
         return
-    if args.coordinator in (None, ""):
+    if not args.coordinator:
         if args.num_processes or args.process_id is not None:
             raise ValueError("--num-processes and --process-id need --coordinator HOST:PORT")
         return
@@ -106,18 +88,11 @@ def check(args: argparse.Namespace) -> None:
 
 
 def initialize(args: argparse.Namespace) -> bool:
-    """Join the multi-process run the flags describe; False (and nothing done) for one process.
-
-    Must run before JAX computes anything. Waits at most ``args.timeout_s`` for every process
-    to join, saying so on stderr, then checks that all were started with the same flags (but
-    those of :data:`PER_PROCESS`).
-
-    Raises:
-        ValueError: bad flags; the others did not all join in time, or process 0 cannot take its
-            port (the cause where it is known, and the fix); a flag differs between processes.
-    """
+    """Join the run the flags describe (False, nothing done, for one process), before JAX
+    computes anything: waits ``args.timeout_s`` at most, then compares every process's flags
+    (but :data:`PER_PROCESS`). One-line ``ValueError`` on bad flags, a failed join or a mismatch."""
     check(args)
-    if args.coordinator in (None, ""):
+    if not args.coordinator:
         return False
     import jax
     from jax._src import distributed as state  # the runtime's client: its key-value store
@@ -213,8 +188,8 @@ def _agree(args: argparse.Namespace, runtime) -> None:
 
 
 def batch_sharding(devices=None):
-    """The sharding of a batch of runs along its first axis over ``devices`` (default: every
-    process's), a ``NamedSharding`` over a 1-D ``("batch",)`` mesh; None with a single device."""
+    """A batch's first axis sharded over ``devices`` (default: every process's) on a 1-D
+    ``("batch",)`` mesh; None with a single device."""
     import jax
     import numpy as np
 

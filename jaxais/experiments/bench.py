@@ -6,7 +6,9 @@ imported by the benchmarks, not here, so :func:`force_host_devices` can set the 
 
 from __future__ import annotations
 
+import contextlib
 import datetime
+import itertools
 import os
 import platform
 import statistics
@@ -24,16 +26,8 @@ from jaxais.io import atomic_write_json
 SCHEMA = "jaxais-bench/1"
 DEVICE_FLAG = "--xla_force_host_platform_device_count"
 
-QUICK = dict(
-    steps=50,
-    repeats=2,
-    batches=(1, 30, 1000),
-    numpy_robots=4,
-    numpy_steps=5,
-    matmul=512,
-    controller_batches=(30,),
-    controller_steps=50,
-)
+QUICK = dict(steps=50, repeats=2, batches=(1, 30, 1000), numpy_robots=4, numpy_steps=5,
+             matmul=512, controller_batches=(30,), controller_steps=50)  # fmt: skip
 SPEEDUP_BATCH = 30  # compared with NumPy: a population of 30, as in the GA
 RESET_CHUNK = 1000  # robots reset in one call; larger batches repeat them (same work per step)
 SHARDING_HELPS = 1.1  # sharding "helps" when this much faster at the largest batch (noise)
@@ -44,7 +38,7 @@ CRUISE, GAIN = 300.0, 0.3  # the policy: wheels = CRUISE -/+ GAIN x (right IR - 
 @dataclass(frozen=True)
 class ScriptRun:
     """A command ``--scripts`` times: JSON key, script (``jaxais.scripts.NAME`` or an absolute
-    path) and flags, its ``--out`` name (in a fresh folder) and the wall-time target, s."""
+    path) and flags, its ``--out`` name (in a fresh folder) and wall-time target (s)."""
 
     name: str
     argv: tuple[str, ...]
@@ -53,18 +47,11 @@ class ScriptRun:
 
 
 SCRIPT_RUNS: tuple[ScriptRun, ...] = (
-    # The default LTL run (5 x 10 robots in ga_maze, one start each and 10 checks of every
-    # population's best, until every best crosses the maze; at most 200 generations),
-    # compilation included: under 2 minutes.
+    # The default LTL run and 30 SIE trials in world1 with the shipped seed, compiles included.
     ScriptRun("evolve", ("evolve.py",), "ltl", 120.0),
-    # 30 SIE trials in world1 with the shipped LTL seed, compilation included.
-    ScriptRun(
-        "trials",
-        ("trials.py", "--system", "SIE", "--world", "world1", "--trials", "30"),
-        "results.json",
-        15.0,
-    ),
-)
+    ScriptRun("trials", ("trials.py", "--system", "SIE", "--world", "world1", "--trials", "30"),
+              "results.json", 15.0),
+)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -99,8 +86,7 @@ def _sizes(value: str | Sequence[int], flag: str) -> tuple[int, ...]:
 def bench_config(quick: bool = False, **values: Any) -> BenchConfig:
     """A checked :class:`BenchConfig` (None: the default or :data:`QUICK`'s); batch sizes may be
     ``"1,30,1000"``; one-line ValueError on a bad value."""
-    values = {k: v for k, v in values.items() if v is not None}
-    values = (QUICK if quick else {}) | values
+    values = (QUICK if quick else {}) | {k: v for k, v in values.items() if v is not None}
     counts = ("steps", "repeats", "numpy_robots", "numpy_steps", "matmul", "controller_steps")
     for name in counts:
         if values.get(name, 1) <= 0:
@@ -128,8 +114,8 @@ def force_host_devices(n: int) -> None:
 
 @dataclass
 class Bench:
-    """What every benchmark gets: config, world, constants, the starting environment (the timed
-    scripts run in it), the document (``results``), shared values and notes."""
+    """Every benchmark's input and output: config, world, constants, the timed scripts'
+    environment, the document (``results``), shared values and notes."""
 
     config: BenchConfig
     world: Any
@@ -141,8 +127,8 @@ class Bench:
 
 
 def _timed(fn: Callable[[], Any], repeats: int) -> dict[str, Any]:
-    """``best_s``, ``median_s``, ``times_s`` of ``repeats`` calls after a warm-up, and
-    ``cpu_per_wall`` (about the cores kept busy)."""
+    """``best_s``, ``median_s``, ``times_s`` of ``repeats`` calls after a warm-up; ``cpu_per_wall``
+    (about the cores kept busy)."""
     import jax
 
     jax.block_until_ready(fn())
@@ -161,21 +147,11 @@ def _timed(fn: Callable[[], Any], repeats: int) -> dict[str, Any]:
     }
 
 
-def policy(obs):
-    """One robot's wheel speeds [2] from its ``Observation``: steer away from the nearer side."""
-    import jax.numpy as jnp
-
-    turn = GAIN * (obs.ir[0] + obs.ir[1] - obs.ir[6] - obs.ir[7])
-    return jnp.stack([CRUISE - turn, CRUISE + turn])
-
-
-def policy_numpy(obs: dict[str, Any]):
-    """:func:`policy` for the NumPy reference's observation dict."""
-    import numpy as np
-
-    ir = obs["ir"]
+def policy(ir, xp):
+    """One robot's wheel speeds [2] from its IR readings [8] (``xp``: ``jnp`` or ``np``): steer
+    away from the nearer side."""
     turn = GAIN * (ir[0] + ir[1] - ir[6] - ir[7])
-    return np.array([CRUISE - turn, CRUISE + turn])
+    return xp.stack([CRUISE - turn, CRUISE + turn])
 
 
 def make_rollout(n_steps: int, sharding: Any = None) -> Callable[..., Any]:
@@ -187,7 +163,7 @@ def make_rollout(n_steps: int, sharding: Any = None) -> Callable[..., Any]:
     from jaxais import envs
 
     v_step = jax.vmap(envs.step, in_axes=(0, 0, 0, None, None))
-    v_policy = jax.vmap(policy)
+    v_policy = jax.vmap(lambda obs: policy(obs.ir, jnp))
 
     def rollout(key, state, obs, world, params):
         n = state.t.shape[0]
@@ -241,20 +217,15 @@ def bench_machine(b: Bench) -> None:
     import numpy as np
 
     def cpu_model() -> str:
-        try:
+        with contextlib.suppress(OSError):
             for line in Path("/proc/cpuinfo").read_text().splitlines():
                 if line.startswith("model name"):
                     return line.split(":", 1)[1].strip()
-        except OSError:
-            pass
         return platform.processor() or platform.machine()
 
-    def memory_bytes() -> int | None:
-        try:
-            return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-        except (ValueError, OSError, AttributeError):
-            return None
-
+    memory = None
+    with contextlib.suppress(ValueError, OSError, AttributeError):
+        memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     affinity = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
     b.results["machine"] = {
         "platform": platform.platform(),
@@ -262,7 +233,7 @@ def bench_machine(b: Bench) -> None:
         "processor": cpu_model(),
         "cpu_count": os.cpu_count(),
         "cpus_available": affinity,
-        "memory_bytes": memory_bytes(),
+        "memory_bytes": memory,
         "python": sys.version.split()[0],
         "numpy": np.__version__,
         "jax": jax.__version__,
@@ -276,7 +247,7 @@ def bench_machine(b: Bench) -> None:
     }
 
 
-def _bench_batches(b: Bench, batches: list[int], sharding_for=None) -> dict[str, dict]:
+def _bench_batches(b: Bench, batches: list[int], sharding: Any = None) -> dict[str, dict]:
     """Compile and time the rollout at each batch size; {batch: {compile_s, best, median}}."""
     import jax
 
@@ -285,7 +256,6 @@ def _bench_batches(b: Bench, batches: list[int], sharding_for=None) -> dict[str,
     steps = b.config.steps
     for n in batches:
         state, obs = initial(b, n)
-        sharding = sharding_for(n) if sharding_for is not None else None
         # On the device(s) before timing: no host-to-device copy inside the timed calls.
         state, obs = jax.device_put((state, obs), sharding)
         rollout = make_rollout(steps, sharding)
@@ -314,9 +284,8 @@ def bench_jax(b: Bench) -> None:
 
 
 def bench_env(b: Bench) -> None:
-    """``env_steps_per_s``: the gymnax environment (``envs.make``), 64 envs under ``vmap`` in a
-    scan of random actions and 50-step episodes: ``step_env`` (no reset) and ``step``
-    (auto-reset)."""
+    """``env_steps_per_s``: ``envs.make``'s env, 64 under ``vmap``, random actions, 50-step
+    episodes: ``step_env`` (no reset) and ``step`` (auto-reset)."""
     import jax
 
     from jaxais import envs
@@ -366,7 +335,7 @@ def bench_sharded(b: Bench) -> None:
         b.notes.append(f"no batch size divisible by {n_dev} devices: sharded benchmark skipped")
         return
     # The task loop's own batch sharding (jaxais.runner shards the same way).
-    runs = _bench_batches(b, usable, sharding_for=lambda n: batch_sharding())
+    runs = _bench_batches(b, usable, batch_sharding())
     sharded = {k: v["steps_per_s"] for k, v in runs.items()}
     b.results["jax_steps_per_s_sharded"] = sharded
     b.results["compile_s_sharded"] = {k: v["compile_s"] for k, v in runs.items()}
@@ -394,6 +363,7 @@ def bench_numpy(b: Bench) -> None:
     import importlib.util
 
     import jax
+    import numpy as np
 
     from jaxais import envs
 
@@ -420,17 +390,10 @@ def bench_numpy(b: Bench) -> None:
         s, o = ref.unbatch(states, i), ref.unbatch(observations, i)
         for t in range(n_t):
             step_noise = {k: v[t, i] for k, v in noise.items()}
-            s, o = ref.ref_step(s, policy_numpy(o), step_noise, world_np, params_np)
+            s, o = ref.ref_step(s, policy(o["ir"], np), step_noise, world_np, params_np)
     seconds = time.perf_counter() - t0
     b.results["numpy_steps_per_s"] = n_r * n_t / seconds
     b.results["numpy"] = {"robots": n_r, "steps": n_t, "seconds": seconds}
-
-
-def _cost(compiled: Any) -> dict[str, float]:
-    ca = compiled.cost_analysis()
-    if isinstance(ca, list | tuple):  # older jax: one dict per computation
-        ca = ca[0] if ca else {}
-    return {k: float(v) for k, v in (ca or {}).items()}
 
 
 def bench_flops(b: Bench) -> None:
@@ -446,7 +409,10 @@ def bench_flops(b: Bench) -> None:
     state, _ = initial(b, n)
     keys = jax.random.split(jax.random.key(3), n)
     wheels = jnp.full((n, 2), CRUISE, jnp.float32)
-    cost = _cost(v_step.lower(keys, state, wheels, b.world, b.params).compile())
+    ca = v_step.lower(keys, state, wheels, b.world, b.params).compile().cost_analysis()
+    if isinstance(ca, list | tuple):  # older jax: one dict per computation
+        ca = ca[0] if ca else {}
+    cost = {k: float(v) for k, v in (ca or {}).items()}
     per_robot = {
         k: cost[k] / n for k in ("flops", "transcendentals", "bytes accessed") if k in cost
     }
@@ -498,12 +464,8 @@ def bench_controller(b: Bench) -> None:
             if n % len(devices):
                 continue
             params = jax.tree.map(lambda a, n=n: jnp.broadcast_to(a, (n, *jnp.shape(a))), system)
-            reset_keys, run_keys = trial_keys(0, "SIE", n)
-            sharding = batch_sharding(devices)
-            if sharding is not None:
-                reset_keys, run_keys, params = jax.device_put(
-                    (reset_keys, run_keys, params), sharding
-                )
+            keys = trial_keys(0, "SIE", n)
+            reset_keys, run_keys, params = jax.device_put((*keys, params), batch_sharding(devices))
             controller = stl_for(params)
             args = (b.world, b.params, controller, params, config)
             t0 = time.perf_counter()
@@ -529,42 +491,33 @@ def bench_scripts(b: Bench) -> None:
 
     env = {**b.environ, "JAXAIS_CACHE_DIR": "off"}
     times: dict[str, list[float]] = {run.name: [] for run in SCRIPT_RUNS}
-    with (
-        tempfile.TemporaryDirectory(prefix="jaxais-bench-") as tmp,
-        tqdm(
-            total=b.config.scripts * len(SCRIPT_RUNS), desc="scripts", file=sys.stderr, leave=False
-        ) as bar,
-    ):
-        for i in range(b.config.scripts):
-            for run in SCRIPT_RUNS:
-                bar.set_postfix_str(Path(run.argv[0]).name)
-                out = Path(tmp, f"{run.name}-{i}", run.out)
-                out.parent.mkdir()
-                script = Path(run.argv[0])
-                where = (
-                    [str(script)]
-                    if script.is_absolute()
-                    else ["-m", f"jaxais.scripts.{script.stem}"]
-                )
-                command = [sys.executable, *where, *run.argv[1:]]
-                t0 = time.perf_counter()
-                proc = subprocess.run([*command, "--out", str(out)], env=env, capture_output=True,
-                                      text=True, check=False)  # fmt: skip
-                times[run.name].append(time.perf_counter() - t0)
-                if proc.returncode:
-                    last = (proc.stderr.strip().splitlines() or ["(nothing on stderr)"])[-1]
-                    raise ChildProcessError(f"--scripts: {Path(command[1]).name} exited with "
-                                            f"status {proc.returncode}: {last}")  # fmt: skip
-                bar.update()
+    bar = tqdm(total=b.config.scripts * len(SCRIPT_RUNS), desc="scripts", file=sys.stderr,
+               leave=False)  # fmt: skip
+    with tempfile.TemporaryDirectory(prefix="jaxais-bench-") as tmp, bar:
+        for i, run in itertools.product(range(b.config.scripts), SCRIPT_RUNS):
+            path = Path(run.argv[0])
+            bar.set_postfix_str(path.name)
+            out = Path(tmp, f"{run.name}-{i}", run.out)
+            out.parent.mkdir()
+            where = [str(path)] if path.is_absolute() else ["-m", f"jaxais.scripts.{path.stem}"]
+            t0 = time.perf_counter()
+            proc = subprocess.run([sys.executable, *where, *run.argv[1:], "--out", str(out)],
+                                  env=env, capture_output=True, text=True, check=False)  # fmt: skip
+            times[run.name].append(time.perf_counter() - t0)
+            if proc.returncode:
+                last = (proc.stderr.strip().splitlines() or ["(nothing on stderr)"])[-1]
+                raise ChildProcessError(f"--scripts: {path.name} exited with status "
+                                        f"{proc.returncode}: {last}")  # fmt: skip
+            bar.update()
     b.results["scripts"] = {
         run.name: {
             "command": " ".join([*run.argv, "--out", run.out]),
             "target_s": run.target_s,
-            "times_s": times[run.name],
-            "min_s": min(times[run.name]),
-            "median_s": statistics.median(times[run.name]),
-            "max_s": max(times[run.name]),
-            "within_target": sum(t <= run.target_s for t in times[run.name]),
+            "times_s": (t := times[run.name]),
+            "min_s": min(t),
+            "median_s": statistics.median(t),
+            "max_s": max(t),
+            "within_target": sum(x <= run.target_s for x in t),
         }
         for run in SCRIPT_RUNS
     }
@@ -661,17 +614,12 @@ def run_bench(
         params=envs.default_params(),
         environ=dict(os.environ if environ is None else environ),
     )
+    names = ("steps", "batches", "repeats", "quick", "numpy_robots", "numpy_steps", "scripts")
     b.results.update(
         schema=SCHEMA,
         config={
             "world": b.world.name,
-            "steps": config.steps,
-            "batches": list(config.batches),
-            "repeats": config.repeats,
-            "quick": config.quick,
-            "numpy_robots": config.numpy_robots,
-            "numpy_steps": config.numpy_steps,
-            "scripts": config.scripts,
+            **{k: getattr(config, k) for k in names},
             "timing": "best of `repeats` timed calls after one warm-up call (median also given)",
             "policy": f"wheels = {CRUISE:g} -/+ {GAIN:g} * (ir0 + ir1 - ir6 - ir7)",
         },

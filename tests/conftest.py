@@ -21,6 +21,17 @@ from jaxais import envs
 # there (a test that wants a cache names its own directory).
 os.environ["JAXAIS_CACHE_DIR"] = "off"
 
+
+@pytest.fixture(scope="session", autouse=True)
+def _scripts_share_a_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """The scripts the tests start share one compilation cache in this run's temporary folder
+    (xdist's workers too: their folders' parent), so a program that several script runs compile
+    is compiled once; pytest removes it with the run's other old temporary folders."""
+    base = tmp_path_factory.getbasetemp()
+    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    os.environ["JAXAIS_CACHE_DIR"] = str(shared / "xla")
+
+
 BATCH = 8
 """Robots per batched call (a fixed size, so that no test triggers a new compilation)."""
 OBS_BATCH = 32

@@ -306,3 +306,18 @@ def test_sweep_script_writes_its_json_and_figure(tmp_path):
     assert doc["config"]["command"].startswith("sweep.py --grid k1=0.85,1.6")
     assert str(tmp_path) not in json.dumps(doc)  # no machine paths in the record
     assert (out_dir / "sweep.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize(
+    ("n_points", "n_trials", "slots", "count"),
+    [(121, 30, 1024, 3), (121, 30, 64, 40), (5, 2, 1024, 1), (7, 3, 3, 7), (34, 30, 1024, 1)],
+)
+def test_every_chunk_is_as_wide_as_the_whole_grids_pool(n_points, n_trials, slots, count):
+    # The shipped 11 x 11 sweep (30 trials, 1024 slots) ran as one pool 1024 runs wide; a chunk
+    # of 1020 runs (34 points) compiled a narrower pool, whose rounding changed one run of the
+    # point k1 = k2 = 1.0. Chunks are whole points, in order, each pool as wide as the whole's.
+    got = sweep.chunks(n_points, n_trials, slots)
+    assert [lo for lo, _ in got] == [0] + [hi for _, hi in got[:-1]] and got[-1][1] == n_points
+    width = min(slots, n_points * n_trials)
+    assert all(min(slots, (hi - lo) * n_trials) == width for lo, hi in got)
+    assert len(got) == count

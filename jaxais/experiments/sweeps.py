@@ -186,6 +186,17 @@ def summarise_point(result: dict[str, np.ndarray], level: float = 0.95) -> dict[
     return out
 
 
+def chunks(n_points: int, n_trials: int, slots: int) -> list[tuple[int, int]]:
+    """The grid's chunks, ``(first point, end)``: each of at least ``slots`` runs (the last joins
+    the one before it), so that every chunk's pool is as wide as one pool of the whole grid.
+    XLA's rounding of a run can depend on the width of the batch it runs in (a rare step, which
+    a chaotic run then amplifies), though not on its batch mates."""
+    los = list(range(0, n_points, -(-slots // n_trials)))
+    if len(los) > 1 and (n_points - los[-1]) * n_trials < slots:
+        los.pop()
+    return list(zip(los, [*los[1:], n_points], strict=True))
+
+
 def run_sweep(
     world: envs.World,
     base: System,
@@ -200,8 +211,8 @@ def run_sweep(
     run: Run | None = None,
     records: bool = False,
 ) -> dict[str, Any]:
-    """Every grid point's ``n_trials`` trials of ``base`` with the point's values, in chunks of
-    about ``slots`` runs (whole points; a run's numbers do not depend on its batch mates).
+    """Every grid point's ``n_trials`` trials of ``base`` with the point's values, in
+    :func:`chunks` of whole points.
 
     Args:
         world: the world. base: the system at the paper's constants. label: its label (it
@@ -221,11 +232,9 @@ def run_sweep(
     points = grid_points(axes)
     grid = point_systems(base, points)
     align = segment_length(config.chunk, int(base.network.idiotope_period))
-    per = max(1, slots // n_trials)  # points per chunk: about one pool of runs each
     start = time.perf_counter()
     out_points, iterations = [], 0
-    for lo in range(0, len(points), per):
-        hi = min(lo + per, len(points))
+    for lo, hi in chunks(len(points), n_trials, slots):
         unit = f"points {lo}-{hi - 1}"
         if run is not None and unit in run.units:  # a chunk finished before a resume
             got = run.units[unit]

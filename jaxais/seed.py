@@ -135,14 +135,12 @@ def save_seed(
             ckpt.save(tmp / ARRAYS_DIR, _arrays(seed))
         doc = seed_to_json(seed, provenance, crossing)
         (tmp / SEED_JSON).write_text(json.dumps(doc, indent=1))
+        old = path.with_name(f".{path.name}.old")
+        shutil.rmtree(old, ignore_errors=True)
         if path.exists():
-            old = path.with_name(f".{path.name}.old")
-            shutil.rmtree(old, ignore_errors=True)
             path.rename(old)
-            tmp.rename(path)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            tmp.rename(path)
+        tmp.rename(path)
+        shutil.rmtree(old, ignore_errors=True)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return path
@@ -200,17 +198,16 @@ def load_seed(path: str | Path | None = None) -> tuple[Seed, dict[str, Any]]:
         json_L = np.asarray([s["L"] for s in sets], np.float32)
     except (KeyError, TypeError, ValueError) as err:
         raise SeedError(f"{path}: {SEED_JSON} is malformed ({err}); {hint}") from None
-    same = len(readable) == x and json_L.shape == seed.L.shape
-    same = same and all(  # every field as float32 (direction as 0/1), set by set
-        np.array_equal(
-            np.asarray(getattr(r, f), np.float32), np.asarray(getattr(antibodies, f)[i], np.float32)
-        )
-        for i, r in enumerate(readable)
-        for f in _FIELDS
-    )
-    same = same and np.array_equal(json_tau, seed.tau.astype(np.float32))
-    same = same and np.array_equal(json_c, seed.collisions.astype(np.int32))
-    same = same and np.array_equal(json_L, seed.L.astype(np.float32))
+    f32 = lambda a: np.asarray(a, np.float32)  # every field as float32 (direction as 0/1)
+    same = (
+        len(readable) == x
+        and json_L.shape == seed.L.shape
+        and all(np.array_equal(f32(getattr(r, f)), f32(getattr(antibodies, f)[i]))
+                for i, r in enumerate(readable) for f in _FIELDS)
+        and np.array_equal(json_tau, f32(seed.tau))
+        and np.array_equal(json_c, seed.collisions.astype(np.int32))
+        and np.array_equal(json_L, f32(seed.L))
+    )  # fmt: skip
     if not same:
         raise SeedError(f"{path}: {SEED_JSON} disagrees with {ARRAYS_DIR}/ ({hint})")
     if CROSSING in meta:

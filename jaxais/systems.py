@@ -114,20 +114,13 @@ def make_system(
     )
 
 
+# A System's traced parameters (grid axes, an optimiser's variables): name -> (field, type).
 PARAMETERS: dict[str, tuple[str, type]] = {
-    "k1": ("network", float),
-    "k2": ("network", float),
-    "k3": ("network", float),
-    "b": ("network", float),
-    "Phi": ("network", float),
-    "initial_clones": ("network", float),
-    "penalty_idiotypic": ("network", float),
-    "penalty_non_idiotypic": ("network", float),
-    "hold": ("readings", int),
-    "encounter_gap": ("readings", int),
-    "sigma0_floor": ("readings", float),
-    "alpha_on_self": ("readings", bool),
-}  # a System's traced parameters (grid axes, an optimiser's variables): name -> (field, type)
+    **dict.fromkeys(("k1", "k2", "k3", "b", "Phi", "initial_clones", "penalty_idiotypic",
+                     "penalty_non_idiotypic"), ("network", float)),
+    "hold": ("readings", int), "encounter_gap": ("readings", int),
+    "sigma0_floor": ("readings", float), "alpha_on_self": ("readings", bool),
+}  # fmt: skip
 
 
 def system_params(system: System, names: Sequence[str] | None = None) -> dict[str, Any]:

@@ -81,8 +81,7 @@ def build_systems(
 ) -> tuple[dict[str, System], dict[str, Any]]:
     """(label -> System, the seed's description or None), reading the LTL seed (unless
     ``loaded`` by :func:`load_ltl_seed`) only when a seeded system needs it."""
-    seed: Seed | None = None
-    seed_info: dict[str, Any] | None = None
+    seed, seed_info = None, None
     if any(parse_label(name)[0] in ("SIE", "SRL") for name in labels):
         seed, seed_info = loaded if loaded is not None else load_ltl_seed(seeds_dir)
     systems = {name: make_system(name, seed, network=network, readings=readings) for name in labels}
@@ -107,9 +106,7 @@ def run_config(
         "episode": dataclasses.asdict(config),
         "network": fields(network),
         "readings": fields(DEFAULT if readings is None else readings),
-        "simulator": {
-            f.name: plain(getattr(sim_params, f.name)) for f in dataclasses.fields(sim_params)
-        },
+        "simulator": fields(sim_params),
         "ltl_seed": seed_info,
         "versions": versions(),
     }

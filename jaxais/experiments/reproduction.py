@@ -54,17 +54,11 @@ def _ltl_summary(seed_dir: Path) -> dict | None:
 
 
 def check_reproduce(
-    out: str | os.PathLike[str],
-    *,
-    trials: int | None = None,
-    seed: int = 0,
-    seeds: str | os.PathLike[str] | None = None,
-    evolve: bool = False,
-    generations: int | None = None,
-    worlds: str | Sequence[str] | None = None,
-    tau_cap: float | None = None,
-    collision_cap: int | None = None,
-) -> tuple[Path, list[str], float, int]:
+    out: str | os.PathLike[str], *, trials: int | None = None, seed: int = 0,
+    seeds: str | os.PathLike[str] | None = None, evolve: bool = False,
+    generations: int | None = None, worlds: str | Sequence[str] | None = None,
+    tau_cap: float | None = None, collision_cap: int | None = None,
+) -> tuple[Path, list[str], float, int]:  # fmt: skip
     """:func:`reproduce`'s arguments checked without JAX (one-line ValueErrors naming the
     flags) -> (out, worlds, tau_cap, collision_cap), defaults filled in."""
     names = protocol.WORLDS if worlds is None else worlds
@@ -97,21 +91,13 @@ def check_reproduce(
 
 
 def reproduce(
-    out: str | os.PathLike[str],
-    *,
-    trials: int | None = None,
-    seed: int = 0,
-    seeds: str | os.PathLike[str] | None = None,
-    evolve: bool = False,
-    generations: int | None = None,
-    baseline: str | os.PathLike[str] | bool = True,
-    worlds: str | Sequence[str] | None = None,
-    tau_cap: float | None = None,
-    collision_cap: int | None = None,
-    progress: bool = True,
-    command: str | None = None,
+    out: str | os.PathLike[str], *, trials: int | None = None, seed: int = 0,
+    seeds: str | os.PathLike[str] | None = None, evolve: bool = False,
+    generations: int | None = None, baseline: str | os.PathLike[str] | bool = True,
+    worlds: str | Sequence[str] | None = None, tau_cap: float | None = None,
+    collision_cap: int | None = None, progress: bool = True, command: str | None = None,
     resume: bool = False,
-) -> dict[str, Any] | None:
+) -> dict[str, Any] | None:  # fmt: skip
     """Run the paper's experiments into ``out`` (the flags of scripts/reproduce.py).
 
     Args:

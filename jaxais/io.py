@@ -36,12 +36,6 @@ IN_FLIGHT: set[Path] = set()  # temporary files being written (the signal handle
 ON_SIGNAL: list[Callable[[], object]] = []  # run on a signal, newest first; removed by its adder
 
 
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
 def atomic_write(path: str | os.PathLike[str], write_fn: Callable[[Path], Any]) -> Path:
     """``write_fn(tmp)`` fills a temporary file in ``path``'s directory (same suffix:
     matplotlib reads the format from it), which then replaces ``path`` (0666 less the umask);
@@ -56,7 +50,9 @@ def atomic_write(path: str | os.PathLike[str], write_fn: Callable[[Path], Any]) 
         write_fn(tmp)
         with open(tmp, "rb+") as f:  # the data is on disk before the rename makes it visible
             os.fsync(f.fileno())
-        os.chmod(tmp, 0o666 & ~_umask())
+        mask = os.umask(0)  # read it: os has no getter
+        os.umask(mask)
+        os.chmod(tmp, 0o666 & ~mask)
         os.replace(tmp, dest)
     except BaseException:
         with contextlib.suppress(OSError):

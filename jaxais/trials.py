@@ -203,17 +203,11 @@ def make_trials(config: TrialsConfig):
 
 
 def run_trials(
-    world: envs.World,
-    systems: Mapping[str, Any],
-    n_trials: int | Mapping[str, int],
-    seed: int,
-    config: EpisodeConfig = STL_CONFIG,
-    sim_params: envs.SimParams | None = None,
-    progress: Any = None,
-    timings: dict[str, float] | None = None,
-    controller: Controller | None = None,
-    slots: int = 1024,
-) -> dict[str, TrialSet]:
+    world: envs.World, systems: Mapping[str, Any], n_trials: int | Mapping[str, int], seed: int,
+    config: EpisodeConfig = STL_CONFIG, sim_params: envs.SimParams | None = None,
+    progress: Any = None, timings: dict[str, float] | None = None,
+    controller: Controller | None = None, slots: int = 1024,
+) -> dict[str, TrialSet]:  # fmt: skip
     """label -> :class:`TrialSet` of each system's ``n_trials`` (an int or per label) trials:
     with ``config.record`` one rollout to the slowest end (trajectories kept), else a refilling
     pool of ``slots`` runs; the same records either way. ``systems``: label (its random stream,

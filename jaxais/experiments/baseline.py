@@ -200,22 +200,18 @@ def evaluate_baseline(
                 world, {NN_LABEL: params}, n, seed, episode, sim, bar, controller=NEURAL
             )
         doc["timings_s"][name] = round(time.perf_counter() - t0, 1)
-        entry: dict[str, Any] = {"systems": {}, "tests": {}}
-        for label, ts in results.items():
-            entry["systems"][label] = {"summary": summarise(ts.records), "trials": ts.records}
+        systems_doc = {k: {"summary": summarise(v.records), "trials": v.records}
+                       for k, v in results.items()}  # fmt: skip
         f = {label: np.asarray([r["fitness"] for r in ts.records]) for label, ts in results.items()}
+        tests = {}
         for other in REFERENCE:
             t, p = stats.welch_t(f[NN_LABEL], f[other])
             u, p_u = stats.mann_whitney_u(f[NN_LABEL], f[other])
-            entry["tests"][f"{NN_LABEL} vs {other}"] = {
-                "metric": "f",
-                "welch_t": t,
-                "welch_p": p,
-                "mann_whitney_u": u,
-                "mann_whitney_p": p_u,
-                "significant_99": bool(p < protocol.ALPHA),
-            }
-        doc["worlds"][name] = entry
+            tests[f"{NN_LABEL} vs {other}"] = {"metric": "f", "welch_t": t, "welch_p": p,
+                "mann_whitney_u": u, "mann_whitney_p": p_u,
+                "significant_99": bool(p < protocol.ALPHA)}  # fmt: skip
+        doc["worlds"][name] = {"systems": systems_doc, "tests": tests}
+
     atomic_write_json(out / "evaluation.json", stats.jsonable(doc))
     atomic_write_text(out / "evaluation.md", _table(doc, info))
     return doc

@@ -24,11 +24,9 @@ UNSEEDED_P = (0.25, 0.75)  # [paper] the unseeded systems' initial paratopes' ra
 N_SETS = 5
 
 HAND_DESIGNED = [
-    # [paper] The HDC "uses a simple random wander to search for the target, a backward turning
-    # motion to escape collisions, and it steers the robot in the opposite direction of any
-    # detected obstacles"; it names no tracking, so it wanders whether or not the target is seen
-    # and finishes when the finish rule fires while it happens to face the target (SPEC 8).
-    # Attributes [ours].
+    # [paper] random wander, backward turn on collision, steer away from obstacles; no tracking:
+    # it finishes when the finish rule fires while it faces the target (SPEC 8). Values [ours].
+
     {"antigen": "target unseen", "type": "wander both", "S": 350, "F": 15, "A": 60, "Rf": 18,
      "Ra": 60},
     {"antigen": "target seen", "type": "wander both", "S": 350, "F": 15, "A": 60, "Rf": 18,

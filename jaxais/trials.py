@@ -174,8 +174,7 @@ def make_trials(config: TrialsConfig):
     @jax.jit
     def run_in(world, key, params, sim_params):
         dt = float(sim_params.dt)  # static: it fixes the loop's length
-        # One call of the task loop runs every trial to its end: a segment of whole chunks past
-        # the time cap (the iteration after the cap records the run's end).
+        # One segment of whole chunks past the time cap runs every trial to its recorded end.
         chunks = episode.max_iterations(dt) // episode.chunk + 2
         to_end = dataclasses.replace(episode, segment=chunks * episode.chunk)
         reset_keys, run_keys = _keys(key, stream, trials)
@@ -194,9 +193,9 @@ def make_trials(config: TrialsConfig):
             _check(params, System, "params", "a System (make_system)")
         sim_params = envs.default_params() if sim_params is None else sim_params
         _check(sim_params, envs.SimParams, "sim_params", "an envs.SimParams")
-        # The world is an argument of the program, not constants folded into it: folded, XLA
-        # rounds some products differently, and a run's path (chaotic over thousands of
-        # steps) would then differ from run_trials'.
+        # The world is an argument, not folded constants: XLA would round some products
+        # differently, and a chaotic run's path would then differ from run_trials'.
+
         return run_in(world, key, params, sim_params)
 
     return run

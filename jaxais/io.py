@@ -1,15 +1,6 @@
-"""Writing files: atomic writes (a file is either its earlier complete self or its new
-complete self) and the checks that an output can be written, made before any work.
-
-Every file jaxais writes goes through :func:`atomic_write`: the contents fill a temporary file in
-the target's directory, which then replaces the target with :func:`os.replace`. A failed or
-interrupted write leaves the earlier file (if any) as it was. The command-line layer
-(:mod:`jaxais.cli`) removes the temporary files still in flight when a signal ends a script, after
-running :data:`ON_SIGNAL`.
-
-A results folder says what it holds (:func:`open_run`): a complete run, or a partial one whose
-finished units ``--resume`` keeps; a run never starts over another one or a user's files.
-"""
+"""Writing files: atomic writes (a temporary file beside the target, then :func:`os.replace`),
+output checks made before any work, and results folders that say what they hold
+(:func:`open_run`). :mod:`jaxais.cli` removes :data:`IN_FLIGHT` files on a signal."""
 
 from __future__ import annotations
 
@@ -24,18 +15,16 @@ from typing import Any
 
 
 class UserError(ValueError):
-    """A mistake by the user (a bad path, flag or argument): one line, exit status 2, from a
-    script (:mod:`jaxais.cli`); a ``ValueError`` for a library caller."""
+    """A mistake by the user: one line and exit status 2 from a script (:mod:`jaxais.cli`)."""
 
 
 class ArgumentTypeError(UserError, TypeError):
-    """An argument of the wrong type: a TypeError, and a UserError like every other bad
-    argument, so callers catching ValueError and the scripts see one line too."""
+    """An argument of the wrong type: a TypeError, and a UserError (one line) too."""
 
 
 def check_type(value: Any, kind: Any, name: str, what: str, hint: str = "") -> None:
-    """:class:`ArgumentTypeError` naming the argument ``name`` unless ``value`` is a ``kind``:
-    "``name`` must be ``what``, got <its type> (<a short value>)``hint``"."""
+    """:class:`ArgumentTypeError` "``name`` must be ``what``, got <type> <value>``hint``" unless
+    ``value`` is a ``kind``."""
     if not isinstance(value, kind):
         got = type(value).__name__
         if isinstance(value, str | int | float):
@@ -43,34 +32,14 @@ def check_type(value: Any, kind: Any, name: str, what: str, hint: str = "") -> N
         raise ArgumentTypeError(f"{name} must be {what}, got {got}{hint}")
 
 
-IN_FLIGHT: set[Path] = set()
-"""Temporary files being written right now (removed by the CLI's signal handler)."""
-ON_SIGNAL: list[Callable[[], object]] = []
-"""What must still happen when a signal ends a script at once, newest first (the seed ledger
-stops its child processes here); each entry is removed by whoever added it."""
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+IN_FLIGHT: set[Path] = set()  # temporary files being written (the signal handler removes them)
+ON_SIGNAL: list[Callable[[], object]] = []  # run on a signal, newest first; removed by its adder
 
 
 def atomic_write(path: str | os.PathLike[str], write_fn: Callable[[Path], Any]) -> Path:
-    """Write a file atomically: ``write_fn`` fills a temporary file, which then replaces ``path``.
-
-    The temporary file lies in ``path``'s directory (so the replace is atomic) and keeps
-    ``path``'s suffix (matplotlib picks a format from the name). If ``write_fn`` raises, the
-    temporary file is removed and ``path`` is untouched. The new file gets the usual permissions
-    (0666 less the umask).
-
-    Args:
-        path: the destination.
-        write_fn: called with the temporary file's path; must write the complete contents there.
-
-    Returns:
-        ``path`` as a ``Path``.
-    """
+    """``write_fn(tmp)`` fills a temporary file in ``path``'s directory (same suffix:
+    matplotlib reads the format from it), which then replaces ``path`` (0666 less the umask);
+    if it raises, ``path`` is untouched. Returns ``Path(path)``."""
     dest = Path(path)
     directory = dest.parent if str(dest.parent) else Path(".")
     fd, tmp_name = tempfile.mkstemp(dir=directory, prefix=f".{dest.name}.", suffix=dest.suffix)
@@ -81,7 +50,9 @@ def atomic_write(path: str | os.PathLike[str], write_fn: Callable[[Path], Any]) 
         write_fn(tmp)
         with open(tmp, "rb+") as f:  # the data is on disk before the rename makes it visible
             os.fsync(f.fileno())
-        os.chmod(tmp, 0o666 & ~_umask())
+        mask = os.umask(0)  # read it: os has no getter
+        os.umask(mask)
+        os.chmod(tmp, 0o666 & ~mask)
         os.replace(tmp, dest)
     except BaseException:
         with contextlib.suppress(OSError):
@@ -98,21 +69,13 @@ def atomic_write_text(path: str | os.PathLike[str], text: str, encoding: str = "
 
 
 def atomic_write_json(path: str | os.PathLike[str], obj: Any, indent: int | None = 2) -> Path:
-    """Write ``obj`` as JSON (plus a final newline) to ``path`` atomically.
-
-    The object is serialised before anything is written, so an unserialisable object leaves no
-    file behind. NaN and infinities are refused (they are not JSON): use None instead.
-    """
+    """Write ``obj`` as JSON plus a newline atomically (serialised first; NaN refused)."""
     text = json.dumps(obj, indent=indent, allow_nan=False) + "\n"
     return atomic_write_text(path, text)
 
 
 def read_json_object(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """The JSON object (a dict) in ``path``.
-
-    Raises:
-        UserError: one line naming the file: missing, unreadable, not JSON, or not an object.
-    """
+    """The JSON object in ``path``, or a one-line UserError naming the file and the fault."""
     p = Path(path)
     try:
         doc = json.loads(p.read_text(encoding="utf-8"))
@@ -126,17 +89,8 @@ def read_json_object(path: str | os.PathLike[str]) -> dict[str, Any]:
 
 
 def check_writable_dir(path: str | os.PathLike[str]) -> Path:
-    """Check that ``path`` is an existing directory this process can create files in.
-
-    Args:
-        path: the directory ("" means the current directory).
-
-    Returns:
-        The directory as a ``Path``.
-
-    Raises:
-        UserError: it does not exist, is not a directory, or is not writable.
-    """
+    """``path`` ("": the current directory) as a Path, or a UserError unless it is an existing
+    directory this process can create files in."""
     d = Path(path) if str(path) else Path(".")
     if not d.exists():
         raise UserError(f"{d}: directory does not exist")
@@ -147,19 +101,12 @@ def check_writable_dir(path: str | os.PathLike[str]) -> Path:
     return d
 
 
-RUN_BYTES = 8192
-"""Host memory a run of the pool keeps until its call ends, about: its parameters (a System,
-1.4 kB, held twice while assembled), keys, outcome and trial record with its JSON (measured)."""
+RUN_BYTES = 8192  # host memory a pooled run keeps, measured: params (twice), keys, its record
 
 
 def check_memory(count: int, each: int, flag: str) -> None:
-    """Refuse, before any work, ``count`` items of ``each`` bytes beyond half this machine's
-    memory (a run killed by the kernel says nothing and loses everything).
-
-    Raises:
-        UserError: ``"{flag} {count} needs about N GB of memory; this machine has M GB; use
-            {flag} <= K"``.
-    """
+    """UserError if ``count`` items of ``each`` bytes pass half the memory (the kernel's kill
+    says nothing and loses everything)."""
     total = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     if count * each > total // 2:
         raise UserError(
@@ -171,19 +118,8 @@ def check_memory(count: int, each: int, flag: str) -> None:
 def check_output_file(
     path: str | os.PathLike[str], suffixes: tuple[str, ...] | None = None
 ) -> Path:
-    """Check, before any work is done, that an output file can be written later.
-
-    Args:
-        path: the output file.
-        suffixes: allowed lower-case suffixes (e.g. ``(".png", ".pdf")``), or None for any.
-
-    Returns:
-        The path as a ``Path``.
-
-    Raises:
-        UserError: the path is a directory, its suffix is not allowed, or its directory is
-            missing or not writable.
-    """
+    """``path`` as a Path, or a UserError unless it can be written later: not a directory, a
+    lower-case suffix in ``suffixes`` (None: any), a writable directory."""
     p = Path(path)
     if not p.name or p.is_dir():
         raise UserError(f"{p}: is a directory, expected a file name")
@@ -197,18 +133,14 @@ def check_output_file(
 
 
 MANIFEST = "manifest.json"
-"""A results folder's manifest (:class:`Run`)."""
-_FIELDS = [str, str, dict, dict]
+_FIELDS = [str, str, dict, dict]  # the types of kind, status, config, units
 
 
 @dataclasses.dataclass
 class Run:
-    """A results folder that says what it holds: ``DIR/manifest.json`` records the driver
-    (``kind``), the settings that decide its results (``config``), its status ("partial" or
-    "complete") and its finished units (name -> what the driver needs to use the unit again).
-    It is rewritten atomically after every unit, so a folder a kill left is a partial run that
-    ``resume`` finishes. Made by :func:`open_run`; ``write`` is False on the processes of a
-    multi-process run that do not write."""
+    """A results folder: ``manifest.json`` holds kind, config, status ("partial"/"complete")
+    and finished units (name -> what reusing it needs), rewritten after every unit. ``write``
+    is False on a multi-process run's non-writing processes."""
 
     out: Path
     kind: str
@@ -217,7 +149,7 @@ class Run:
     write: bool = True
 
     def finish(self, unit: str, info: Any = None) -> None:
-        """Record ``unit`` (its files already written) as finished, with ``info``."""
+        """Record ``unit`` (its files written) as finished."""
         self.units[unit] = info
         self._save("partial")
 
@@ -236,16 +168,10 @@ def open_run(
     out: str | os.PathLike[str], kind: str, config: dict[str, Any], *, resume: bool = False,
     write: bool = True,
 ) -> Run:  # fmt: skip
-    """Start a run of ``kind`` into ``out`` (created if missing), or resume the one there.
+    """Start a run of ``kind`` in a missing or empty ``out``, or ``resume`` the same kind and
+    config there. ``write=False`` checks and writes nothing. A UserError says what is in the way
+    and how to go on, or names the first setting that differs."""
 
-    A fresh run needs a missing or empty folder; ``resume`` needs a run of the same kind and
-    ``config`` there (its finished units are kept). On a process that does not write
-    (``write=False``) nothing is checked or written; with ``resume`` its units are read.
-
-    Raises:
-        UserError: one line saying what is in the way and how to go on (``--resume``, a fresh
-            ``--out``), or naming the first setting that differs from the run being resumed.
-    """
     out = Path(out)
     config = json.loads(json.dumps(config))  # as it reads back: tuples as lists
     path, old = out / MANIFEST, None

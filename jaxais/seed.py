@@ -1,13 +1,8 @@
-"""The LTL seed: five evolved antibody sets with their τ_i, c_i and L_ij, on disk.
+"""The LTL seed on disk: five evolved antibody sets with their τ_i, c_i and L_ij.
 
-A seed directory holds ``seed.json`` (readable: behaviour types by name, attributes, τ, c, L, and
-the command, seed and version that made it) and ``arrays/``, an orbax checkpoint of the same
-numbers at full precision. Loading reads the orbax arrays and checks them against the JSON.
-
-``seed.json`` may also hold a ``"crossing"`` entry (:data:`CROSSING`): how often each set crossed
-the LTL maze in fresh random starts, measured by ``scripts/evolve.py`` after the GA
-(``{"starts": n, "rate": [x fractions], "tau_cap": s, ...}``; SPEC 10: a seed whose sets do not
-reliably cross the maze is a failed LTL run). Loading checks its form (:func:`check_crossing`).
+A seed directory holds ``seed.json`` (readable, with provenance and an optional ``"crossing"``
+entry: how often each set crossed the LTL maze, SPEC 10) and ``arrays/``, an orbax checkpoint of
+the same numbers at full precision; loading checks one against the other.
 """
 
 from __future__ import annotations
@@ -22,24 +17,15 @@ from typing import Any
 import numpy as np
 
 from jaxais.envs.struct import pytree_dataclass
-from jaxais.immune.antibodies import (
-    Antibodies,
-    from_dicts,
-    to_dicts,
-    within_limits,
-)
+from jaxais.immune.antibodies import Antibodies, from_dicts, to_dicts, within_limits
 from jaxais.io import check_type
 from jaxais.orbax_reads import forget_abandoned_reads
 
 SEED_JSON = "seed.json"
 ARRAYS_DIR = "arrays"
-CROSSING = "crossing"
-"""The optional seed.json entry with the sets' crossing rates (see :func:`check_crossing`)."""
+CROSSING = "crossing"  # seed.json's optional crossing rates (:func:`check_crossing`)
 _FIELDS = ("type", "speed", "freq", "angle", "direction", "right_freq", "right_angle")
-
-
 SEED_FORMAT = "jaxais-seed/1"
-"""The ``format`` of the seed.json this version writes and reads."""
 
 
 def _bad_values(seed: Seed) -> str | None:
@@ -55,18 +41,13 @@ def _bad_values(seed: Seed) -> str | None:
 
 
 class SeedError(ValueError):
-    """A seed directory is missing, incomplete or corrupt (the message is one line)."""
+    """A seed directory is missing, incomplete or corrupt (one line)."""
 
 
 @pytree_dataclass
 class Seed:
-    """Evolved sets for the STL.
-
-    Attributes:
-        antibodies: [x, y] the sets (x = 5 populations' best robots, y = 8 antigens).
-        tau: [x] task time of each set's robot, s. collisions: [x] its collisions.
-        L: [x, y] each antibody's cumulative RL score.
-    """
+    """Evolved sets: antibodies [x, 8], their robots' tau [x] (s) and collisions [x], and
+    L [x, 8], each antibody's cumulative RL score."""
 
     antibodies: Antibodies
     tau: np.ndarray
@@ -75,7 +56,7 @@ class Seed:
 
 
 def default_seed_dir() -> Path:
-    """The seed shipped in ``checkpoints/default`` (``scripts/evolve.py`` with its defaults)."""
+    """The shipped seed, ``checkpoints/default`` (evolve.py's defaults)."""
     return Path(str(resources.files("jaxais.checkpoints").joinpath("default")))
 
 
@@ -90,12 +71,8 @@ def _arrays(seed: Seed) -> dict[str, np.ndarray]:
 
 
 def check_crossing(entry: Any, x: int) -> str | None:
-    """What is wrong with a ``"crossing"`` entry for ``x`` sets, or None.
-
-    The entry is a dict with ``starts`` (an int >= 1), ``rate`` (x fractions in [0, 1], each a
-    whole number of crossings out of ``starts``) and ``tau_cap`` (the time cap, s, > 0); further
-    keys (the world, mean τ, how the keys were made, ...) are free.
-    """
+    """What is wrong with a crossing entry for ``x`` sets, or None: it needs ``starts`` >= 1,
+    ``rate`` (x whole fractions of ``starts``) and ``tau_cap`` > 0; other keys are free."""
     if not isinstance(entry, dict):
         return "not a JSON object"
     starts, rate, cap = entry.get("starts"), entry.get("rate"), entry.get("tau_cap")
@@ -116,7 +93,7 @@ def check_crossing(entry: Any, x: int) -> str | None:
 def seed_to_json(
     seed: Seed, provenance: dict[str, Any], crossing: dict[str, Any] | None = None
 ) -> dict[str, Any]:
-    """The readable form of a seed (one entry per set; ``crossing`` as its "crossing" entry)."""
+    """seed.json's document: provenance, ``crossing``, one entry per set."""
     sets = []
     for i in range(seed.tau.shape[0]):
         one = Antibodies(**{f: np.asarray(getattr(seed.antibodies, f))[i] for f in _FIELDS})
@@ -144,14 +121,8 @@ def save_seed(
     provenance: dict[str, Any],
     crossing: dict[str, Any] | None = None,
 ) -> Path:
-    """Write a seed directory atomically (built beside ``path``, then renamed into place).
-
-    Args:
-        path: the seed directory to create or replace.
-        seed: the sets.
-        provenance: command, seed, package version, ... (stored in seed.json).
-        crossing: the sets' crossing rates (seed.json's "crossing" entry, :func:`check_crossing`).
-    """
+    """Write a seed directory atomically (built beside ``path``, then renamed into place);
+    ``provenance`` (command, seed, version ...) and ``crossing`` go into seed.json."""
     import orbax.checkpoint as ocp
 
     check_type(seed, Seed, "save_seed's seed", "a Seed")
@@ -164,28 +135,20 @@ def save_seed(
             ckpt.save(tmp / ARRAYS_DIR, _arrays(seed))
         doc = seed_to_json(seed, provenance, crossing)
         (tmp / SEED_JSON).write_text(json.dumps(doc, indent=1))
+        old = path.with_name(f".{path.name}.old")
+        shutil.rmtree(old, ignore_errors=True)
         if path.exists():
-            old = path.with_name(f".{path.name}.old")
-            shutil.rmtree(old, ignore_errors=True)
             path.rename(old)
-            tmp.rename(path)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            tmp.rename(path)
+        tmp.rename(path)
+        shutil.rmtree(old, ignore_errors=True)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return path
 
 
 def load_seed(path: str | Path | None = None) -> tuple[Seed, dict[str, Any]]:
-    """Read a seed directory (default: the shipped seed).
+    """(seed, its parsed seed.json) from ``path`` (default: shipped), or a one-line SeedError."""
 
-    Returns:
-        (seed, the parsed seed.json).
-
-    Raises:
-        SeedError: one line saying what is missing or corrupt and how to make a new seed.
-    """
     import orbax.checkpoint as ocp
 
     check_type(path, str | Path | None, "load_seed's path", "a seed directory or None")
@@ -235,17 +198,16 @@ def load_seed(path: str | Path | None = None) -> tuple[Seed, dict[str, Any]]:
         json_L = np.asarray([s["L"] for s in sets], np.float32)
     except (KeyError, TypeError, ValueError) as err:
         raise SeedError(f"{path}: {SEED_JSON} is malformed ({err}); {hint}") from None
-    same = len(readable) == x and json_L.shape == seed.L.shape
-    same = same and all(  # every field as float32 (direction as 0/1), set by set
-        np.array_equal(
-            np.asarray(getattr(r, f), np.float32), np.asarray(getattr(antibodies, f)[i], np.float32)
-        )
-        for i, r in enumerate(readable)
-        for f in _FIELDS
-    )
-    same = same and np.array_equal(json_tau, seed.tau.astype(np.float32))
-    same = same and np.array_equal(json_c, seed.collisions.astype(np.int32))
-    same = same and np.array_equal(json_L, seed.L.astype(np.float32))
+    f32 = lambda a: np.asarray(a, np.float32)  # every field as float32 (direction as 0/1)
+    same = (
+        len(readable) == x
+        and json_L.shape == seed.L.shape
+        and all(np.array_equal(f32(getattr(r, f)), f32(getattr(antibodies, f)[i]))
+                for i, r in enumerate(readable) for f in _FIELDS)
+        and np.array_equal(json_tau, f32(seed.tau))
+        and np.array_equal(json_c, seed.collisions.astype(np.int32))
+        and np.array_equal(json_L, f32(seed.L))
+    )  # fmt: skip
     if not same:
         raise SeedError(f"{path}: {SEED_JSON} disagrees with {ARRAYS_DIR}/ ({hint})")
     if CROSSING in meta:

@@ -1,16 +1,6 @@
-"""The five STL systems of the paper (SPEC 8) as :class:`~jaxais.controllers.System` data.
-
-| code | sets | idiotypic | replacement |
-|------|------|-----------|-------------|
-| SIE  | LTL seed | yes | no |
-| SRL  | LTL seed | no  | no |
-| UIE  | random set R1 or R2 | yes | yes |
-| URL  | random set R1 or R2 | no  | yes |
-| HDC  | hand-designed, fixed, no learning | - | - |
-
-The names (``SYSTEMS``, ``RANDOM_SETS``, ``LABELS``, :func:`label`, :func:`parse_label`) live in
-:mod:`jaxais.labels`, which is free of JAX, and are re-exported here.
-"""
+"""The five STL systems (SPEC 8) as :class:`~jaxais.controllers.System` data: SIE and SRL from
+the LTL seed, UIE and URL from random set R1 or R2 (with replacement), the idiotypic ones SIE
+and UIE; HDC hand-designed, without learning. Names from :mod:`jaxais.labels` (re-exported)."""
 
 from __future__ import annotations
 
@@ -30,16 +20,13 @@ from jaxais.io import check_type as _check
 from jaxais.labels import LABELS, RANDOM_SETS, SYSTEMS, label, parse_label  # noqa: F401 (re-export)
 from jaxais.seed import Seed, load_seed
 
-UNSEEDED_P = (0.25, 0.75)
-"""Range of the unseeded systems' initial paratopes [paper]."""
+UNSEEDED_P = (0.25, 0.75)  # [paper] the unseeded systems' initial paratopes' range
 N_SETS = 5
 
 HAND_DESIGNED = [
-    # [paper] The HDC "uses a simple random wander to search for the target, a backward turning
-    # motion to escape collisions, and it steers the robot in the opposite direction of any
-    # detected obstacles"; it names no tracking, so it wanders whether or not the target is seen
-    # and finishes when the finish rule fires while it happens to face the target (SPEC 8).
-    # Attributes [ours].
+    # [paper] random wander, backward turn on collision, steer away from obstacles; no tracking:
+    # it finishes when the finish rule fires while it faces the target (SPEC 8). Values [ours].
+
     {"antigen": "target unseen", "type": "wander both", "S": 350, "F": 15, "A": 60, "Rf": 18,
      "Ra": 60},
     {"antigen": "target seen", "type": "wander both", "S": 350, "F": 15, "A": 60, "Rf": 18,
@@ -88,19 +75,9 @@ def make_system(
     network: NetworkParams | None = None,
     readings: Readings | None = None,
 ) -> System:
-    """Build one system.
-
-    Args:
-        name: SIE, SRL, UIE, URL or HDC (or a label such as ``UIE-R2``).
-        seed: the LTL seed (needed by SIE and SRL), or its directory (read by ``load_seed``).
-        random_set: R1 or R2 (needed by UIE and URL).
-        network: network constants (default: the paper's; checked by ``validate``).
-        readings: our readings of the paper's open points (default: ours,
-            :data:`jaxais.immune.readings.DEFAULT`).
-
-    Raises:
-        ValueError: one line naming the bad argument (a wrong type: also a TypeError).
-    """
+    """One system by ``name`` (or a label, ``UIE-R2``): SIE and SRL need ``seed`` (a Seed or
+    its directory), UIE and URL ``random_set``; ``network``, ``readings``: default the paper's
+    and ours. A bad argument: a one-line ValueError."""
     _check(name, str, "make_system's name", f"one of {', '.join(LABELS)}")
     if "-" in name:
         name, random_set = parse_label(name)
@@ -135,42 +112,27 @@ def make_system(
     )
 
 
+# A System's traced parameters (grid axes, an optimiser's variables): name -> (field, type).
 PARAMETERS: dict[str, tuple[str, type]] = {
-    "k1": ("network", float),
-    "k2": ("network", float),
-    "k3": ("network", float),
-    "b": ("network", float),
-    "Phi": ("network", float),
-    "initial_clones": ("network", float),
-    "penalty_idiotypic": ("network", float),
-    "penalty_non_idiotypic": ("network", float),
-    "hold": ("readings", int),
-    "encounter_gap": ("readings", int),
-    "sigma0_floor": ("readings", float),
-    "alpha_on_self": ("readings", bool),
-}
-"""A System's traced parameters by name (the sweep's grid axes, an optimiser's variables):
-name -> (the System field that holds it, its type). The network's valid ranges are
-:data:`jaxais.immune.network.BOUNDS`."""
+    **dict.fromkeys(("k1", "k2", "k3", "b", "Phi", "initial_clones", "penalty_idiotypic",
+                     "penalty_non_idiotypic"), ("network", float)),
+    "hold": ("readings", int), "encounter_gap": ("readings", int),
+    "sigma0_floor": ("readings", float), "alpha_on_self": ("readings", bool),
+}  # fmt: skip
 
 
 def system_params(system: System, names: Sequence[str] | None = None) -> dict[str, Any]:
-    """``system``'s parameters as a flat dict name -> value (default: every name of
-    :data:`PARAMETERS`), e.g. ``{"k1": 0.85, "k2": 1.1}``: an optimiser's starting point."""
+    """``system``'s parameters ``names`` (default: all of :data:`PARAMETERS`) as name -> value."""
     names = PARAMETERS if names is None else names
     _unknown(names)
     return {name: getattr(getattr(system, PARAMETERS[name][0]), name) for name in names}
 
 
 def with_params(system: System, params: Mapping[str, Any]) -> System:
-    """``system`` with ``params`` (name -> value, :data:`PARAMETERS`' names), jit-safe.
+    """``system`` with ``params`` (:data:`PARAMETERS` name -> value), jit-safe: each value takes
+    its leaf's dtype (the same program) and the network is clipped into its valid ranges (an
+    optimiser never runs a negative k1)."""
 
-    Each value takes its leaf's dtype (an int32 ``hold`` stays int32: the same program), and
-    the network's constants are clipped into their valid ranges
-    (:meth:`~jaxais.immune.network.NetworkParams.clip_valid`), so values an optimiser proposes
-    never run as, e.g., a negative k1. Outside ``jit``, ``system.network.validate()`` refuses
-    such values instead.
-    """
     _unknown(params)
     parts = {"network": {}, "readings": {}}
     for name, value in params.items():

@@ -1,24 +1,11 @@
 """Statistical trials (SPEC 9): n runs of each system in a world as one compiled, vmapped batch.
 
-Randomness is split so results do not depend on what else shares a batch: trial i's world
-placement comes from (seed, i) alone, so every system meets the same start configurations (common
-random numbers), and its dynamics from (seed, system label, i), where the label enters by a hash
-of its name (:func:`stream_id`), not by its place in a list: adding, removing or reordering
-systems changes no other system's trials. A label may carry a variant tag after "@"
-(``"SIE@hold=1"``): the same system with other data (``scripts/ablate.py`` batches several
-variants of one system), which meets the same worlds and random streams as the plain label.
-
-Two ways to run them:
-
-- :func:`make_trials` builds an experiment as one pure function, ``run(key, params)`` ->
-  per-trial arrays, jitted, which ``vmap`` batches over seeds (keys) and parameter grids (a
-  params pytree with a leading axis): what sweeps are made of.
-- :func:`run_trials` runs several systems' trials from the host, with a progress bar, through
-  :mod:`jaxais.runner`'s refilling pool (or as one rollout, to keep every trajectory), and
-  returns trial records (what the scripts and the paper's tables use). Its trials are those of
-  ``make_trials``: the same keys, the same numbers.
-
-Both run any :class:`~jaxais.controllers.Controller` (default: the STL network).
+Trial i's world comes from (seed, i) alone (every system meets the same starts) and its dynamics
+from (seed, CRC-32 of the label's name, i): no system's trials depend on what else shares the
+batch. A variant tag after "@" (``"SIE@hold=1"``) keeps the plain label's worlds and streams.
+:func:`make_trials` is one pure jitted function to vmap over keys and params (sweeps);
+:func:`run_trials` runs systems from the host through :mod:`jaxais.runner`'s pool and returns
+records: the same keys, the same numbers.
 """
 
 from __future__ import annotations
@@ -43,20 +30,14 @@ from jaxais.loop import EpisodeConfig, outcome
 from jaxais.runner import advance, rollout, run_pool, segment_length, start_batch
 from jaxais.systems import LABELS
 
+# [paper] SPEC 9: a run ends on the finish rule or at 4000 s; c > 100 fails it, Table 3 caps c.
 STL_CONFIG = EpisodeConfig(tau_cap=4000.0, collision_cap=100, stop_at_collision_cap=False)
-"""The paper's STL protocol (SPEC 9): a run ends on the finish rule or at 4000 s, nothing else;
-more than 100 collisions fails it, and Table 3 uses c capped at 100."""
 
 
 @dataclass(frozen=True)
 class Placement:
-    """Where a trial's world put the objects it places at random (they never move in a run).
-
-    Attributes:
-        boxes: [B, 2] box centres, padded like ``World.box_region`` (a fixed box at its
-            centre; padding rows far outside the arena: mask with ``World.box_valid``).
-        goal: [2] goal centre.
-    """
+    """Where a trial's world placed its boxes [B, 2] (padded like ``World.box_region``; mask with
+    ``World.box_valid``) and goal [2]."""
 
     boxes: np.ndarray
     goal: np.ndarray
@@ -64,20 +45,8 @@ class Placement:
 
 @dataclass
 class TrialSet:
-    """The trials of one system in one world.
-
-    Attributes:
-        records: one dict per trial: tau (s), collisions (the raw count), collisions_capped
-            (at 100, what Table 3 averages), fitness (with the capped c), failed,
-            failed_collisions (c > 100), failed_time (4000 s reached), failed_by (a list of
-            "collisions", "time"; both can hold), trapped_s, locked_s (trapped with the same
-            antibody selected for each antigen, :class:`~jaxais.loop.EpisodeConfig`),
-            idiotypic_difference_rate,
-            iterations, replaced.
-        trajectories: [n] arrays [T_i, 3] of poses sampled every ``chunk`` iterations, or None.
-        placements: [n] :class:`Placement`: each trial's boxes and goal, to draw its trajectory
-            in the world it ran in.
-    """
+    """One system's trials in one world: ``records`` (:func:`trial_records`), ``trajectories``
+    ([n] arrays [T_i, 3] of poses every ``chunk`` iterations, or None), ``placements`` [n]."""
 
     records: list[dict[str, Any]]
     trajectories: list[np.ndarray] | None
@@ -90,8 +59,7 @@ def base_label(name: str) -> str:
 
 
 def stream_id(system_label: str) -> int:
-    """The number that names a label's random stream: a CRC-32 of its base label (a stable
-    hash, unlike Python's ``hash``), in [0, 2**31)."""
+    """A label's random stream: CRC-32 of its base label (stable, unlike ``hash``), < 2**31."""
     return zlib.crc32(base_label(system_label).encode()) & 0x7FFFFFFF
 
 
@@ -101,14 +69,8 @@ def trial_keys(seed: int, system_label: str, n: int) -> tuple[jax.Array, jax.Arr
 
 
 def batch_keys(seed: int, plan: tuple[tuple[str, int], ...]) -> tuple[jax.Array, jax.Array]:
-    """(reset keys, run keys), each [sum of n], of several systems' trials in ``plan``'s
-    (label, n) order.
-
-    From ``k_worlds, k_systems = split(key(seed))``: trial i's reset key is
-    ``fold_in(k_worlds, i)`` for every system (the same world); its run key is
-    ``fold_in(stream, i)`` with ``stream = fold_in(k_systems, stream_id(label))``, which depends
-    on the label's name alone.
-    """
+    """(reset keys, run keys) [sum of n] of ``plan``'s (label, n) trials: reset
+    ``fold_in(k_worlds, i)``, run ``fold_in(fold_in(k_systems, stream_id(label)), i)``."""
     streams = np.concatenate([np.full(n, stream_id(label), np.uint32) for label, n in plan])
     trials = np.concatenate([np.arange(n, dtype=np.uint32) for _, n in plan])
     return _derive_keys(np.uint32(seed), streams, trials)
@@ -116,14 +78,12 @@ def batch_keys(seed: int, plan: tuple[tuple[str, int], ...]) -> tuple[jax.Array,
 
 @jax.jit
 def _derive_keys(seed: jax.Array, streams: jax.Array, trials: jax.Array):
-    """:func:`batch_keys` given the seed and, per trial, its stream id and index ([n] uint32):
-    one small program per batch size, whatever the seed and the systems."""
+    """:func:`batch_keys` compiled once per batch size (stream ids, indices: [n] uint32)."""
     return _keys(jax.random.key(seed), streams, trials)
 
 
 def _keys(key: jax.Array, streams: jax.Array, trials: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """(reset keys, run keys) [n] of the trials with these stream ids and indices, from ``key``
-    (:func:`batch_keys`)."""
+    """(reset keys, run keys) [n] from ``key`` (:func:`batch_keys`)."""
     k_worlds, k_systems = jax.random.split(key)
     fold_each = jax.vmap(jax.random.fold_in, in_axes=(None, 0))
     run_streams = fold_each(k_systems, streams)
@@ -132,17 +92,9 @@ def _keys(key: jax.Array, streams: jax.Array, trials: jax.Array) -> tuple[jax.Ar
 
 @dataclasses.dataclass(frozen=True)
 class TrialsConfig:
-    """What :func:`make_trials` compiles in (static: it fixes shapes and the program).
-
-    Attributes:
-        world: a built-in world's name or a world TOML file (``envs.load_world``).
-        n_trials: trials per call.
-        label: the system's label, whose name chooses the random stream (:func:`batch_keys`):
-            ``make_trials(TrialsConfig(label="SIE"))(key(seed), system)`` gives the trials of
-            ``run_trials(world, {"SIE": system}, n, seed)``.
-        controller: the controller (default: the STL network, for a :class:`System`).
-        episode: caps and recording (default: the paper's STL protocol).
-    """
+    """What :func:`make_trials` compiles in (static). ``label`` picks the random stream, so
+    ``make_trials(TrialsConfig(label="SIE"))(key(seed), system)`` gives
+    ``run_trials(world, {"SIE": system}, n, seed)``'s trials."""
 
     world: str = "world1"
     n_trials: int = 30
@@ -160,8 +112,7 @@ class TrialsConfig:
 
 
 def _integer(value: Any, name: str, high: int | None = None) -> int:
-    """``value`` as an int >= 1, or in [0, high) (NumPy integers are integers; 2.0 and True
-    are not)."""
+    """``value`` as an int >= 1, or in [0, high) (NumPy ints are; 2.0 and True are not)."""
     _check(value, int | np.integer, name, "an integer")
     if isinstance(value, bool):
         raise ArgumentTypeError(f"{name} must be an integer, got {value!r}")
@@ -179,11 +130,7 @@ def _check_label(label: Any, name: str) -> None:
 
 
 def _check_run(world, systems, n_trials, seed, config, sim_params, progress, controller):
-    """:func:`run_trials`' arguments checked, one line naming the first bad one.
-
-    Returns:
-        label -> its number of trials.
-    """
+    """:func:`run_trials`' arguments checked (one line naming the first bad one): label -> n."""
     hint = f": build it with envs.load_world({world!r})" if isinstance(world, str) else ""
     _check(world, envs.World, "world", "an envs.World", hint)
     _check(systems, Mapping, "systems", "a dict label -> params (a System for the STL)")
@@ -212,24 +159,11 @@ def _check_run(world, systems, n_trials, seed, config, sim_params, progress, con
 
 
 def make_trials(config: TrialsConfig):
-    """An experiment as a pure function: ``run(key, params, sim_params=None)``.
-
-    ``run`` plays ``config.n_trials`` trials of ``config.controller`` with ``params`` (one
-    controller's params, e.g. a :class:`System`; every trial gets them) in ``config.world``,
-    each to its end, and returns a dict of arrays [n_trials]: :func:`jaxais.loop.outcome`'s
-    (tau, collisions, collisions_capped, fitness, failed_collisions, failed_time, trapped_s,
-    locked_s, status, iterations) and the controller's ``stats`` (for the STL:
-    idiotypic_difference_rate, NaN where not idiotypic, and replaced). It is jitted, and
-    ``jax.vmap`` batches it over keys (seeds) and over a params pytree with a leading axis (a
-    grid: several values of k1, of b, of the penalties ...); ``sim_params`` (default
-    ``envs.default_params()``) is traced too, so the simulator's noise levels can be swept.
-
-    Example::
-
-        run = make_trials(TrialsConfig(world="world1", n_trials=30))
-        out = run(jax.random.key(0), make_system("SIE", load_seed()[0]))
-        out["tau"].mean()
-    """
+    """An experiment as a pure jitted function ``run(key, params, sim_params=None)``: n_trials
+    trials of one controller's ``params`` (e.g. a :class:`System`), each to its end, -> dict of
+    [n_trials] arrays (:func:`jaxais.loop.outcome`'s and the controller's ``stats``; NaN: does
+    not apply). ``jax.vmap`` it over keys and a params pytree with a leading axis (a grid);
+    ``sim_params`` is traced too (noise sweeps)."""
     _check(config, TrialsConfig, "make_trials' config", "a TrialsConfig")
     world = envs.load_world(config.world)
     episode = config.episode
@@ -240,8 +174,7 @@ def make_trials(config: TrialsConfig):
     @jax.jit
     def run_in(world, key, params, sim_params):
         dt = float(sim_params.dt)  # static: it fixes the loop's length
-        # One call of the task loop runs every trial to its end: a segment of whole chunks past
-        # the time cap (the iteration after the cap records the run's end).
+        # One segment of whole chunks past the time cap runs every trial to its recorded end.
         chunks = episode.max_iterations(dt) // episode.chunk + 2
         to_end = dataclasses.replace(episode, segment=chunks * episode.chunk)
         reset_keys, run_keys = _keys(key, stream, trials)
@@ -260,53 +193,26 @@ def make_trials(config: TrialsConfig):
             _check(params, System, "params", "a System (make_system)")
         sim_params = envs.default_params() if sim_params is None else sim_params
         _check(sim_params, envs.SimParams, "sim_params", "an envs.SimParams")
-        # The world is an argument of the program, not constants folded into it: folded, XLA
-        # rounds some products differently, and a run's path (chaotic over thousands of
-        # steps) would then differ from run_trials'.
+        # The world is an argument, not folded constants: XLA would round some products
+        # differently, and a chaotic run's path would then differ from run_trials'.
+
         return run_in(world, key, params, sim_params)
 
     return run
 
 
 def run_trials(
-    world: envs.World,
-    systems: Mapping[str, Any],
-    n_trials: int | Mapping[str, int],
-    seed: int,
-    config: EpisodeConfig = STL_CONFIG,
-    sim_params: envs.SimParams | None = None,
-    progress: Any = None,
-    timings: dict[str, float] | None = None,
-    controller: Controller | None = None,
-    slots: int = 1024,
-) -> dict[str, TrialSet]:
-    """Run every system's trials: with ``config.record``, as one batch to its slowest run's end
-    (every trajectory kept, :func:`jaxais.runner.rollout`); otherwise through a refilling pool
-    (:func:`jaxais.runner.run_pool`), where a run that ended frees its slot for the next. The
-    records are the same either way.
-
-    Args:
-        world: the world.
-        systems: label -> the controller's params (a :class:`System` for the STL network).
-            A label names the system's random stream (:func:`batch_keys`); the STL's labels
-            come from :data:`jaxais.systems.LABELS`, optionally with a variant tag after "@"
-            (``"SIE@hold=1"``: then the random streams of the plain label).
-        n_trials: trials per system (or per label).
-        seed: the run's seed, in [0, 2**32).
-        config: caps and recording (``config.record`` keeps every trial's trajectory).
-        progress: optional tqdm-like object with ``update(n)``, advanced in simulated
-            iterations of the batch with ``config.record``, else in trials ended.
-        timings: optional dict collecting ``run_s`` (compiles included).
-        controller: the controller every system runs (default: the STL network, the smallest
-            variant that runs these systems, :func:`~jaxais.controllers.stl_for`).
-        slots: runs live at once in the pool (without ``config.record``).
-
-    Returns:
-        label -> :class:`TrialSet`.
-
-    Raises:
-        ValueError: one line naming the bad argument, before anything runs (a wrong type, e.g.
-            a world's name for ``world``: :class:`ArgumentTypeError`, also a TypeError).
+    world: envs.World, systems: Mapping[str, Any], n_trials: int | Mapping[str, int], seed: int,
+    config: EpisodeConfig = STL_CONFIG, sim_params: envs.SimParams | None = None,
+    progress: Any = None, timings: dict[str, float] | None = None,
+    controller: Controller | None = None, slots: int = 1024,
+) -> dict[str, TrialSet]:  # fmt: skip
+    """label -> :class:`TrialSet` of each system's ``n_trials`` (an int or per label) trials:
+    with ``config.record`` one rollout to the slowest end (trajectories kept), else a refilling
+    pool of ``slots`` runs; the same records either way. ``systems``: label (its random stream,
+    a variant tag allowed) -> params (a :class:`System` unless ``controller``, default the
+    smallest STL that runs them). ``progress`` (tqdm-like) counts iterations with record, else
+    trials; ``timings`` collects ``run_s``. A bad argument: one-line ValueError before any run.
     """
     counts = _check_run(world, systems, n_trials, seed, config, sim_params, progress, controller)
     sim_params = envs.default_params() if sim_params is None else sim_params
@@ -359,9 +265,10 @@ def run_trials(
 
 
 def trial_records(res: Mapping[str, np.ndarray]) -> list[dict[str, Any]]:
-    """The records (:class:`TrialSet`) of trials' outcome arrays [n]: :func:`~jaxais.loop.outcome`
-    and the controller's stats (the placement and ``status`` are not recorded: failed_time and
-    the iterations say the status)."""
+    """One dict per trial of outcome arrays [n] (:func:`~jaxais.loop.outcome`'s, the stats'):
+    tau, collisions (raw), collisions_capped, fitness, failed, failed_collisions, failed_time,
+    failed_by, trapped_s, locked_s, iterations, then the stats (NaN -> None)."""
+
     records = []
     for i in range(len(res["tau"])):
         by_c, by_t = bool(res["failed_collisions"][i]), bool(res["failed_time"][i])

@@ -19,8 +19,7 @@ from jaxais.baselines.config import NN_LABEL, TrainConfig
 from jaxais.experiments import protocol
 from jaxais.io import UserError, atomic_write_json, atomic_write_text, open_run, read_json_object
 
-REFERENCE = ("SIE", "HDC")
-"""The paper's systems it runs beside."""
+REFERENCE = ("SIE", "HDC")  # the paper's systems it runs beside
 
 
 def _output_dir(out: str | Path, into_checkpoints: bool, make: bool = True) -> Path:
@@ -60,14 +59,8 @@ def train_baseline(
     command: str | None = None,
     into_checkpoints: bool = False,
 ) -> dict[str, Any]:
-    """Train the MLP by OpenES (:func:`~jaxais.baselines.neural.make_train`), logging a line to
-    stderr every ``log_every`` generations; write params.npz, config.json (returned: config,
-    seed, versions, wall time, final fitness, the curve) and training_curve.png into ``out``.
-    ``config`` defaults to ``TrainConfig()``.
-
-    Raises:
-        ValueError: a bad argument (one line), before anything runs.
-    """
+    """Train the MLP by OpenES, a stderr line every ``log_every`` generations; write params.npz,
+    config.json (returned) and training_curve.png into ``out``. Bad arguments: ValueError."""
     if not 0 <= seed < 2**32:
         raise ValueError(f"--seed must be in [0, 2**32), got {seed}")
     if log_every < 1:
@@ -165,14 +158,9 @@ def evaluate_baseline(
     command: str | None = None,
     into_checkpoints: bool = False,
 ) -> dict[str, Any]:
-    """Run the trained controller in ``weights`` (None: the shipped one), SIE (the LTL seed in
-    ``seeds``, default the shipped one) and HDC in ``worlds`` with the trials' seed ``seed``;
-    write evaluation.json (returned: every trial, the summaries, NN-vs-SIE and NN-vs-HDC tests
-    of f) and evaluation.md into ``out``. ``trials`` and ``episode`` default to the paper's.
-
-    Raises:
-        ValueError: a bad argument (one line), before anything runs.
-    """
+    """Run the controller in ``weights`` (None: shipped), SIE (``seeds``) and HDC in ``worlds``;
+    write evaluation.json (returned: trials, summaries, NN-vs-SIE/HDC tests of f) and
+    evaluation.md into ``out``. ``trials``, ``episode``: default the paper's."""
     if not 0 <= seed < 2**32:
         raise ValueError(f"--eval-seed must be in [0, 2**32), got {seed}")
     _check_weights(weights)
@@ -212,22 +200,18 @@ def evaluate_baseline(
                 world, {NN_LABEL: params}, n, seed, episode, sim, bar, controller=NEURAL
             )
         doc["timings_s"][name] = round(time.perf_counter() - t0, 1)
-        entry: dict[str, Any] = {"systems": {}, "tests": {}}
-        for label, ts in results.items():
-            entry["systems"][label] = {"summary": summarise(ts.records), "trials": ts.records}
+        systems_doc = {k: {"summary": summarise(v.records), "trials": v.records}
+                       for k, v in results.items()}  # fmt: skip
         f = {label: np.asarray([r["fitness"] for r in ts.records]) for label, ts in results.items()}
+        tests = {}
         for other in REFERENCE:
             t, p = stats.welch_t(f[NN_LABEL], f[other])
             u, p_u = stats.mann_whitney_u(f[NN_LABEL], f[other])
-            entry["tests"][f"{NN_LABEL} vs {other}"] = {
-                "metric": "f",
-                "welch_t": t,
-                "welch_p": p,
-                "mann_whitney_u": u,
-                "mann_whitney_p": p_u,
-                "significant_99": bool(p < protocol.ALPHA),
-            }
-        doc["worlds"][name] = entry
+            tests[f"{NN_LABEL} vs {other}"] = {"metric": "f", "welch_t": t, "welch_p": p,
+                "mann_whitney_u": u, "mann_whitney_p": p_u,
+                "significant_99": bool(p < protocol.ALPHA)}  # fmt: skip
+        doc["worlds"][name] = {"systems": systems_doc, "tests": tests}
+
     atomic_write_json(out / "evaluation.json", stats.jsonable(doc))
     atomic_write_text(out / "evaluation.md", _table(doc, info))
     return doc
@@ -248,14 +232,9 @@ def baseline(
     into_checkpoints: bool = False,
     resume: bool = False,
 ) -> tuple[dict[str, Any] | None, dict[str, Any] | None]:
-    """``scripts/train_baseline.py``: :func:`train_baseline` (``train``) and then
-    :func:`evaluate_baseline` (``evaluate``) of the new weights, or of ``weights`` (None: the
-    shipped ones) without ``train``, into ``out`` (missing or empty). Each stage is a unit of
-    ``out/manifest.json`` (:func:`jaxais.io.open_run`): ``resume=True`` finishes an interrupted
-    run with the same arguments, skipping a finished stage.
-
-    Returns:
-        (config.json's document or None, evaluation.json's or None).
+    """``scripts/train_baseline.py``: :func:`train_baseline` then :func:`evaluate_baseline` of
+    the new weights (or ``weights`` without ``train``) into ``out``, each stage a unit of its
+    manifest (``resume``). Returns (config.json's document, evaluation.json's), None if skipped.
     """
     config = TrainConfig() if config is None else config
     if evaluate and not train:
@@ -333,9 +312,8 @@ def _entry(doc: Any, path: Path, *keys: str) -> Any:
 
 
 def collect_baselines(dirs: Sequence[str | Path]) -> str:
-    """One markdown table of several evaluated runs (``evaluation.json`` and ``config.json`` in
-    each directory): mean f and failure rate per world, SIE and HDC from the first run, and
-    (several runs) every run's NN trials pooled and tested against SIE's."""
+    """One markdown table of evaluated runs' mean f and failure rate per world (SIE and HDC
+    from the first run); several runs' NN trials are also pooled and tested against SIE's."""
     import numpy as np
 
     from jaxais.experiments import stats
@@ -345,6 +323,7 @@ def collect_baselines(dirs: Sequence[str | Path]) -> str:
         and isinstance(t.get("failed"), bool)
         and isinstance(t.get("fitness"), int | float)
     )
+
     runs, worlds = [], None
     for d in dirs:
         path = Path(d) / "evaluation.json"

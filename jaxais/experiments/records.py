@@ -1,10 +1,5 @@
-"""What a run records: plumbing shared by ``scripts/trials.py``, ``scripts/reproduce.py`` and
-``scripts/ablate.py``.
-
-Turns (world, systems, trials, seed) into the results document of one system in one world, with
-every parameter it used recorded, so a run can be regenerated from its JSON. Which systems run
-where, and how many times, is :mod:`jaxais.experiments.protocol`'s.
-"""
+"""What a run records (trials, reproduce, ablate): one system's results document in one world,
+with every parameter it used, so a run can be regenerated from its JSON."""
 
 from __future__ import annotations
 
@@ -32,16 +27,13 @@ FORMATS = {
     "trials": "jaxais-trials/1",
     "sweep": "jaxais-sweep/1",
     "reality_gap": "jaxais-reality-gap/1",
-}
-"""The ``format`` tag of each results file this version writes: a trials file
-(:func:`results_document`), sweep.json and reality_gap.json (docs/formats.md)."""
-SHIPPED_SEED = "shipped (checkpoints/default)"
-"""How records name the shipped LTL seed (not by where this machine installed it)."""
+}  # each results file's format tag (docs/formats.md)
+SHIPPED_SEED = "shipped (checkpoints/default)"  # not where this machine installed it
 
 
 def portable_path(path: str | Path) -> str:
-    """A path for the records: relative to the working directory when under it, else its
-    name, so no record names a directory of the machine that made it."""
+    """``path`` relative to the working directory, else its name: no record names a machine's
+    directories."""
     p = Path(path).resolve()
     try:
         return str(p.relative_to(Path.cwd().resolve()))
@@ -55,7 +47,7 @@ def portable_command(command: str) -> str:
 
 
 def versions() -> dict[str, str]:
-    """The versions that made a run: jaxais, jax, jaxlib, numpy, Python, and JAX's backend."""
+    """The versions that made a run, and JAX's backend."""
     import jax
     import jaxlib
 
@@ -70,8 +62,7 @@ def versions() -> dict[str, str]:
 
 
 def load_ltl_seed(seeds_dir: str | Path | None) -> tuple[Seed, dict[str, Any]]:
-    """The LTL seed (default: the shipped one) and a description of it: path and provenance
-    (portable: no absolute paths)."""
+    """(the LTL seed, default the shipped one, and its portable path and provenance)."""
     path = default_seed_dir() if seeds_dir is None else Path(seeds_dir)
     seed, meta = load_seed(path)
     made_by = {k: meta.get(k) for k in ("command", "seed", "version") if k in meta}
@@ -88,17 +79,9 @@ def build_systems(
     loaded: tuple[Seed, dict[str, Any]] | None = None,
     readings: Readings | None = None,
 ) -> tuple[dict[str, System], dict[str, Any]]:
-    """Systems by label, loading the LTL seed only when a seeded system needs it.
-
-    Args:
-        loaded: a seed already read by :func:`load_ltl_seed` (then ``seeds_dir`` is not read).
-        readings: our readings of the paper's open points (default: ours).
-
-    Returns:
-        (label -> System, a description of the seed used: path and provenance, or None).
-    """
-    seed: Seed | None = None
-    seed_info: dict[str, Any] | None = None
+    """(label -> System, the seed's description or None), reading the LTL seed (unless
+    ``loaded`` by :func:`load_ltl_seed`) only when a seeded system needs it."""
+    seed, seed_info = None, None
     if any(parse_label(name)[0] in ("SIE", "SRL") for name in labels):
         seed, seed_info = loaded if loaded is not None else load_ltl_seed(seeds_dir)
     systems = {name: make_system(name, seed, network=network, readings=readings) for name in labels}
@@ -123,9 +106,7 @@ def run_config(
         "episode": dataclasses.asdict(config),
         "network": fields(network),
         "readings": fields(DEFAULT if readings is None else readings),
-        "simulator": {
-            f.name: plain(getattr(sim_params, f.name)) for f in dataclasses.fields(sim_params)
-        },
+        "simulator": fields(sim_params),
         "ltl_seed": seed_info,
         "versions": versions(),
     }
@@ -138,8 +119,7 @@ def results_document(
     trials: TrialSet,
     config: dict[str, Any],
 ) -> dict[str, Any]:
-    """The results.json of one system in one world (a label beyond the paper's, e.g. the
-    neural baseline's "NN", is its own system, with no random set)."""
+    """The results.json of one system in one world (a label such as "NN": no random set)."""
     try:
         system, random_set = parse_label(label)
     except ValueError:
@@ -158,17 +138,10 @@ def results_document(
 
 
 def records_frame(source: str | Path | Mapping[str, Any], runs: bool = False):
-    """A results file (a path or its parsed JSON) as a ``pandas.DataFrame`` (docs/formats.md).
-
-    Rows: a trials file's trials (label, system, world, random_set, seed, trial, then each
-    record's fields); a sweep's grid points (the axes' values, n, and per metric its mean and
-    ``<metric>_low``, ``<metric>_high``: the 95 % interval), or with ``runs`` its runs (a sweep
-    that kept them: the point's values, trial, the record's fields); a reality gap's
-    (scale, label) pairs, with the columns of a sweep's points.
-
-    Raises:
-        ValueError: pandas missing, not a jaxais results file, or no runs kept (one line).
-    """
+    """A results file (a path or its JSON) as a ``pandas.DataFrame`` (docs/formats.md): a
+    trials file's trials; a sweep's points (the axes, n, per metric its mean, ``_low`` and
+    ``_high``) or with ``runs`` its kept runs; a reality gap's (scale, label) rows. One-line
+    ValueError otherwise."""
     try:
         import pandas as pd
     except ImportError:
@@ -207,7 +180,8 @@ def records_frame(source: str | Path | Mapping[str, Any], runs: bool = False):
 
 
 def _flat(summary: Mapping[str, Any]) -> dict[str, Any]:
-    """A point's summary (:func:`jaxais.experiments.sweeps.summarise_point`) as flat columns."""
+    """A point's summary (``sweeps.summarise_point``) as flat columns."""
+
     out = {}
     for k, v in summary.items():
         if isinstance(v, Mapping) and "ci" in v:

@@ -1,26 +1,9 @@
-"""The paper end to end: every system in every world, Tables 3-5, H1-H4, the claims, a report.
+"""The paper end to end (SPEC 9): every system in every world, Tables 3-5, H1-H4, the claims.
 
-:func:`reproduce` runs the paper's protocol (SPEC 9): 30 trials of each system per simulated world
-and 20 in ``real``; the unseeded systems with both random sets R1 and R2 in the simulated worlds
-and R1 only in ``real``. All systems of a world run as one compiled, vmapped pool of runs, each
-slot refilled when its run ends (sharded over every device JAX sees; in a multi-process run
-every process runs its share and process 0 writes). It writes, under ``out``:
-
-- ``tables.json`` (Tables 3-5 with 95 % bootstrap intervals, H1-H4, the calibration point, the
-  neural baseline's tables), ``claims.json`` (the paper's 32 claims, each held or not, also read
-  with 95 % confidence intervals, and a summary);
-- ``report.md`` (opening with the claims ledger; figures in ``figures/``);
-- every trial in ``trials/`` and ``run.json`` (the config, seeds and timings needed to
-  regenerate it all);
-- ``manifest.json`` (:func:`jaxais.io.open_run`): the run's settings, whether it is complete,
-  and its finished units, a world each (its trials files and ``trials/WORLD_examples.npz``,
-  the drawn trials); ``resume=True`` finishes a partial run.
-
-Only the first trial of each system is drawn (run again with its trajectory recorded); the
-records of all trials are kept. SIE also runs with a selection every iteration (``hold=1``,
-``trials/WORLD_SIE_hold1.json``) for the report's calibration point: its idiotypic difference
-rate beside the paper's 20 %. The arguments are checked before JAX starts (one-line
-``ValueError``\\ s naming the flags of ``scripts/reproduce.py``).
+A world's systems run as one pool (process 0 writes in a multi-process run). ``out`` gets
+tables.json, claims.json, report.md (figures/), run.json, trials/ (every trial; the drawn first
+trials in WORLD_examples.npz; SIE at hold=1 in WORLD_SIE_hold1.json, the calibration point
+beside the paper's 20 %) and manifest.json, a unit per world (``resume``).
 """
 
 from __future__ import annotations
@@ -41,8 +24,7 @@ from jaxais.io import RUN_BYTES, Run, atomic_write, atomic_write_json, check_mem
 
 __all__ = ["LTLRunError", "check_reproduce", "headline", "reproduce", "run_ltl"]
 
-CALIBRATED = "SIE@hold=1"
-"""SIE with a selection every iteration, on the plain label's worlds and random streams."""
+CALIBRATED = "SIE@hold=1"  # SIE selecting every iteration, on the plain label's streams
 
 
 class LTLRunError(RuntimeError):
@@ -50,18 +32,8 @@ class LTLRunError(RuntimeError):
 
 
 def run_ltl(out: Path, seed: int, generations: int | None = None, resume: bool = False) -> Path:
-    """Run the LTL (``scripts/evolve.py``'s defaults, GA seed ``seed``) into ``out`` (continue
-    its checkpoints with ``resume``).
-
-    The one place :func:`reproduce` runs the GA: a child process (``python -m
-    jaxais.scripts.evolve``), which sets the GA's own XLA settings before its JAX starts.
-
-    Returns:
-        The seed folder it wrote (``out/seed``).
-
-    Raises:
-        LTLRunError: the run failed (its messages are on this process's stderr).
-    """
+    """Run the LTL (evolve.py's defaults, GA seed ``seed``) into ``out``; returns ``out/seed``.
+    A child process, as the GA sets its own XLA flags before its JAX starts."""
     cmd = [sys.executable, "-m", "jaxais.scripts.evolve", "--out", str(out), "--seed", str(seed)]
     if generations is not None:
         cmd += ["--generations", str(generations)]
@@ -82,20 +54,13 @@ def _ltl_summary(seed_dir: Path) -> dict | None:
 
 
 def check_reproduce(
-    out: str | os.PathLike[str],
-    *,
-    trials: int | None = None,
-    seed: int = 0,
-    seeds: str | os.PathLike[str] | None = None,
-    evolve: bool = False,
-    generations: int | None = None,
-    worlds: str | Sequence[str] | None = None,
-    tau_cap: float | None = None,
-    collision_cap: int | None = None,
-) -> tuple[Path, list[str], float, int]:
-    """Check :func:`reproduce`'s arguments as it does, without loading JAX (one-line
-    ``ValueError``\\ s naming the script's flags); returns the output folder, the worlds and the
-    two caps, defaults filled in. The folder itself is checked when the run opens it."""
+    out: str | os.PathLike[str], *, trials: int | None = None, seed: int = 0,
+    seeds: str | os.PathLike[str] | None = None, evolve: bool = False,
+    generations: int | None = None, worlds: str | Sequence[str] | None = None,
+    tau_cap: float | None = None, collision_cap: int | None = None,
+) -> tuple[Path, list[str], float, int]:  # fmt: skip
+    """:func:`reproduce`'s arguments checked without JAX (one-line ValueErrors naming the
+    flags) -> (out, worlds, tau_cap, collision_cap), defaults filled in."""
     names = protocol.WORLDS if worlds is None else worlds
     names = [w for w in names.split(",") if w] if isinstance(names, str) else list(names)
     tau_cap = float(protocol.TAU_CAP if tau_cap is None else tau_cap)  # 10 and 10.0: one record
@@ -126,49 +91,26 @@ def check_reproduce(
 
 
 def reproduce(
-    out: str | os.PathLike[str],
-    *,
-    trials: int | None = None,
-    seed: int = 0,
-    seeds: str | os.PathLike[str] | None = None,
-    evolve: bool = False,
-    generations: int | None = None,
-    baseline: str | os.PathLike[str] | bool = True,
-    worlds: str | Sequence[str] | None = None,
-    tau_cap: float | None = None,
-    collision_cap: int | None = None,
-    progress: bool = True,
-    command: str | None = None,
+    out: str | os.PathLike[str], *, trials: int | None = None, seed: int = 0,
+    seeds: str | os.PathLike[str] | None = None, evolve: bool = False,
+    generations: int | None = None, baseline: str | os.PathLike[str] | bool = True,
+    worlds: str | Sequence[str] | None = None, tau_cap: float | None = None,
+    collision_cap: int | None = None, progress: bool = True, command: str | None = None,
     resume: bool = False,
-) -> dict[str, Any] | None:
-    """Run the paper's experiments and write the tables, claims, report and every trial to ``out``.
+) -> dict[str, Any] | None:  # fmt: skip
+    """Run the paper's experiments into ``out`` (the flags of scripts/reproduce.py).
 
     Args:
-        out: the output folder (created if missing).
-        trials: trials per system and world (default: the paper's, 30; 20 in ``real``).
-        seed: the trials' PRNG seed, in [0, 2**32) (and the GA's with ``evolve``).
-        seeds: the LTL seed folder (default: the shipped ``checkpoints/default``).
         evolve: run the LTL first (:func:`run_ltl`, into ``out/ltl``) and use its seed.
-        generations: the LTL's generation cap with ``evolve`` (default: evolve.py's).
-        baseline: the trained neural controller run beside SIE and HDC: True for the shipped
-            ``checkpoints/neural``, a folder for other weights, False for none.
-        worlds: a subset of the protocol's worlds (names, or one comma-separated string).
-        tau_cap, collision_cap: the caps (default: the paper's).
-        progress: show a progress bar per world on stderr.
-        command: the command recorded in ``run.json`` and the report (default: the
-            ``reproduce.py`` command line these arguments stand for).
-        resume: finish the partial run in ``out`` (the same arguments): its finished worlds
-            (and LTL) are kept, the rest run, giving the uninterrupted run's results. Without
-            it ``out`` must be missing or empty (:func:`jaxais.io.open_run`).
+        baseline: the neural controller beside SIE and HDC: True (shipped), a folder, False.
+        command: recorded in run.json (default: the reproduce.py line these arguments mean).
+        resume: finish the partial run in ``out``, giving the uninterrupted run's results.
 
     Returns:
-        On the writing process, ``{"tables", "claims", "run", "report"}``: the documents of
-        ``tables.json``, ``claims.json`` and ``run.json``, and the report's path; None on the
-        other processes of a multi-process run.
+        ``{"tables", "claims", "run", "report"}`` on the writing process, else None.
 
     Raises:
-        ValueError: a bad argument, ``out`` holding another run (or none to resume), or a seed
-            or weights that cannot be read (before any trial).
+        ValueError: a bad argument, folder, seed or weights (before any trial).
         LTLRunError: the LTL run failed.
     """
     if command is None:
@@ -230,9 +172,8 @@ def _run(run: Run, worlds: list[str], n_trials: int | None, seed: int,
          seeds: str | os.PathLike[str] | None, loaded: tuple, nn: tuple | None, tau_cap: float,
          collision_cap: int, *, progress: bool, command: str, started: float,
          timings: dict[str, float], lead: bool) -> dict[str, Any] | None:  # fmt: skip
-    """:func:`reproduce` once its arguments are checked, the seed (``loaded``) and baseline
-    (``nn``: weights and what made them, or None) read and the LTL run (``timings`` holds its
-    time, ``started`` the call's start): every world not finished in ``run`` runs here."""
+    """:func:`reproduce` once checked and read (``nn``: weights and their info, or None): every
+    world not finished in ``run``, then the tables, claims and report."""
     import numpy as np
     from tqdm import tqdm
 
@@ -260,12 +201,9 @@ def _run(run: Run, worlds: list[str], n_trials: int | None, seed: int,
     network = NetworkParams()
     params = envs.default_params()
     config = EpisodeConfig(tau_cap=tau_cap, collision_cap=collision_cap)
-    # The report draws each system's first trial: it runs again, alone and recorded (the same
-    # keys, so the same run as in the pooled trials).
+    # The first trial of each system runs again recorded (same keys: same run), to be drawn.
     example = EpisodeConfig(tau_cap=tau_cap, collision_cap=collision_cap, record=True)
     results_by_world, baseline_by_world, trajectories, placements, configs = {}, {}, {}, {}, {}
-    # SIE again with a selection every iteration: its difference rate beside the paper's 20 %
-    # (the report's calibration point), on the plain label's worlds and random streams.
     calibration_by_world = {}
     (out / "trials").mkdir(exist_ok=True)
     for name in worlds:
@@ -378,7 +316,8 @@ def _run(run: Run, worlds: list[str], n_trials: int | None, seed: int,
 
 
 def headline(result: Mapping[str, Any]) -> str:
-    """One line: the claims reproduced, H1-H4's verdicts, the time taken and the report's path."""
+    """One line: claims reproduced, H1-H4's verdicts, time taken, the report's path."""
+
     verdicts = ", ".join(
         f"{h} {'supported' if v['supported'] else 'not supported'}"
         for h, v in result["tables"]["hypotheses"].items()

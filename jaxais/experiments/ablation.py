@@ -36,8 +36,8 @@ from jaxais.systems import HAND_DESIGNED, N_SETS, hand_designed_sets, make_syste
 from jaxais.trials import STL_CONFIG, TrialSet
 
 __all__ = [
-    "VARIANTS", "Ablation", "Variant", "ablate", "hdc_antibodies", "markdown", "plan_calls",
-    "run_ablation", "select", "variant_systems",
+    "VARIANTS", "Ablation", "Variant", "ablate", "document", "hdc_antibodies", "markdown",
+    "plan_calls", "run_ablation", "select", "variant_systems",
 ]  # fmt: skip
 
 REPORTED = ("SIE", "HDC", "UIE-R1", "URL-R1")  # the systems the table shows
@@ -271,9 +271,6 @@ class Ablation:
         }
 
 
-Runner = Callable[..., dict[str, TrialSet]]
-
-
 def run_ablation(
     worlds: Sequence[str],
     variants: Sequence[Variant],
@@ -285,7 +282,7 @@ def run_ablation(
     network: NetworkParams | None = None,
     share: bool = True,
     progress: Any = None,
-    runner: Runner | None = None,
+    runner: Callable[..., dict[str, TrialSet]] | None = None,
     folder: Run | None = None,
 ) -> Ablation:
     """Run every variant's protocol: per world, one :func:`~jaxais.trials.run_trials` per call.
@@ -329,8 +326,7 @@ def run_ablation(
     if progress is not None and hasattr(progress, "reset"):
         progress.reset(total=sum(units(n, call, batch) for _, _, n, call, batch, _ in plan))
     for i, (world_name, world, n, call, batch, source) in enumerate(plan):
-        first = by_name[call.variants[0]]
-        sim_params = first.sim_params()
+        sim_params = by_name[call.variants[0]].sim_params()
         done = _Counter(progress)
         if progress is not None and hasattr(progress, "set_description_str"):
             progress.set_description_str(

@@ -118,43 +118,38 @@ def point_systems(base: System, points: Sequence[dict[str, Any]]) -> System:
     )
 
 
-def _t_interval(x: np.ndarray, level: float) -> tuple[float, float, float]:
-    """(mean, low, high) of a Student's t interval of the mean of ``x`` (finite values)."""
+def _t_interval(x: np.ndarray, level: float) -> dict[str, Any]:
+    """The mean of ``x``'s finite values and its Student's t interval."""
     x = x[np.isfinite(x)]
-    if x.size == 0:
-        return (math.nan,) * 3
-    mean = float(np.mean(x))
-    if x.size < 2:
-        return mean, mean, mean
-    half = sps.t.ppf(0.5 + level / 2, x.size - 1) * np.std(x, ddof=1) / math.sqrt(x.size)
-    return mean, mean - float(half), mean + float(half)
+    mean = float(np.mean(x)) if x.size else math.nan
+    ci = [mean, mean]
+    if x.size >= 2:
+        half = float(sps.t.ppf(0.5 + level / 2, x.size - 1) * np.std(x, ddof=1) / math.sqrt(x.size))
+        ci = [mean - half, mean + half]
+    return {"mean": mean, "ci": ci}
 
 
-def _wilson(k: int, n: int, level: float) -> tuple[float, float, float]:
-    """(rate, low, high) of the Wilson score interval of k successes in n."""
+def _wilson(k: int, n: int, level: float) -> dict[str, Any]:
+    """The rate of k successes in n and its Wilson score interval."""
     z = sps.norm.ppf(0.5 + level / 2)
     p = k / n
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return p, max(0.0, centre - half), min(1.0, centre + half)
+    return {"mean": p, "ci": [max(0.0, centre - half), min(1.0, centre + half)]}
 
 
 def summarise_point(result: dict[str, np.ndarray], level: float = 0.95) -> dict[str, Any]:
     """One point's means and intervals from its trials' outcome arrays [n]."""
     out: dict[str, Any] = {"n": int(result["tau"].size)}
     for name, key in zip(METRICS, _COLUMNS, strict=True):
-        mean, lo, hi = _t_interval(np.asarray(result[key], np.float64), level)
-        out[name] = {"mean": mean, "ci": [lo, hi]}
+        out[name] = _t_interval(np.asarray(result[key], np.float64), level)
     failed = np.asarray(result["failed_collisions"]) | np.asarray(result["failed_time"])
-    rate, lo, hi = _wilson(int(failed.sum()), failed.size, level)
-    out["failure_rate"] = {"mean": rate, "ci": [lo, hi]}
+    out["failure_rate"] = _wilson(int(failed.sum()), failed.size, level)
     if "idiotypic_difference_rate" in result:
         idio = np.asarray(result["idiotypic_difference_rate"], np.float64)
-        if np.all(np.isnan(idio)):
-            out["idiotypic_difference_rate"] = None
-        else:
-            mean, lo, hi = _t_interval(idio, level)
-            out["idiotypic_difference_rate"] = {"mean": mean, "ci": [lo, hi]}
+        out["idiotypic_difference_rate"] = (
+            None if np.isnan(idio).all() else _t_interval(idio, level)
+        )
     return out
 
 

@@ -1,25 +1,12 @@
 """What each [ours] reading does: the paper's protocol rerun with each switched to its alternative.
 
-The engine's readings of what the paper leaves open (SPEC 5-9) are named parameters whose earlier,
-literal readings are kept as options. A :class:`Variant` switches some of them; :data:`VARIANTS`
-holds ours, one variant per reading and ``literal`` (every old reading together). For each
-variant, :func:`run_ablation` runs every system of the paper's protocol in every world and
-:func:`variant_summary` scores it: the paper's claims reproduced
-(:mod:`jaxais.experiments.claims`) and the mean f and failure rate of SIE, HDC and URL-R1. The
-systems of each world and the trial counts are :mod:`jaxais.experiments.protocol`'s.
-
-Batching. The readings (:class:`jaxais.immune.readings.Readings`) and the HDC's antibodies are
-traced data of a :class:`~jaxais.controllers.System`, so the variants that differ only there run as
-one batch, in one compiled program per world: the systems of all of them side by side, labelled
-``"SIE@hold=1"`` and so on (:func:`jaxais.trials.run_trials` gives a tagged label the random streams
-of its plain label, so every variant meets the same worlds and draws: common random numbers). A
-variant with another :class:`~jaxais.loop.EpisodeConfig` (collision rule, stopping at the
-collision cap: static, compile-time) is its own call, and so is one with other simulator parameters
-(noise-free IR; traced but shared by a whole batch). :func:`plan_calls` groups them.
-
-Within a call, a variant's system that is the same data as another variant's (the HDC-tracking
-variant changes HDC alone) is run once and its trials shared: a run's numbers do not depend on
-its batch mates (``tests/test_trials.py``), so the shared trials are those it would have run.
+A :class:`Variant` switches some readings (SPEC 5-9); :func:`run_ablation` runs every system of
+the protocol in every world per variant and :func:`variant_summary` scores it (claims reproduced,
+mean f and failure rate). Variants differing only in traced data (readings, HDC antibodies) run as
+one batch per world under tagged labels (``"SIE@hold=1"``), which get their plain label's random
+streams (common random numbers); another EpisodeConfig or sim params is another call
+(:func:`plan_calls`). A system identical to another variant's is run once and shared: a run's
+numbers do not depend on its batch mates (``tests/test_trials.py``).
 """
 
 from __future__ import annotations
@@ -49,70 +36,36 @@ from jaxais.systems import HAND_DESIGNED, N_SETS, hand_designed_sets, make_syste
 from jaxais.trials import STL_CONFIG, TrialSet
 
 __all__ = [
-    "REPORTED",
-    "TRACKING_HDC",
-    "VARIANTS",
-    "Ablation",
-    "Call",
-    "Variant",
-    "ablate",
-    "batch_systems",
-    "document",
-    "figure",
-    "hdc_antibodies",
-    "markdown",
-    "plan_calls",
-    "run_ablation",
-    "select",
-    "variant_summary",
-    "variant_systems",
-]
+    "VARIANTS", "Ablation", "Variant", "ablate", "document", "hdc_antibodies", "markdown",
+    "plan_calls", "run_ablation", "select", "variant_systems",
+]  # fmt: skip
 
-REPORTED = ("SIE", "HDC", "UIE-R1", "URL-R1")
-"""The systems whose mean f and failure rate the ablation table shows."""
+REPORTED = ("SIE", "HDC", "UIE-R1", "URL-R1")  # the systems the table shows
 
+# The earlier HDC: "target seen" tracks markers (SPEC 8: the paper's HDC does not track).
 TRACKING_HDC = [
     {"antigen": "target seen", "type": "track markers", "S": 350, "A": 30}
     if item["antigen"] == "target seen"
     else item
     for item in HAND_DESIGNED
 ]
-"""The earlier HDC: :data:`jaxais.systems.HAND_DESIGNED` with "target seen" mapped to marker
-tracking instead of a wander (SPEC 8 says the paper's HDC does not track)."""
 
 
 @dataclasses.dataclass(frozen=True)
 class Variant:
-    """A setting of the [ours] readings (defaults: ours).
-
-    Attributes:
-        name: short name, also the label tag in a batch (``"SIE@hold=1"``).
-        description: one line: what is switched, and to what.
-        hold: iterations a selected behaviour acts [ours: 31; literal 1].
-        count_encounters: the obstacle penalty counts encounters [ours] or iterations (False).
-        sigma0_floor: floor on eq (4)'s initial column means [ours: 0.05; literal 0].
-        collision_rule: "episode" [ours] or "entry" (every entry into a collision antigen).
-        stop_at_collision_cap: end a run at the collision cap (the earlier reading; ours: no).
-        hdc_tracks: the HDC tracks the target when it sees it (the earlier HDC; ours: no).
-        ir_noise: the simulator's IR noise table in every world [ours]; False: noise-free IR
-            (a world's own extra noise, the ``real`` world's, stays).
-        alpha_on_self: eqs (7)-(8) also sum alpha's own set (the engine's earlier reading;
-            the paper's, the default: alpha acts on the others).
-        swap_penalties: the idiotypic and RL-only penalties swapped (1.0 and 0.5). Not a
-            reading: the paper's values are its rule; this shows what they do to UIE and URL.
-    """
+    """A setting of the [ours] readings (defaults: ours); ``name`` also tags labels in a batch."""
 
     name: str
-    description: str
-    hold: int = HOLD
-    count_encounters: bool = True
-    sigma0_floor: float = SIGMA0_FLOOR
-    collision_rule: str = "episode"
-    stop_at_collision_cap: bool = False
-    hdc_tracks: bool = False
-    ir_noise: bool = True
-    alpha_on_self: bool = ALPHA_ON_SELF
-    swap_penalties: bool = False
+    description: str  # one line: what is switched, and to what
+    hold: int = HOLD  # iterations a selected behaviour acts [ours: 31; literal 1]
+    count_encounters: bool = True  # obstacle penalty counts encounters [ours], else iterations
+    sigma0_floor: float = SIGMA0_FLOOR  # floor on eq (4)'s initial column means [ours: 0.05]
+    collision_rule: str = "episode"  # [ours], or "entry": every entry into a collision antigen
+    stop_at_collision_cap: bool = False  # the earlier reading: a run ends at the cap
+    hdc_tracks: bool = False  # the earlier HDC: tracks the target when it sees it
+    ir_noise: bool = True  # False: noise-free IR (a world's own extra noise stays)
+    alpha_on_self: bool = ALPHA_ON_SELF  # eqs (7)-(8) also sum alpha's own set (earlier reading)
+    swap_penalties: bool = False  # not a reading: shows what the paper's 1.0/0.5 do to UIE, URL
 
     def readings(self) -> Readings:
         """The controllers' readings of this variant."""
@@ -214,31 +167,21 @@ VARIANTS = (
         hdc_tracks=True,
     ),
 )
-"""Ours, one variant per [ours] reading switched to its alternative, and all old ones together."""
 
 
 def select(names: Sequence[str] | None) -> tuple[Variant, ...]:
-    """The variants named (in :data:`VARIANTS`' order; all of them for None).
-
-    Raises:
-        ValueError: an unknown or repeated name (one line, listing the known ones).
-    """
+    """The variants named, in :data:`VARIANTS`' order (all for None); ValueError if unknown."""
     if names is None:
         return VARIANTS
     known = {v.name: v for v in VARIANTS}
     unknown = [n for n in names if n not in known]
-    if unknown or not names:
-        raise ValueError(
-            f"unknown variant(s) {unknown} (choose from {', '.join(known)})"
-            if unknown
-            else "no variant named"
-        )
+    if unknown:
+        raise ValueError(f"unknown variant(s) {unknown} (choose from {', '.join(known)})")
+    if not names:
+        raise ValueError("no variant named")
     if len(set(names)) != len(names):
         raise ValueError(f"a variant is named twice in {list(names)}")
     return tuple(v for v in VARIANTS if v.name in names)
-
-
-# --------------------------------------------------------------------------- systems
 
 
 def hdc_antibodies(tracks: bool, x: int = N_SETS) -> Antibodies:
@@ -253,11 +196,7 @@ def variant_systems(
     seed: Seed | None,
     network: NetworkParams | None = None,
 ) -> dict[str, System]:
-    """The systems of ``labels`` (e.g. ``"UIE-R2"``) as ``variant`` builds them.
-
-    Args:
-        seed: the LTL seed (needed by SIE and SRL).
-    """
+    """The systems of ``labels`` (e.g. ``"UIE-R2"``) as ``variant`` builds them."""
     out = {}
     for name in labels:
         system = make_system(
@@ -279,18 +218,9 @@ def _same(a: Any, b: Any) -> bool:
     )
 
 
-# --------------------------------------------------------------------------- batching
-
-
 @dataclasses.dataclass(frozen=True)
 class Call:
-    """One batch: the variants that share an episode config and simulator parameters.
-
-    Attributes:
-        config: the episode config (static: one compiled program per config and batch shape).
-        ir_noise: the simulator's IR noise table on (sim params: shared by the batch).
-        variants: the variants' names, in :data:`VARIANTS`' order.
-    """
+    """One batch: the variants (names) sharing an episode config (static) and sim params."""
 
     config: EpisodeConfig
     ir_noise: bool
@@ -298,10 +228,7 @@ class Call:
 
 
 def plan_calls(variants: Sequence[Variant], base: EpisodeConfig = STL_CONFIG) -> list[Call]:
-    """Group the variants into batches: one per (episode config, simulator parameters).
-
-    Variants that differ only in traced data (readings, the HDC's antibodies) share a batch.
-    """
+    """Group the variants into batches: one per (episode config, simulator parameters)."""
     groups: dict[tuple[EpisodeConfig, bool], list[str]] = {}
     for v in variants:
         groups.setdefault((v.config(base), v.ir_noise), []).append(v.name)
@@ -311,31 +238,17 @@ def plan_calls(variants: Sequence[Variant], base: EpisodeConfig = STL_CONFIG) ->
 def batch_systems(
     names: Sequence[str], systems: Mapping[str, Mapping[str, System]], share: bool = True
 ) -> tuple[dict[str, System], dict[str, dict[str, str]]]:
-    """The batch of one call: every variant's systems under tagged labels.
+    """One call's batch, ``systems`` being variant -> label -> System.
 
-    Args:
-        names: the call's variants.
-        systems: variant name -> label -> System.
-        share: run a system that is the same data as an earlier variant's of the call once.
-
-    Returns:
-        (tagged label (``"SIE@hold=1"``) -> System, variant -> label -> the tagged label whose
-        trials it gets).
+    Returns (tagged label ``"SIE@hold=1"`` -> System, variant -> label -> the tagged label whose
+    trials it gets); with ``share`` a system equal to an earlier variant's is run once.
     """
     batch: dict[str, System] = {}
     source: dict[str, dict[str, str]] = {name: {} for name in names}
-    for name in names:
+    for i, name in enumerate(names):
         for label, system in systems[name].items():
-            twin = None
-            if share:
-                twin = next(
-                    (
-                        source[earlier][label]
-                        for earlier in names[: names.index(name)]
-                        if _same(systems[earlier][label], system)
-                    ),
-                    None,
-                )
+            same = (e for e in names[:i] if share and _same(systems[e][label], system))
+            twin = next((source[e][label] for e in same), None)
             if twin is None:
                 twin = f"{label}@{name}"
                 batch[twin] = system
@@ -345,28 +258,17 @@ def batch_systems(
 
 @dataclasses.dataclass
 class Ablation:
-    """The trials of an ablation.
+    """The trials of an ablation, and one log dict per batch run (``run.json``'s calls)."""
 
-    Attributes:
-        trials: variant -> world -> label -> :class:`~jaxais.trials.TrialSet`.
-        calls: one dict per batch run: world, variants, the episode config's switched fields,
-            ir_noise, systems (tagged labels run), shared (variant -> label -> tagged label run
-            for it, where not its own), runs, run_s (compiles included).
-    """
-
-    trials: dict[str, dict[str, dict[str, TrialSet]]]
+    trials: dict[str, dict[str, dict[str, TrialSet]]]  # variant -> world -> label -> trials
     calls: list[dict[str, Any]]
 
     def records(self, variant: str) -> dict[str, dict[str, list[dict[str, Any]]]]:
-        """``{world: {label: [trial record]}}`` of a variant (what
-        :mod:`jaxais.experiments.claims` reads)."""
+        """``{world: {label: [trial record]}}`` of a variant (what ``claims`` reads)."""
         return {
             world: {label: ts.records for label, ts in by_label.items()}
             for world, by_label in self.trials[variant].items()
         }
-
-
-Runner = Callable[..., dict[str, TrialSet]]
 
 
 def run_ablation(
@@ -380,30 +282,19 @@ def run_ablation(
     network: NetworkParams | None = None,
     share: bool = True,
     progress: Any = None,
-    runner: Runner | None = None,
+    runner: Callable[..., dict[str, TrialSet]] | None = None,
     folder: Run | None = None,
 ) -> Ablation:
     """Run every variant's protocol: per world, one :func:`~jaxais.trials.run_trials` per call.
 
     Args:
-        worlds: world names (``world1``, ``world2``, ``real`` or a world file).
-        variants: the variants (see :data:`VARIANTS`).
-        seed: the trials' PRNG seed (every variant meets the same worlds and random streams).
-        ltl_seed: the LTL seed for SIE and SRL (None if ``labels`` has neither).
         n_trials: trials per system (or per world name); default the paper's (30, 20 in real).
         base: the episode config's caps and recording; each variant sets its own rules.
         labels: the systems (default: the paper's protocol in each world).
-        network: network constants (default: the paper's).
-        share: see :func:`batch_systems`.
-        progress: optional tqdm-like bar, advanced in runs ended (in simulated iterations with
-            ``base.record``); its ``reset(total=...)``, where it has one, is called first with
-            the total.
+        progress: optional tqdm-like bar, advanced in runs ended (iterations with ``base.record``);
+            its ``reset(total=...)``, if any, is called first.
         runner: ``run_trials`` or a stand-in with its signature (tests).
-        folder: the results folder: each batch's records are a unit there (``batches/I.json``),
-            and a batch it holds already is read, not run again.
-
-    Returns:
-        The :class:`Ablation`.
+        folder: each batch's records are a unit there (``batches/I.json``); a held one is read.
     """
     run = trials_module.run_trials if runner is None else runner
     calls = plan_calls(variants, base)
@@ -435,8 +326,7 @@ def run_ablation(
     if progress is not None and hasattr(progress, "reset"):
         progress.reset(total=sum(units(n, call, batch) for _, _, n, call, batch, _ in plan))
     for i, (world_name, world, n, call, batch, source) in enumerate(plan):
-        first = by_name[call.variants[0]]
-        sim_params = first.sim_params()
+        sim_params = by_name[call.variants[0]].sim_params()
         done = _Counter(progress)
         if progress is not None and hasattr(progress, "set_description_str"):
             progress.set_description_str(
@@ -495,9 +385,6 @@ class _Counter:
             self.bar.update(k)
 
 
-# --------------------------------------------------------------------------- results
-
-
 def _reported(records: Sequence[Mapping[str, Any]]) -> dict[str, float]:
     return {
         "f": float(stats.metric_values(records, "f").mean()),
@@ -509,17 +396,7 @@ def _reported(records: Sequence[Mapping[str, Any]]) -> dict[str, float]:
 
 
 def variant_summary(results_by_world: Mapping[str, Mapping[str, Sequence[Mapping]]]) -> dict:
-    """A variant's scores: the claims and the reported systems' means per world.
-
-    Args:
-        results_by_world: ``{world: {label: [trial record]}}``.
-
-    Returns:
-        ``{"claims": {"reproduced", "evaluated", "total"}, "held": [claim ids held],
-        "worlds": {world: {label: {"f", "failure_rate", "trapped_s", "locked_s",
-        "replaced"}}}}`` for the labels of
-        :data:`REPORTED` that have trials.
-    """
+    """A variant's claims summary, held claim ids, and :data:`REPORTED` systems' means per world."""
     ledger = claims.claims(results_by_world)
     return {
         "claims": claims.summary(ledger),
@@ -562,9 +439,7 @@ def _cell(value: float | None, fmt: str) -> str:
 
 
 def markdown(doc: Mapping[str, Any]) -> str:
-    """The ablation table: variant | claims reproduced | per world the reported systems' f
-    and SIE's failures (%), then what each variant switches, then UIE against URL (replacements
-    and trapped time) for ours and the swapped penalties."""
+    """The ablation table (claims, f per world and system, SIE fail %), notes, penalty table."""
     worlds = list(doc["trials"])
     reported = doc.get("reported_systems", REPORTED)
     head = ["variant", "claims reproduced"]
@@ -653,9 +528,6 @@ def figure(doc: Mapping[str, Any]) -> Any:
     return fig
 
 
-# ------------------------------------------------------------------------------ the driver
-
-
 def ablate(
     out: str | Path,
     *,
@@ -669,17 +541,9 @@ def ablate(
     share: bool = True,
     resume: bool = False,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
-    """Run the ablation (:func:`run_ablation`; ``variants`` by name, default all) and write
-    ablation.json, ablation.md, ablation.png and run.json (config, seeds, versions, batches,
-    timings) into ``out``. ``trials`` defaults to the paper's counts. ``out`` must be missing or
-    empty; ``manifest.json`` there lists the finished batches (:func:`jaxais.io.open_run`) and
-    ``resume=True`` finishes an interrupted run with the same arguments.
-
-    Returns:
-        (the ablation.json document, the run.json document).
-
-    Raises:
-        ValueError: a bad argument (one line), before anything runs.
+    """Run the ablation and write ablation.json/.md/.png and run.json into ``out`` (missing or
+    empty; ``resume`` finishes an interrupted run). Returns (ablation.json, run.json) documents;
+    ValueError (one line) on a bad argument, before anything runs.
     """
     import os
     import sys

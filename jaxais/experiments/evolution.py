@@ -1,10 +1,6 @@
-"""The LTL experiment (``scripts/evolve.py``): evolve antibody sets, checkpoint every generation,
-write the STL's seed, measure its crossing rates, summarise and plot.
-
-:func:`evolve` writes into ``out``: ``checkpoints/`` (the GA state after every generation; a
-run with ``resume=True`` continues exactly), ``seed/`` (the seed, with its crossing rates in
-fresh starts whose keys the GA never used), ``summary.json`` and ``fitness.png``.
-:func:`check_seed` measures an existing seed, writing nothing.
+"""The LTL experiment (``scripts/evolve.py``): evolve antibody sets into ``out``: ``checkpoints/``
+(every generation; ``resume`` continues exactly), ``seed/`` (with its crossing rates in fresh
+starts the GA never used), ``summary.json`` and ``fitness.png``. :func:`check_seed` writes nothing.
 """
 
 from __future__ import annotations
@@ -30,7 +26,6 @@ from jaxais.seed import Seed, load_seed, save_seed
 
 __all__ = ["check_seed", "evolve", "measure_crossing", "report"]
 
-
 _COMPILE_EVENTS = frozenset(
     f"/jax/core/compile/{e}_duration"
     for e in ("jaxpr_trace", "jaxpr_to_mlir_module", "backend_compile")
@@ -39,8 +34,7 @@ _COMPILE_EVENTS = frozenset(
 
 @contextlib.contextmanager
 def _compile_clock():
-    """A one-element list holding the seconds of JAX's tracing, lowering and XLA compiles so far
-    within the block (jax.monitoring events)."""
+    """A one-element list: the seconds of JAX's traces, lowerings and compiles within the block."""
     seconds = [0.0]
 
     def listen(event: str, duration: float, **kwargs: Any) -> None:
@@ -62,8 +56,7 @@ def _check(seed: int, crossing_starts: int) -> None:
 
 
 def _generation_record(generation: int, evaluation, best, wall: float) -> dict[str, Any]:
-    """One generation's line of the history: its evaluation (means over each robot's starts)
-    and, after the success check, each population's best so far."""
+    """One generation's history line: its evaluation and each population's best so far."""
     f, tau, c = (np.asarray(x) for x in (evaluation.fitness, evaluation.tau, evaluation.collisions))
     crossings = np.asarray(evaluation.crossings)
     pops = []
@@ -119,8 +112,7 @@ def _plot(path: Path, history: list[dict[str, Any]], title: str, tau_cap: float)
 def measure_crossing(
     seed: Seed, world: envs.World, config: GAConfig, run_seed: int, starts: int
 ) -> dict[str, Any]:
-    """The crossing rates of ``seed``'s sets in ``starts`` fresh starts with the keys
-    ``crossing_key(run_seed)``: seed.json's and summary.json's "crossing" entry."""
+    """The "crossing" entry: ``seed``'s sets' rates in ``starts`` starts of ``crossing_key``."""
     key = driver.crossing_key(run_seed)
     # In rollouts of success_starts starts per set: the success check's compiled program.
     batch = config.success_starts or None
@@ -148,18 +140,12 @@ def evolve(
     diversity_seeds: int | None = None,
     argv: list[str] | None = None,
 ) -> dict[str, Any]:
-    """Evolve the LTL seed with PRNG seed ``seed`` into ``out`` (created if missing); returns
-    the summary it writes. Raises ConfigError (an argument out of range) or another ValueError
-    (nothing to resume, another run's checkpoints, a corrupt checkpoint, a bad world).
+    """Evolve the LTL seed with PRNG seed ``seed`` into ``out``; returns the summary it writes.
 
-    Args:
-        config: the GA settings (default :class:`GAConfig`'s).
-        world: world name or ``.toml`` path.
-        resume: continue from ``out/checkpoints`` (same arguments; ``generations`` may grow).
-        crossing_starts: fresh starts per seed set of the final crossing measurement.
-        diversity_seeds: also compare the diversity of P × R with 1 × PR over this many GA seeds
-            (``seed``, ``seed + 1``, ...; the main run is the first; not checkpointed).
-        argv: the ``scripts/evolve.py`` arguments to record as its command.
+    ``resume`` continues ``out/checkpoints`` (same arguments; ``generations`` may grow);
+    ``diversity_seeds`` also compares P × R with 1 × PR over GA seeds ``seed``, ``seed + 1``, ...
+    (not checkpointed); ``argv`` is recorded as the command. Raises ConfigError (out of range) or
+    ValueError (nothing to resume, another run's or a corrupt checkpoint, a bad world).
     """
     config = GAConfig() if config is None else config
     _check(seed, crossing_starts)
@@ -290,8 +276,8 @@ def check_seed(
     seed: int = 0,
     crossing_starts: int = CROSSING_STARTS,
 ) -> dict[str, Any]:
-    """Measure the crossing rates of the seed in ``seed_dir`` as :func:`evolve` with these
-    arguments would (writes nothing); returns them with those recorded in its seed.json."""
+    """The crossing rates of the seed in ``seed_dir`` as :func:`evolve` measures them, and those
+    recorded in its seed.json (writes nothing)."""
     config = GAConfig() if config is None else config
     _check(seed, crossing_starts)
     ltl_seed, meta = load_seed(seed_dir)
@@ -315,8 +301,7 @@ def _crossing_line(c: dict[str, Any]) -> str:
 
 
 def report(result: dict[str, Any], where: str | Path) -> str:
-    """What ``scripts/evolve.py`` prints: the lines of a :func:`check_seed` result (``where``:
-    the seed directory) or of an :func:`evolve` summary (``where``: its output directory)."""
+    """What ``scripts/evolve.py`` prints for a :func:`check_seed` or :func:`evolve` result."""
     if "recorded_crossing" in result:
         lines = [f"{where}: {_crossing_line(result['crossing'])}"]
         if result["recorded_crossing"] is not None:

@@ -1,28 +1,12 @@
 """The paper's claims across LTL seeds: the whole protocol on N fresh seeds, resumable per seed.
 
-For each GA seed s, :func:`ltl_ledger` runs, as subprocesses of this interpreter,
-
-- the LTL: ``python -m jaxais.scripts.evolve --out OUT/ltl/seed_s --seed s`` (evolve.py's
-  defaults), and then
-- the STL: ``python -m jaxais.scripts.reproduce --seeds OUT/ltl/seed_s/seed --out OUT/stl/seed_s
-  --seed s --no-baseline`` (the paper's protocol with that seed, trial seed s),
-
-and tabulates which claims and hypotheses hold on how many seeds: ``OUT/seeds.json`` and
-``OUT/seeds.md``, rebuilt after every seed (a partial ledger says "k of N seeds done"), and
-``OUT/run.json`` (command, settings, versions, wall times). :func:`summarise` and
-:func:`markdown` make the ledger from the runs' files alone.
-
-``OUT/manifest.json`` (:func:`jaxais.io.open_run`) records the settings and the finished seeds
-(a seed is finished once reproduce.py exited 0); ``resume=True`` goes on where a run stopped:
-
-- a seed's LTL is done when ``seed/seed.json`` and ``summary.json`` exist (evolve.py writes the
-  seed folder whole, summary.json last); a complete checkpoint without them is continued with
-  ``--resume`` (exactly the seed of an uninterrupted run); otherwise it starts afresh;
-- a seed's STL that reproduce.py began (its own manifest) is finished with its ``--resume``
-  (its finished worlds kept, the same bits); a folder without one is removed and run again.
-
-Wall times: the LTL's is evolve.py's own ``wall_time_total_s`` (summed over resumes), the STL's
-the reproduce.py subprocess's. Nothing here imports JAX (the subprocesses have the device).
+For each GA seed s, :func:`ltl_ledger` runs as subprocesses ``jaxais.scripts.evolve --out
+OUT/ltl/seed_s --seed s`` (the LTL) then ``jaxais.scripts.reproduce --seeds OUT/ltl/seed_s/seed
+--out OUT/stl/seed_s --seed s --no-baseline`` (the STL), and rebuilds ``OUT/seeds.json``,
+``seeds.md`` and ``run.json`` after every seed. ``OUT/manifest.json`` records the finished seeds;
+on ``resume`` an LTL with a complete checkpoint but no seed continues with ``--resume`` (see
+:func:`ltl_state`) and an STL that reproduce.py began finishes with its own ``--resume`` (same
+bits). Nothing here imports JAX: the subprocesses have the device.
 """
 
 from __future__ import annotations
@@ -45,15 +29,12 @@ from jaxais.io import MANIFEST, ON_SIGNAL, Run, atomic_write_json, atomic_write_
 __all__ = ["SeedRunError", "headline", "ltl_ledger", "ltl_state", "markdown", "summarise"]
 
 FORMAT = "jaxais-seeds/1"
-MAX_SEED = 2**31 - 1
-"""evolve.py's largest --seed."""
-SYSTEMS = ("SIE", "SRL")
-"""The seeded systems whose failure rates and lock-up times the ledger shows."""
+MAX_SEED = 2**31 - 1  # evolve.py's largest --seed
+SYSTEMS = ("SIE", "SRL")  # the seeded systems whose failures and lock-ups the ledger shows
+# reproduce.py flags the ledger sets itself (not allowed in ``extra_args``).
 RESERVED = ("--out", "--seeds", "--seed", "--no-baseline", "--baseline", "--evolve", "--trials")
-"""reproduce.py flags the ledger sets itself (not allowed in ``extra_args``)."""
 
-Runner = Callable[[list[str], Path | None], int]
-"""Runs a command (output to the log file when one is given) and returns its exit status."""
+Runner = Callable[[list[str], Path | None], int]  # (command, log file or None) -> exit status
 
 
 class SeedRunError(RuntimeError):
@@ -121,17 +102,10 @@ def _seed_row(docs: Mapping[str, Any]) -> dict[str, Any]:
 def summarise(
     per_seed: Mapping[int, Mapping[str, Any]], requested: Iterable[int] | None = None
 ) -> dict[str, Any]:
-    """The ledger over finished seeds.
+    """The ``seeds.json`` ledger over finished seeds (of ``requested``, default all).
 
-    Args:
-        per_seed: seed -> its documents: "tables" (tables.json), "claims" (claims.json) and,
-            optional, "ltl_summary" (evolve.py's summary.json), "ltl_seed" (seed/seed.json),
-            "wall_s" ({"ltl": s, "stl": s}).
-        requested: the seeds asked for (default: those of ``per_seed``).
-
-    Returns:
-        The ``seeds.json`` document: per seed, per claim (fraction of seeds it holds on), per
-        hypothesis, claims held (median, min, max), and how many of the requested seeds are done.
+    ``per_seed``: seed -> {"tables", "claims"} and optionally "ltl_summary" (evolve.py's
+    summary.json), "ltl_seed" (seed/seed.json), "wall_s" ({"ltl": s, "stl": s}).
     """
     seeds = sorted(per_seed)
     wanted = sorted(set(seeds if requested is None else requested))
@@ -151,15 +125,10 @@ def summarise(
         on = [s for s in seeds if rows[s]["hypotheses"].get(h)]
         hypotheses[h] = {"held_on": len(on), "of": n, "seeds": on}
     counts = [rows[s]["claims_held"] for s in seeds]
-    held = {"median": None, "min": None, "max": None, "of": None}
+    held = dict.fromkeys(("median", "min", "max", "of"))
     if counts:
         total = max(rows[s]["claims_total"] for s in seeds)
-        held = {
-            "median": statistics.median(counts),
-            "min": min(counts),
-            "max": max(counts),
-            "of": total,
-        }
+        held = dict(median=statistics.median(counts), min=min(counts), max=max(counts), of=total)
     return {
         "format": FORMAT,
         "seeds": {str(s): rows[s] for s in seeds},
@@ -315,9 +284,8 @@ def _documents(folder: Run, s: int) -> dict[str, Any]:
 
 
 def _versions(out: Path, done: Iterable[int]) -> dict[str, Any]:
-    """The versions that made the runs: reproduce.py's record (``records.versions()``, JAX's
-    backend included) from the first done seed; before any, the installed packages'. JAX is not
-    started here: on a GPU it would take the memory the subprocesses need."""
+    """The first done seed's reproduce.py versions, else the installed packages' (JAX not
+    started: on a GPU it would take the memory the subprocesses need)."""
     for s in done:
         found = _get(_read_json(_paths(out, s)[1] / "run.json"), "versions")
         if isinstance(found, dict):
@@ -387,28 +355,18 @@ def ltl_ledger(
     runner: Runner | None = None,
     resume: bool = False,
 ) -> dict[str, Any]:
-    """Run the LTL and the paper's protocol on every seed (each unless done) and tabulate them.
+    """Run the LTL and the paper's protocol on every seed (each unless done); return the ledger.
 
     Args:
-        out: the output folder (missing or empty, or with ``resume`` the interrupted run's);
-            see the module docstring for its layout.
         seeds: the GA seeds (each also the STL's trial seed).
         trials: reproduce.py's ``--trials`` (default: the paper's counts).
-        jobs: how many seeds' pipelines run side by side; with more than one, each subprocess
-            writes to ``OUT/logs/seed_s.{ltl,stl}.log`` instead of this terminal.
+        jobs: seeds run side by side; above 1 subprocesses log to ``OUT/logs/seed_s.{ltl,stl}.log``.
         extra_args: further reproduce.py flags (``--worlds``, ``--tau-cap``, ...).
-        progress: print a line on stderr as each stage starts and each seed ends.
-        command: how the ledger was started, for its records (default: this call).
         runner: runs one subprocess (tests inject one); default: a child process of this one.
-        resume: finish the interrupted run in ``out`` (the same seeds, trials and extra_args).
-
-    Returns:
-        The ledger (``seeds.json``'s document) over the requested seeds that are done.
 
     Raises:
         ValueError: bad arguments, or ``out`` holding another run (or none to resume).
-        SeedRunError: a subprocess failed (after the seeds already running finished; the
-            ledger of the finished seeds is written).
+        SeedRunError: a subprocess failed (after the running seeds finished and were written).
     """
     out, seeds = Path(out), list(seeds)
     if not seeds or len(set(seeds)) != len(seeds):

@@ -1,20 +1,11 @@
 """Parameter landscapes: a grid over the STL's traced parameters, all points' trials as one pool.
 
-The network's constants (:class:`~jaxais.immune.network.NetworkParams`: k1, k2, b, Phi, ...,
-the penalties) and our readings (:class:`~jaxais.immune.readings.Readings`: hold, ...) are
-traced data of a :class:`~jaxais.controllers.System`, so every grid point is the same compiled
-program with other numbers. :func:`run_sweep` stacks one system per point, repeats it for its
-trials and runs all points x trials through :func:`jaxais.runner.run_pool` (one compiled loop,
-finished runs' slots refilled).
-
-Trial i of every point meets the same world placement and the same random streams as trial i of
-``run_trials(world, {label: system}, n, seed)`` (common random numbers across the grid): the
-point that equals the paper's constants reproduces the plain trials, and the differences between
-points are the parameters', not the draws'.
-
-Per point the sweep reports the mean and a 95 % confidence interval of tau, c (capped at 100, as
-in Table 3), f and trapped time (Student's t interval of the mean), the failure rate (Wilson
-score interval) and the mean idiotypic difference rate (t interval; idiotypic systems only).
+Network constants and readings are traced System data, so every grid point is one compiled
+program with other numbers; :func:`run_sweep` runs all points x trials through
+:func:`jaxais.runner.run_pool`. Trial i of every point gets trial i's placement and streams of
+``run_trials`` (common random numbers: the paper's point reproduces the plain trials). Per point:
+mean and 95 % CI of tau, c (capped), f, trapped time (t interval), failure rate (Wilson) and the
+idiotypic difference rate (t; idiotypic systems only). Also the reality gap (noise scaled).
 """
 
 from __future__ import annotations
@@ -46,10 +37,8 @@ USED_BY: dict[str, tuple[str, ...]] = {
     **dict.fromkeys(_IDIOTYPIC, ("SIE", "UIE")),
     "penalty_non_idiotypic": ("SRL", "URL"),
     "sigma0_floor": ("SIE", "SRL", "UIE", "URL"),  # eq (4): the learning systems
-}
-"""The systems that use a parameter, where not all do (a penalty ends HDC's bout too)."""
-MAX_AXIS = 10**6
-"""The most values of one axis (the grid's size is bounded by the memory it needs)."""
+}  # the systems that use a parameter, where not all do (a penalty ends HDC's bout too)
+MAX_AXIS = 10**6  # values of one axis at most (the grid's size is bounded by its memory)
 
 STATIC: dict[str, str] = {
     "idiotope_period": "NetworkParams.idiotope_period is a loop schedule, fixed when the "
@@ -58,23 +47,16 @@ STATIC: dict[str, str] = {
     "system with other NetworkParams instead",
     "phi": "rho and phi set the seeded paratopes (eqs 1-2) before the trials start; build the "
     "system with other NetworkParams instead",
-}
-"""Parameters that look sweepable but are not traced, and why."""
+}  # parameters that look sweepable but are not traced, and why
 
-METRICS = ("tau", "c", "f", "trapped_s")
-"""Continuous metrics summarised per point (c is capped at 100)."""
-PAPER_POINT = {"k1": 0.85, "k2": 1.10}
-"""The paper's operating point (section 5: tuned for a mean idiotypic difference rate of about
-20 %)."""
+METRICS = ("tau", "c", "f", "trapped_s")  # summarised per point (c capped at 100)
+_COLUMNS = ("tau", "collisions_capped", "fitness", "trapped_s")  # METRICS' outcome arrays
+PAPER_POINT = {"k1": 0.85, "k2": 1.10}  # [paper] section 5: ~20 % idiotypic difference rate
 
 
 def parse_axis(spec: str) -> tuple[str, np.ndarray]:
     """``"k1=0:2:11"`` (11 points from 0 to 2) or ``"k1=0.5,0.85,1.1"`` -> (name, values); a
-    switch (``alpha_on_self=0,1``) takes 0 and 1.
-
-    Raises:
-        ValueError: one line naming the bad part and the accepted forms.
-    """
+    switch (``alpha_on_self=0,1``) takes 0 and 1. ValueError (one line) on a bad spec."""
     name, sep, values = spec.partition("=")
     name = name.strip()
     if not sep or not values.strip():
@@ -123,11 +105,7 @@ def grid_points(axes: Sequence[tuple[str, np.ndarray]]) -> list[dict[str, Any]]:
 
 
 def point_systems(base: System, points: Sequence[dict[str, Any]]) -> System:
-    """``base`` once per point with the point's values, stacked along a leading axis [P].
-
-    Raises:
-        ValueError: a value out of its parameter's range (the network's and readings' checks).
-    """
+    """``base`` once per point with its values, stacked [P]; ValueError on a value out of range."""
     for point in points:  # checked here: with_params would clip a value out of its range
         base.network.replace(**{k: v for k, v in point.items() if k in BOUNDS}).validate()
         ours = {name: np.asarray(v).item() for name, v in vars(base.readings).items()}
@@ -140,49 +118,38 @@ def point_systems(base: System, points: Sequence[dict[str, Any]]) -> System:
     )
 
 
-def _t_interval(x: np.ndarray, level: float) -> tuple[float, float, float]:
-    """(mean, low, high) of a Student's t interval of the mean of ``x`` (finite values)."""
+def _t_interval(x: np.ndarray, level: float) -> dict[str, Any]:
+    """The mean of ``x``'s finite values and its Student's t interval."""
     x = x[np.isfinite(x)]
-    if x.size == 0:
-        return (math.nan,) * 3
-    mean = float(np.mean(x))
-    if x.size < 2:
-        return mean, mean, mean
-    half = sps.t.ppf(0.5 + level / 2, x.size - 1) * np.std(x, ddof=1) / math.sqrt(x.size)
-    return mean, mean - float(half), mean + float(half)
+    mean = float(np.mean(x)) if x.size else math.nan
+    ci = [mean, mean]
+    if x.size >= 2:
+        half = float(sps.t.ppf(0.5 + level / 2, x.size - 1) * np.std(x, ddof=1) / math.sqrt(x.size))
+        ci = [mean - half, mean + half]
+    return {"mean": mean, "ci": ci}
 
 
-def _wilson(k: int, n: int, level: float) -> tuple[float, float, float]:
-    """(rate, low, high) of the Wilson score interval of k successes in n."""
+def _wilson(k: int, n: int, level: float) -> dict[str, Any]:
+    """The rate of k successes in n and its Wilson score interval."""
     z = sps.norm.ppf(0.5 + level / 2)
     p = k / n
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return p, max(0.0, centre - half), min(1.0, centre + half)
+    return {"mean": p, "ci": [max(0.0, centre - half), min(1.0, centre + half)]}
 
 
 def summarise_point(result: dict[str, np.ndarray], level: float = 0.95) -> dict[str, Any]:
     """One point's means and intervals from its trials' outcome arrays [n]."""
-    values = {
-        "tau": result["tau"],
-        "c": result["collisions_capped"],
-        "f": result["fitness"],
-        "trapped_s": result["trapped_s"],
-    }
     out: dict[str, Any] = {"n": int(result["tau"].size)}
-    for name in METRICS:
-        mean, lo, hi = _t_interval(np.asarray(values[name], np.float64), level)
-        out[name] = {"mean": mean, "ci": [lo, hi]}
+    for name, key in zip(METRICS, _COLUMNS, strict=True):
+        out[name] = _t_interval(np.asarray(result[key], np.float64), level)
     failed = np.asarray(result["failed_collisions"]) | np.asarray(result["failed_time"])
-    rate, lo, hi = _wilson(int(failed.sum()), failed.size, level)
-    out["failure_rate"] = {"mean": rate, "ci": [lo, hi]}
+    out["failure_rate"] = _wilson(int(failed.sum()), failed.size, level)
     if "idiotypic_difference_rate" in result:
         idio = np.asarray(result["idiotypic_difference_rate"], np.float64)
-        if np.all(np.isnan(idio)):
-            out["idiotypic_difference_rate"] = None
-        else:
-            mean, lo, hi = _t_interval(idio, level)
-            out["idiotypic_difference_rate"] = {"mean": mean, "ci": [lo, hi]}
+        out["idiotypic_difference_rate"] = (
+            None if np.isnan(idio).all() else _t_interval(idio, level)
+        )
     return out
 
 
@@ -214,19 +181,10 @@ def run_sweep(
     """Every grid point's ``n_trials`` trials of ``base`` with the point's values, in
     :func:`chunks` of whole points.
 
-    Args:
-        world: the world. base: the system at the paper's constants. label: its label (it
-            names the random streams, as in :func:`jaxais.trials.run_trials`).
-        axes: (parameter name, values) per axis (:func:`parse_axis`).
-        slots: runs live at once (:func:`jaxais.runner.run_pool`).
-        progress: called with the number of runs that ended, after every segment.
-        run: the results folder: each chunk's point summaries are recorded there as a unit,
-            and a chunk it holds already is not run again.
-        records: keep each point's trial records (``"trials"``, as in a trials file).
-
-    Returns:
-        ``{"axes": {name: values}, "points": [{"values": {...}, <summarise_point>}, ...],
-        "runs", "robot_iterations", "wall_s"}``; points in :func:`grid_points` order.
+    ``label`` names the random streams (as in ``run_trials``); ``axes`` are :func:`parse_axis`'s;
+    ``progress`` gets the runs ended; each chunk is a unit of ``run`` (a held one is not rerun);
+    ``records`` keeps each point's trial records. Returns the sweep.json document, points in
+    :func:`grid_points` order.
     """
     sim_params = envs.default_params() if sim_params is None else sim_params
     points = grid_points(axes)
@@ -282,8 +240,7 @@ def surface(doc: dict[str, Any], metric: str) -> np.ndarray:
 
 
 def interpolate(doc: dict[str, Any], metric: str, at: dict[str, float]) -> float | None:
-    """A metric's mean at a point between grid points of a 2-D sweep (bilinear), or None when
-    the point lies outside the grid or the sweep is not over those two axes."""
+    """A metric's bilinear mean at ``at`` in a 2-D sweep over its axes, or None (outside, other)."""
     names = list(doc["axes"])
     if len(names) != 2 or set(names) != set(at):
         return None
@@ -297,22 +254,16 @@ def interpolate(doc: dict[str, Any], metric: str, at: dict[str, float]) -> float
     return None if math.isnan(value) else value
 
 
-# ------------------------------------------------------------------------ the reality gap
-
 NOISE_KINDS: dict[str, tuple[str, ...]] = {
     "ir": ("ir_noise",),
     "camera": ("camera_miss", "camera_shift"),
     "wheel": ("wheel_noise",),
-}
-"""The world's noise sources (``envs.World`` fields) by kind. The simulator's own IR noise
-(``SimParams.ir_noise``, Webots' e-puck table, SPEC 2) is on in every world and not scaled."""
+}  # World fields by kind; SimParams.ir_noise (SPEC 2) stays on in every world, not scaled
 
 
 def noisy_world(world: envs.World, scale: float, kinds: Sequence[str] = tuple(NOISE_KINDS)):
-    """``world`` with the noise levels of ``kinds`` times ``scale`` (probabilities capped at 1).
-
-    The levels are static (a noiseless world draws no noise): each scale is its own program.
-    """
+    """``world`` with the noise levels of ``kinds`` times ``scale`` (probabilities capped at 1);
+    the levels are static (a noiseless world draws no noise): each scale is its own program."""
     if scale < 0 or not math.isfinite(scale):
         raise ValueError(f"noise scales must be finite and >= 0, got {scale}")
     unknown = sorted(set(kinds) - set(NOISE_KINDS))
@@ -332,7 +283,7 @@ def _arrays(records: Sequence[dict[str, Any]]) -> dict[str, np.ndarray]:
     """Trial records as the outcome arrays :func:`summarise_point` reads."""
     column = lambda k: np.asarray([r[k] for r in records])
     rates = [r.get("idiotypic_difference_rate") for r in records]
-    out = {k: column(k) for k in ("tau", "collisions_capped", "fitness", "trapped_s")}
+    out = {k: column(k) for k in _COLUMNS}
     out |= {k: column(k).astype(bool) for k in ("failed_collisions", "failed_time")}
     if any(x is not None for x in rates):
         out["idiotypic_difference_rate"] = np.asarray(
@@ -353,14 +304,9 @@ def run_noise_sweep(
     progress: Callable[[int], None] | None = None,
     run: Run | None = None,
 ) -> dict[str, Any]:
-    """Every system's trials in ``world`` with its noise scaled by each of ``scales`` (1 = the
-    world's own levels); one batch per scale, the same seed (common random numbers for the
-    placements and the controllers' draws). ``run``: as in :func:`run_sweep`, a scale a unit.
-
-    Returns:
-        ``{"kinds", "scales", "points": [{"scale", "levels", "systems": {label:
-        <summarise_point>}}], "wall_s"}``.
-    """
+    """Every system's trials in ``world`` with its noise scaled by each of ``scales`` (1 = its
+    own levels); one batch per scale, the same seed (common random numbers); a scale is a unit
+    of ``run``. Returns the reality_gap.json document."""
     from jaxais.trials import run_trials
 
     start = time.perf_counter()
@@ -387,9 +333,6 @@ def run_noise_sweep(
     }
 
 
-# ------------------------------------------------------------------------------ the driver
-
-
 def sweep(
     out: str | Path,
     *,
@@ -410,23 +353,11 @@ def sweep(
     records: bool = False,
 ) -> dict[str, Any]:
     """A grid over the STL's parameters (``grid``: :func:`parse_axis` specs) or the reality gap
-    (``noise``: scales of the world's noise, 1 = its own levels), written into ``out``.
+    (``noise``: scales of the world's noise), written into ``out`` (missing or empty; ``resume``
+    finishes an interrupted run) as sweep.json/.png or reality_gap.json/.png; returns it.
 
-    Writes sweep.json and (one or two axes) sweep.png, or reality_gap.json and reality_gap.png.
-    ``system``: one label (grid; default SIE) or comma-separated labels (noise; default
-    SIE,SRL,HDC); ``noise_kinds`` (noise only; names or one comma-separated string) default to
-    every kind of :data:`NOISE_KINDS`; ``records``: keep every run's record in sweep.json
-    (:func:`run_sweep`). ``world`` defaults to world1 (grid) or real (noise),
-    ``trials`` to the paper's count there, the caps to the paper's. Under ``jax.distributed``
-    (joined by the caller) every process computes the same numbers and process 0 writes.
-    Returns the document.
-
-    ``out`` must be missing or empty; it records the finished chunks of the grid (the noise
-    scales) in ``manifest.json`` (:func:`jaxais.io.open_run`), and ``resume=True`` finishes an
-    interrupted run with the same arguments, giving the uninterrupted run's numbers.
-
-    Raises:
-        ValueError: a bad argument (one line), before anything runs.
+    Defaults as ``scripts/sweep.py --help`` says. Under ``jax.distributed`` every process computes
+    the same numbers and process 0 writes. ValueError (one line) on a bad argument, before any run.
     """
     import sys
 
@@ -533,9 +464,6 @@ def sweep(
     if lead:
         name = "sweep" if grid is not None else "reality_gap"
         atomic_write_json(run.out / f"{name}.json", doc)
-        if grid is not None:
-            save_sweep_figures(doc, run.out)
-        else:
-            save_noise_figure(doc, run.out)
+        (save_sweep_figures if grid is not None else save_noise_figure)(doc, run.out)
         run.complete()
     return doc

@@ -2,7 +2,9 @@
 
 Drive an e-puck to the blue goal without crashing (README "gymnax"). ``register_gymnax()`` adds
 the built-in worlds to gymnax's registry (evosax's ``GymnaxProblem`` finds them); gymnax's
-wrappers take the env as it is, 5-tuple tools take ``gymnax.wrappers.LegacyStepAPIWrapper(env)``.
+wrappers take the env as it is. Tools written for gymnax before 1.0, whose ``step`` returned five
+values (rejax 0.1), take ``make(..., legacy_step=True)``: gymnax's ``LegacyStepAPIWrapper`` does
+the same but cannot be deep-copied, which rejax does to its config.
 
 - obs [11] float32 (``OBS_NAMES``): IR ps0..ps7 / 4095; blue pixels / 45; blue centroid column
   in [-1, 1] (0 when none seen); goal pixels / 45.
@@ -280,7 +282,17 @@ class EpuckEnv(environment.Environment):
         return self
 
     def __repr__(self) -> str:
-        return f"EpuckEnv({self.name!r}, max_steps_in_episode={self._params.max_steps_in_episode})"
+        name = type(self).__name__
+        return f"{name}({self.name!r}, max_steps_in_episode={self._params.max_steps_in_episode})"
+
+
+class LegacyEpuckEnv(EpuckEnv):
+    """:class:`EpuckEnv` with gymnax 0.0's five-value ``step``: ``(obs, state, reward, done,
+    info)``, ``done = terminated | truncated`` (info keeps both)."""
+
+    def step(self, key, state, action, params=None):
+        obs, state, reward, terminated, truncated, info = super().step(key, state, action, params)
+        return obs, state, reward, terminated | truncated, info
 
 
 def make(
@@ -289,10 +301,12 @@ def make(
     sim_params: SimParams | None = None,
     auto_reset: bool = True,
     reset_pool: int = RESET_POOL,
+    legacy_step: bool = False,
     **overrides: float,
 ) -> EpuckEnv:
     """The environment of a world (built-in name, file path or :class:`World`); ``overrides``
-    are :class:`EnvParams` fields. Raises ``WorldError``/``ValueError`` (one line) on bad input."""
+    are :class:`EnvParams` fields; ``legacy_step``: a :class:`LegacyEpuckEnv`. Raises
+    ``WorldError``/``ValueError`` (one line) on bad input."""
     unknown = sorted(set(overrides) - set(_RANGES))
     if unknown:
         raise ValueError(
@@ -310,7 +324,8 @@ def make(
     fields = {"max_steps_in_episode": round(PAPER_TIME_CAP / sim.dt), **overrides}
     params = check_params(EnvParams(world=w, sim=sim, **fields))
     params = params.replace(**{k: int(getattr(params, k)) for k, r in _RANGES.items() if r[2]})
-    return EpuckEnv(params, auto_reset=auto_reset, reset_pool=int(reset_pool))
+    env = LegacyEpuckEnv if legacy_step else EpuckEnv
+    return env(params, auto_reset=auto_reset, reset_pool=int(reset_pool))
 
 
 def register_gymnax() -> tuple[str, ...]:

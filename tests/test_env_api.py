@@ -201,6 +201,19 @@ def test_truncated_at_max_steps(env):
     assert genv.EpuckEnv._step._cache_size() == size
 
 
+def test_legacy_step_gives_gymnax_0_0s_five_values(env):
+    # rejax 0.1 unpacks five values from step: done = terminated | truncated, the rest as is.
+    legacy = envs.make("world1", legacy_step=True)
+    params = env.default_params.replace(max_steps_in_episode=1)
+    _, state = env.reset(jax.random.key(5), params)
+    key, action = jax.random.key(6), jnp.array([0.3, -0.2])
+    *same, term, trunc, info = env.step(key, state, action, params)
+    out = legacy.step(key, state, action, params)
+    assert len(out) == 5 and bool(out[3]) and bool(trunc) and not bool(term)
+    jax.tree.map(np.testing.assert_array_equal, (*same, info), (*out[:3], out[4]))
+    assert isinstance(legacy, environment.Environment) and repr(legacy).startswith("Legacy")
+
+
 def test_first_episode_does_not_depend_on_the_pool(env, env_no_reset):
     # reset draws the auto-reset's starts from a key of their own: the first episode is the same
     # with or without them.

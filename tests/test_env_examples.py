@@ -1,8 +1,9 @@
 """The gymnax examples run at tiny budgets, as a user runs them (``python examples/NAME.py
---tiny``): examples/gymnax_ppo.py (PureJaxRL's PPO) and examples/evosax_policy.py (evosax's
-OpenAI-ES through its GymnaxProblem), third-party training code on ``gymnax.make("jaxais/world1")``.
+--tiny``): examples/gymnax_ppo.py (PureJaxRL's PPO), examples/evosax_policy.py (evosax's
+OpenAI-ES through its GymnaxProblem) and examples/rejax_ppo.py (rejax's PPO), third-party training
+code on ``gymnax.make("jaxais/world1")``.
 
-Both run in one fresh interpreter with XLA's fast-compile options (tests/conftest.py's): each
+All run in one fresh interpreter with XLA's fast-compile options (tests/conftest.py's): each
 compiles its whole training run once, which is most of its time.
 """
 
@@ -25,7 +26,7 @@ def output() -> str:
     flags = " ".join(f"--{k}={str(v).lower()}" for k, v in fast_compile_options().items())
     code = (
         "import runpy, sys\n"
-        "for name in ('gymnax_ppo', 'evosax_policy'):\n"
+        "for name in ('gymnax_ppo', 'evosax_policy', 'rejax_ppo'):\n"
         "    sys.argv = [name, '--tiny']\n"
         f"    runpy.run_path(f'{EXAMPLES}/{{name}}.py', run_name='__main__')\n"
     )
@@ -52,6 +53,15 @@ def test_evosax_evolves_a_policy_on_gymnax_make(output):
         r"^OpenES on jaxais/world1: 3 generations of 4, mean return (\S+) -> (\S+)$",
         output,
         re.MULTILINE,
+    )
+    assert found, output
+    assert np.isfinite(float(found[1])) and np.isfinite(float(found[2]))
+
+
+def test_rejax_ppo_trains_on_gymnax_make(output):
+    # 128 steps in 64-step evaluation periods: evaluations before, after 64 and after 128 steps.
+    found = re.search(
+        r"^rejax PPO on world1: 3 evaluations, mean return (\S+) -> (\S+)$", output, re.MULTILINE
     )
     assert found, output
     assert np.isfinite(float(found[1])) and np.isfinite(float(found[2]))

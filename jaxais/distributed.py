@@ -208,20 +208,23 @@ def _watch(runtime, silence: float) -> None:
     """Beat every second in the key-value store; when another process's beats stop for
     ``silence`` seconds, end this one with one line (before XLA's own heartbeat check aborts it
     with a C++ trace), its writes in flight removed."""
-    me, n, beats, stop = runtime.process_id, runtime.num_processes, {}, threading.Event()
-    atexit.register(stop.set)  # before JAX's shutdown at exit, whose waits are no loss
-    while not stop.wait(1):
+    me, n, beats, done = runtime.process_id, runtime.num_processes, {}, threading.Event()
+    # At exit JAX's shutdown waits for every process (process 0 may still be writing): beat on,
+    # judge no more.
+    atexit.register(done.set)
+    while True:
+        time.sleep(1)
         try:
             runtime.client.key_value_increment(f"jaxais/alive/{me}", 1)
             counts = dict(runtime.client.key_value_dir_get("jaxais/alive/"))
-        except Exception:  # noqa: BLE001 (process 0, the store, is gone: XLA ends this one)
+        except Exception:  # noqa: BLE001 (shut down, or process 0 is gone: XLA ends this one)
             return
         now = time.monotonic()
-        for peer in set(range(n)) - {me}:
+        for peer in () if done.is_set() else set(range(n)) - {me}:
             count = counts.get(f"jaxais/alive/{peer}")
             if peer not in beats or beats[peer][0] != count:
                 beats[peer] = (count, now)
-            elif now - beats[peer][1] > silence and not stop.is_set():
+            elif now - beats[peer][1] > silence:
                 ON_LOST[0](lost(peer))
 
 

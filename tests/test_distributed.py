@@ -42,18 +42,33 @@ def _free_ports(n: int) -> list[int]:
     return ports
 
 
-def _start(out: Path, *extra: str) -> subprocess.Popen:
+def _python(*args: str) -> subprocess.Popen:
     env = {**os.environ, "JAXAIS_DEBUG": "", "JAXAIS_CACHE_DIR": "off"}
     for name in distributed.ENV.values():
         env.pop(name, None)
-    return subprocess.Popen(
-        [sys.executable, "scripts/trials.py", *TRIALS, "--out", str(out), *extra],
-        cwd=ROOT,
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    return subprocess.Popen([sys.executable, *args], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)  # fmt: skip
+
+
+def _start(out: Path, *extra: str) -> subprocess.Popen:
+    return _python("scripts/trials.py", *TRIALS, "--out", str(out), *extra)
+
+
+LATE = """
+import time
+from jaxais import cli, distributed
+
+@cli.main_wrapper("late.py")
+def main():
+    parser = cli.ArgumentParser(prog="late.py")
+    distributed.add_arguments(parser)
+    args = parser.parse_args()
+    distributed.initialize(args)
+    time.sleep(12 if args.process_id == 0 else 0)  # longer than a lost process's 10 s silence
+
+cli.run_script(main)
+"""
+"""A joined run whose process 0 (writing, say) ends 12 s after process 1 (waiting at exit)."""
 
 
 def _joined(tmp: Path, name: str, port: int, n: int, pid: int, *more: str) -> subprocess.Popen:
@@ -76,7 +91,7 @@ def _read_until(proc: subprocess.Popen, text: str) -> str:
 def runs(tmp_path_factory):
     """Every process of the file at once: ``(tmp, {name: (returncode, stderr)})``."""
     tmp = tmp_path_factory.mktemp("dist")
-    pair, lost, nobody, alone, mismatch, taken, twice, interrupted = _free_ports(8)
+    pair, lost, late, nobody, alone, mismatch, taken, twice, interrupted = _free_ports(9)
     holder = socket.create_server(("", taken))  # another program holds process 0's port
     procs = {
         "alone": _start(tmp / "alone.json"),
@@ -84,6 +99,9 @@ def runs(tmp_path_factory):
         "p1": _joined(tmp, "p1", pair, 2, 1, *LONG),
         "lost0": _joined(tmp, "lost0", lost, 2, 0, "--world", EMPTY_WORLD, "--tau-cap", "4000"),
         "lost1": _joined(tmp, "lost1", lost, 2, 1, "--world", EMPTY_WORLD, "--tau-cap", "4000"),
+        **{f"late{i}": _python("-c", LATE, "--coordinator", f"127.0.0.1:{late}",
+                               "--num-processes", "2", "--process-id", str(i), "--timeout-s", "4")
+           for i in (0, 1)},
         "unreachable": _joined(tmp, "unreachable", nobody, 2, 1),
         "alone0": _joined(tmp, "alone0", alone, 2, 0),
         "mismatch0": _joined(tmp, "mismatch0", mismatch, 2, 0, "--trials", "4", *LONG),
@@ -138,6 +156,13 @@ def test_both_processes_of_a_joined_run_exit_0_without_an_abort(runs):
         code, err = runs[1][name]
         assert code == 0 and "Traceback" not in err and "Check failure" not in err, (name, err)
     assert "joined the run at 127.0.0.1:" in runs[1]["p1"][1]
+
+
+@pytest.mark.slow
+def test_a_process_that_ends_first_waits_for_the_others_without_a_loss(runs):
+    for name in ("late0", "late1"):
+        code, err = runs[1][name]
+        assert code == 0 and "error" not in err and "Check failure" not in err, (name, err)
 
 
 @pytest.mark.slow

@@ -16,6 +16,7 @@ import atexit
 import contextlib
 import json
 import os
+import select
 import socket
 import sys
 import threading
@@ -169,20 +170,32 @@ def initialize(args: argparse.Namespace) -> bool:
 
 
 def _claim(server: socket.socket, n: int) -> None:
-    """Process 0: grant ids 1 .. n-1 on the coordinator's port, each once, then free the port."""
+    """Process 0: grant ids 1 .. n-1 on the coordinator's port, each to one live process (one
+    that ends frees its id), then close the claims and the port: the others then join."""
+    held: dict[int, socket.socket] = {}
     with server:
-        claimed: set[int] = set()
-        while len(claimed) < n - 1:
-            conn, _ = server.accept()
-            with conn, contextlib.suppress(OSError, ValueError):
-                conn.settimeout(5)
-                i = int(conn.recv(16).decode())
-                if 0 < i < n and i not in claimed:
-                    claimed.add(i)
-                    conn.sendall(b"ok")
-                else:
-                    taken = "is already taken" if 0 < i < n else f"is not in 1..{n - 1}"
-                    conn.sendall(f"--process-id {i} {taken} in the run of {n} processes".encode())
+        while len(held) < n - 1:
+            for sock in select.select([server, *held.values()], [], [])[0]:
+                if sock is not server:  # a claimer ended (it sends nothing more)
+                    held = {i: s for i, s in held.items() if s is not sock}
+                    sock.close()
+                    continue
+                conn = server.accept()[0]
+                with contextlib.suppress(OSError, ValueError):
+                    conn.settimeout(5)
+                    i = int(conn.recv(16).decode())
+                    if 0 < i < n and i not in held:
+                        conn.sendall(b"ok")
+                        held[i], conn = conn, None
+                    else:
+                        taken = "is already taken" if 0 < i < n else f"is not in 1..{n - 1}"
+                        conn.sendall(
+                            f"--process-id {i} {taken} in the run of {n} processes".encode()
+                        )
+                if conn is not None:
+                    conn.close()
+    for conn in held.values():
+        conn.close()
 
 
 def _claim_id(args: argparse.Namespace, where: str) -> None:
@@ -194,11 +207,13 @@ def _claim_id(args: argparse.Namespace, where: str) -> None:
             with socket.create_connection((host.strip("[]"), int(port)), timeout=5) as conn:
                 conn.sendall(str(args.process_id).encode())
                 answer = conn.recv(200)
+                if answer == b"ok":
+                    conn.settimeout(None)
+                    conn.recv(1)  # until process 0 has every id and closes the claims
+                    return
         except OSError:
             time.sleep(0.5)
             continue
-        if answer == b"ok":
-            return
         why = f"--process-id {args.process_id} is already taken (the run at {where} has started)"
         why = answer.decode() if answer.startswith(b"--") else why
         raise ValueError(f"{why}: give each process its own --process-id, 0 .. --num-processes - 1")
@@ -207,25 +222,32 @@ def _claim_id(args: argparse.Namespace, where: str) -> None:
 def _watch(runtime, silence: float) -> None:
     """Beat every second in the key-value store; when another process's beats stop for
     ``silence`` seconds, end this one with one line (before XLA's own heartbeat check aborts it
-    with a C++ trace), its writes in flight removed."""
-    me, n, beats, done = runtime.process_id, runtime.num_processes, {}, threading.Event()
-    # At exit JAX's shutdown waits for every process (process 0 may still be writing): beat on,
-    # judge no more.
-    atexit.register(done.set)
-    while True:
-        time.sleep(1)
+    with a C++ trace), its writes in flight removed; one that ends says so (:func:`_leave`)."""
+    me, n, beats, stop = runtime.process_id, runtime.num_processes, {}, threading.Event()
+    atexit.register(_leave, runtime, stop, threading.current_thread())
+    while not stop.wait(1):
         try:
             runtime.client.key_value_increment(f"jaxais/alive/{me}", 1)
             counts = dict(runtime.client.key_value_dir_get("jaxais/alive/"))
-        except Exception:  # noqa: BLE001 (shut down, or process 0 is gone: XLA ends this one)
+        except Exception:  # noqa: BLE001 (process 0, the store, is gone: XLA ends this one)
             return
         now = time.monotonic()
-        for peer in () if done.is_set() else set(range(n)) - {me}:
+        for peer in set(range(n)) - {me}:
             count = counts.get(f"jaxais/alive/{peer}")
             if peer not in beats or beats[peer][0] != count:
                 beats[peer] = (count, now)
-            elif now - beats[peer][1] > silence:
+            elif now - beats[peer][1] > silence and count != "ended":
                 ON_LOST[0](lost(peer))
+
+
+def _leave(runtime, stop: threading.Event, beating: threading.Thread) -> None:
+    """At exit, before JAX's shutdown waits for every process (process 0 may still be writing):
+    stop beating (a thread inside XLA's client when Python finalizes aborts the process) and
+    tell the others that this process ended, not died."""
+    stop.set()
+    beating.join(5)
+    with contextlib.suppress(Exception):
+        runtime.client.key_value_set(f"jaxais/alive/{runtime.process_id}", "ended", True)
 
 
 def lost_peer(err: BaseException) -> bool:

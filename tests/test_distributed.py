@@ -4,9 +4,10 @@ cannot start, or loses a process, fails fast with one line.
 
 Every process of the file starts at once in one module fixture (:func:`runs`), so the file costs
 about one compile's wall time: ``scripts/trials.py`` alone and as a joined pair on a tiny run
-(the only processes that run to the end), a pair whose process 1 is stopped as soon as it has
-joined, and the failures (nobody at the coordinator's address, process 0 alone, flags that
-differ, a port taken, an id taken twice, Ctrl-C while waiting), which end before any compile.
+(the only processes that compile), small joined runs that compile nothing (:data:`JOIN`: a
+process that ends first, processes killed mid-run, seen by the heartbeats or by gloo), and the
+failures (nobody at the coordinator's address, process 0 alone, flags that differ, a port taken,
+an id taken twice, Ctrl-C while waiting).
 """
 
 from __future__ import annotations
@@ -27,8 +28,6 @@ import pytest
 from jaxais import distributed
 
 ROOT = Path(__file__).resolve().parent.parent
-EMPTY_WORLD = str(ROOT / "tests" / "worlds" / "empty.toml")
-"""No visible goal: a run lasts until its time cap, so a stopped process finds its peer running."""
 TRIALS = ["--system", "HDC", "--trials", "3", "--tau-cap", "8"]
 LONG = ("--timeout-s", "60")  # for processes that must not time out (the others wait 4 s)
 
@@ -54,21 +53,37 @@ def _start(out: Path, *extra: str) -> subprocess.Popen:
     return _python("scripts/trials.py", *TRIALS, "--out", str(out), *extra)
 
 
-LATE = """
-import time
+JOIN = """
+import sys, time
 from jaxais import cli, distributed
 
-@cli.main_wrapper("late.py")
+@cli.main_wrapper("join.py")
 def main():
-    parser = cli.ArgumentParser(prog="late.py")
+    parser = cli.ArgumentParser(prog="join.py")
+    parser.add_argument("--then", choices=("end", "sleep", "gather"))
     distributed.add_arguments(parser)
     args = parser.parse_args()
     distributed.initialize(args)
-    time.sleep(12 if args.process_id == 0 else 0)  # longer than a lost process's 10 s silence
+    if args.then == "end":  # process 0 (writing, say) ends 12 s after the others (at exit)
+        time.sleep(12 if args.process_id == 0 else 0)
+    while args.then != "end":  # until a process is lost
+        if args.then == "gather":
+            import jax.numpy as jnp
+            from jax.experimental import multihost_utils
+
+            multihost_utils.process_allgather(jnp.zeros(1))
+            print("gathered", file=sys.stderr, flush=True)
+        time.sleep(0.1)
 
 cli.run_script(main)
 """
-"""A joined run whose process 0 (writing, say) ends 12 s after process 1 (waiting at exit)."""
+"""A joined run without a compile of the task loop: ``--then end``, ``sleep`` or ``gather``."""
+
+
+def _join(port: int, n: int, pid: int, then: str, timeout: str = "60") -> subprocess.Popen:
+    where = ["--coordinator", f"127.0.0.1:{port}", "--num-processes", str(n)]
+    return _python("-c", JOIN, "--then", then, *where, "--process-id", str(pid), "--timeout-s",
+                   timeout)  # fmt: skip
 
 
 def _joined(tmp: Path, name: str, port: int, n: int, pid: int, *more: str) -> subprocess.Popen:
@@ -91,32 +106,42 @@ def _read_until(proc: subprocess.Popen, text: str) -> str:
 def runs(tmp_path_factory):
     """Every process of the file at once: ``(tmp, {name: (returncode, stderr)})``."""
     tmp = tmp_path_factory.mktemp("dist")
-    pair, lost, late, nobody, alone, mismatch, taken, twice, interrupted = _free_ports(9)
+    pair, late, quiet, gloo, nobody, alone, mismatch, taken, twice, stop = _free_ports(10)
     holder = socket.create_server(("", taken))  # another program holds process 0's port
     procs = {
         "alone": _start(tmp / "alone.json"),
         "p0": _joined(tmp, "p0", pair, 2, 0, *LONG),
         "p1": _joined(tmp, "p1", pair, 2, 1, *LONG),
-        "lost0": _joined(tmp, "lost0", lost, 2, 0, "--world", EMPTY_WORLD, "--tau-cap", "4000"),
-        "lost1": _joined(tmp, "lost1", lost, 2, 1, "--world", EMPTY_WORLD, "--tau-cap", "4000"),
-        **{f"late{i}": _python("-c", LATE, "--coordinator", f"127.0.0.1:{late}",
-                               "--num-processes", "2", "--process-id", str(i), "--timeout-s", "4")
-           for i in (0, 1)},
+        # Process 0 waits 8 s at most for the others (they wait 60), so it judges a process
+        # lost after 10 s of silence (its watchdog); with 60 s, only gloo's error comes in time.
+        "late0": _join(late, 2, 0, "end", "8"),
+        "late1": _join(late, 2, 1, "end"),
+        **{f"quiet{i}": _join(quiet, 3, i, "sleep", "8" if i == 0 else "60") for i in range(3)},
+        **{f"gloo{i}": _join(gloo, 2, i, "gather") for i in range(2)},
         "unreachable": _joined(tmp, "unreachable", nobody, 2, 1),
         "alone0": _joined(tmp, "alone0", alone, 2, 0),
         "mismatch0": _joined(tmp, "mismatch0", mismatch, 2, 0, "--trials", "4", *LONG),
         "mismatch1": _joined(tmp, "mismatch1", mismatch, 3, 1, "--trials", "6", *LONG),
         "taken": _joined(tmp, "taken", taken, 2, 0),
-        "interrupted": _joined(tmp, "interrupted", interrupted, 2, 1, *LONG),
+        "interrupted": _joined(tmp, "interrupted", stop, 2, 1, *LONG),
         # Two processes say they are process 0 of 3 and two claim id 1: one of each is refused,
         # and Ctrl-C ends the two that wait for id 2.
         **{f"twice{i}": _joined(tmp, f"twice{i}", twice, 3, pid, *LONG)
            for i, pid in enumerate((0, 0, 1, 1))},
     }  # fmt: skip
-    # Process 1 of the pair "lost" stops (SIGTERM: JAX's own handler must not be installed) as
-    # soon as it has joined, which its process 0 must notice on its own.
-    said = {"lost1": _read_until(procs["lost1"], "joined the run")}
-    procs["lost1"].send_signal(signal.SIGTERM)
+    # Once joined, quiet1 gets SIGTERM (JAX's own handler must not be installed) and quiet2
+    # SIGKILL; gloo1 SIGKILL once it has gathered: their processes 0 must notice.
+    said = {
+        name: _read_until(procs[name], text)
+        for name, text in (
+            ("quiet1", "joined the run"),
+            ("quiet2", "joined the run"),
+            ("gloo1", "gathered"),
+        )
+    }
+    procs["quiet1"].send_signal(signal.SIGTERM)
+    procs["quiet2"].kill()
+    procs["gloo1"].kill()
     # Ctrl-C once the process says it is waiting (no sooner: the line proves where it was).
     said["interrupted"] = _read_until(procs["interrupted"], "waiting for")
     procs["interrupted"].send_signal(signal.SIGINT)
@@ -278,13 +303,23 @@ def test_an_id_taken_twice_is_one_line_for_each_process(runs):
 
 
 @pytest.mark.slow
-def test_a_process_that_stops_ends_the_others_with_one_line(runs):
-    assert _one_line(runs, "lost1", 143) == "trials.py: error: terminated"
-    assert _one_line(runs, "lost0") == (
-        "trials.py: error: process 1 of 2 stopped responding (killed, or its machine is "
-        "unreachable); nothing half-written is left: rerun all 2 processes"
+def test_sigterm_stops_a_joined_process(runs):
+    assert _one_line(runs, "quiet1", 143) == "join.py: error: terminated"
+
+
+@pytest.mark.slow
+def test_a_process_killed_mid_run_ends_the_others_with_one_line(runs):
+    """kill -9 (and SIGTERM) of processes 1 and 2 of 3: process 0 says so within 10 s of
+    silence, or at once from gloo's error in a collective, instead of XLA's abort."""
+    assert re.fullmatch(
+        r"join\.py: error: process [12] of 3 stopped responding \(killed, or its machine is "
+        r"unreachable\); nothing half-written is left: rerun all 3 processes",
+        _one_line(runs, "quiet0"),
     )
-    assert not list(runs[0].glob(".lost0*")) and not (runs[0] / "lost0.json").exists()
+    assert runs[1]["quiet2"][0] == -signal.SIGKILL and runs[1]["gloo1"][0] == -signal.SIGKILL
+    line = _one_line(runs, "gloo0")
+    assert line.startswith("join.py: error: process 1 of 2 stopped responding (killed, or its ")
+    assert "rerun all 2 processes (" in line and "Gloo" in line
 
 
 @pytest.mark.slow

@@ -6,6 +6,7 @@
   143, wherever the signal lands: the handler runs :data:`jaxais.io.ON_SIGNAL`, removes the temp
   files of writes in flight (:data:`jaxais.io.IN_FLIGHT`) and exits at once. Outputs are atomic
   and checkpoints whole, so nothing is half-written and a resumable run resumes.
+- A multi-process run whose collective fails (another process died) ends with one line too.
 
 Scripts wrap ``main`` in ``@main_wrapper("name.py")``, run it with :func:`run_script` and import
 JAX inside ``main`` (a bad flag is reported before JAX starts). ``JAXAIS_DEBUG=1`` re-raises.
@@ -89,15 +90,7 @@ def _signal_handler(prog: str) -> Callable[[int, Any], None]:
 
     def handler(signum: int, frame: Any) -> None:
         status, message = _STATUS[signum]
-        for cleanup in reversed(list(io.ON_SIGNAL)):
-            with contextlib.suppress(Exception):
-                cleanup()
-        for tmp in list(io.IN_FLIGHT):
-            with contextlib.suppress(OSError):
-                tmp.unlink()
-        with contextlib.suppress(OSError):
-            os.write(2, _error_line(prog, message).encode())
-        os._exit(status)
+        io.abandon(_error_line(prog, message), status)
 
     return handler
 
@@ -115,6 +108,7 @@ class main_wrapper(contextlib.ContextDecorator):  # noqa: N801 (used like a func
 
     def __enter__(self) -> main_wrapper:
         previous = {}
+        distributed.ON_LOST[0] = lambda message: io.abandon(_error_line(self.prog, message), 2)
         if not _debug() and threading.current_thread() is threading.main_thread():
             handler = _signal_handler(self.prog)
             for signum in _STATUS:
@@ -130,6 +124,8 @@ class main_wrapper(contextlib.ContextDecorator):  # noqa: N801 (used like a func
             return False
         if isinstance(exc, KeyboardInterrupt):  # raised by code, not by our handler
             fail(self.prog, "interrupted", EXIT_INTERRUPTED)
+        if distributed.lost_peer(exc):
+            fail(self.prog, f"{distributed.lost()} ({error_message(exc)[:200]})")
         if isinstance(exc, self.handled):
             fail(self.prog, error_message(exc))
         return False

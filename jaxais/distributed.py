@@ -5,18 +5,24 @@ Every process runs the same script and flags (:func:`add_arguments`, or ``JAXAIS
 a batch of runs is sharded over a 1-D mesh of every device (:func:`batch_sharding`) with the
 readouts replicated, so every process writes the same results, bit for bit those of one process.
 Joining fails fast with one line (a ``ValueError``) naming the cause and the fix: a process
-missing after the timeout, or flags that differ between processes; waiting is reported on stderr.
+missing after the timeout, an id taken twice, or flags that differ between processes; waiting is
+reported on stderr. A process that stops responding mid-run ends the others with one line.
 """
 
 from __future__ import annotations
 
 import argparse
+import atexit
+import contextlib
 import json
 import os
+import select
 import socket
 import sys
 import threading
 import time
+
+from jaxais import io
 
 ENV = {
     k: "JAXAIS_" + k.upper() for k in ("coordinator", "num_processes", "process_id", "timeout_s")
@@ -25,8 +31,10 @@ TIMEOUT_S = 60.0  # seconds a process waits for the others by default
 PER_PROCESS = ("process_id", "timeout_s", "out", "plot")  # may differ (the others write nothing)
 AUTO = ("SLURM_STEP_NODELIST", "OMPI_MCA_orte_hnp_uri")  # what JAX's cluster detection reads
 ABANDONED: list = []
-"""Runtimes of joins that timed out mid-way: :func:`jaxais.cli.fail` then ends with ``os._exit``,
-as the teardown at exit would wait on them or abort."""
+"""Runtimes of joins that timed out mid-way, or of runs that lost a process: :func:`jaxais.cli.fail`
+then ends with ``os._exit``, as the teardown at exit would wait on them or abort."""
+ON_LOST = [lambda message: io.abandon(f"error: {message}\n", 2)]
+"""Ends the process with a line when :func:`_watch` finds a process gone (jaxais.cli sets it)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -113,7 +121,7 @@ def initialize(args: argparse.Namespace) -> bool:
         spec, where = {}, "the cluster's coordinator"
     elif args.process_id == 0:  # a second process 0 would take the port over, and XLA abort
         try:
-            socket.create_server(("", int(where.rpartition(":")[2]))).close()
+            server = socket.create_server(("", int(where.rpartition(":")[2])))
         except OSError as err:
             raise ValueError(
                 f"cannot host the coordinator at {where}: {os.strerror(err.errno)} (another "
@@ -123,10 +131,16 @@ def initialize(args: argparse.Namespace) -> bool:
     # XLA's own join timeout aborts the process (SIGABRT, a C++ trace): ours ends it first, and
     # the join runs in a thread so that this one can report progress and take Ctrl-C meanwhile.
     failed: list[Exception] = []
+    silence = max(args.timeout_s, 10.0)  # seconds without a sign of life: a process stopped
 
     def join() -> None:
         try:
-            jax.distributed.initialize(**spec, initialization_timeout=int(args.timeout_s) + 600)
+            if not auto:  # XLA aborts every process when a connected id connects again
+                _claim(server, n) if args.process_id == 0 else _claim_id(args, where)
+            jax.distributed.initialize(
+                **spec, initialization_timeout=int(args.timeout_s) + 600,
+                heartbeat_timeout_seconds=int(silence) + 90,  # _watch ends it first
+            )  # fmt: skip
         except Exception as err:  # noqa: BLE001 (reported by the waiting thread)
             failed.append(err)
 
@@ -140,13 +154,122 @@ def initialize(args: argparse.Namespace) -> bool:
             waited = f"{time.monotonic() - start:.0f} s of {args.timeout_s:g}"
             print(f"waiting for {others} at {where} ({waited})", file=sys.stderr, flush=True)
     if failed:
+        if isinstance(failed[0], ValueError):
+            raise failed[0]
         raise ValueError(f"could not join the run at {where}: {failed[0]}")
     if joining.is_alive():
         ABANDONED.append((state.global_state.client, state.global_state.service))
         state.global_state.client = state.global_state.service = None
         raise ValueError(_why_not_joined(args, where))
-    _agree(args, state.global_state)
+    runtime = state.global_state
+    _agree(args, runtime)
+    threading.Thread(target=_watch, args=(runtime, silence), daemon=True).start()
+    print(f"joined the run at {where} as process {runtime.process_id} of "
+          f"{runtime.num_processes}", file=sys.stderr, flush=True)  # fmt: skip
     return True
+
+
+def _claim(server: socket.socket, n: int) -> None:
+    """Process 0: grant ids 1 .. n-1 on the coordinator's port, each to one live process (one
+    that ends frees its id), then close the claims and the port: the others then join."""
+    held: dict[int, socket.socket] = {}
+    with server:
+        while len(held) < n - 1:
+            for sock in select.select([server, *held.values()], [], [])[0]:
+                if sock is not server:  # a claimer ended (it sends nothing more)
+                    held = {i: s for i, s in held.items() if s is not sock}
+                    sock.close()
+                    continue
+                conn = server.accept()[0]
+                with contextlib.suppress(OSError, ValueError):
+                    conn.settimeout(5)
+                    i = int(conn.recv(16).decode())
+                    if 0 < i < n and i not in held:
+                        conn.sendall(b"ok")
+                        held[i], conn = conn, None
+                    else:
+                        taken = "is already taken" if 0 < i < n else f"is not in 1..{n - 1}"
+                        conn.sendall(
+                            f"--process-id {i} {taken} in the run of {n} processes".encode()
+                        )
+                if conn is not None:
+                    conn.close()
+    for conn in held.values():
+        conn.close()
+
+
+def _claim_id(args: argparse.Namespace, where: str) -> None:
+    """Claim ``--process-id`` from process 0 (retrying until it listens): ValueError if it
+    refuses, or if the run has started (every id claimed: XLA's runtime holds the port)."""
+    host, _, port = args.coordinator.rpartition(":")
+    while True:
+        try:
+            with socket.create_connection((host.strip("[]"), int(port)), timeout=5) as conn:
+                conn.sendall(str(args.process_id).encode())
+                answer = conn.recv(200)
+                if answer == b"ok":
+                    conn.settimeout(None)
+                    conn.recv(1)  # until process 0 has every id and closes the claims
+                    return
+        except OSError:
+            time.sleep(0.5)
+            continue
+        why = f"--process-id {args.process_id} is already taken (the run at {where} has started)"
+        why = answer.decode() if answer.startswith(b"--") else why
+        raise ValueError(f"{why}: give each process its own --process-id, 0 .. --num-processes - 1")
+
+
+def _watch(runtime, silence: float) -> None:
+    """Beat every second in the key-value store; when another process's beats stop for
+    ``silence`` seconds, end this one with one line (before XLA's own heartbeat check aborts it
+    with a C++ trace), its writes in flight removed; one that ends says so (:func:`_leave`)."""
+    me, n, beats, stop = runtime.process_id, runtime.num_processes, {}, threading.Event()
+    atexit.register(_leave, runtime, stop, threading.current_thread())
+    while not stop.wait(1):
+        try:
+            runtime.client.key_value_increment(f"jaxais/alive/{me}", 1)
+            counts = dict(runtime.client.key_value_dir_get("jaxais/alive/"))
+        except Exception:  # noqa: BLE001 (process 0, the store, is gone: XLA ends this one)
+            return
+        now = time.monotonic()
+        for peer in set(range(n)) - {me}:
+            count = counts.get(f"jaxais/alive/{peer}")
+            if peer not in beats or beats[peer][0] != count:
+                beats[peer] = (count, now)
+            elif now - beats[peer][1] > silence and count != "ended":
+                ON_LOST[0](lost(peer))
+
+
+def _leave(runtime, stop: threading.Event, beating: threading.Thread) -> None:
+    """At exit, before JAX's shutdown waits for every process (process 0 may still be writing):
+    stop beating (a thread inside XLA's client when Python finalizes aborts the process) and
+    tell the others that this process ended, not died."""
+    stop.set()
+    beating.join(5)
+    with contextlib.suppress(Exception):
+        runtime.client.key_value_set(f"jaxais/alive/{runtime.process_id}", "ended", True)
+
+
+def lost_peer(err: BaseException) -> bool:
+    """Whether ``err`` is a joined run's collective failing (gloo's error, a JaxRuntimeError or
+    a ValueError), as it does when a process went away."""
+    jax = sys.modules.get("jax")
+    joined = jax is not None and jax._src.distributed.global_state.client is not None
+    return joined and isinstance(err, Exception) and "gloo" in str(err).lower()
+
+
+def lost(peer: int | None = None) -> str:
+    """The one line for a run that lost process ``peer`` (None: the other, or unknown)."""
+    from jax._src import distributed as state
+
+    me, n = state.global_state.process_id, state.global_state.num_processes
+    peer = (1 - me if n == 2 else None) if peer is None else peer
+    who = "another process" if peer is None else f"process {peer}"
+    ABANDONED.append(state.global_state.client)
+    return (
+        f"{who} of {n} stopped responding (killed, or its machine is unreachable); nothing "
+        f"half-written is left: rerun all {n} processes"
+    )
 
 
 def _why_not_joined(args: argparse.Namespace, where: str) -> str:

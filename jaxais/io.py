@@ -36,6 +36,20 @@ IN_FLIGHT: set[Path] = set()  # temporary files being written (the signal handle
 ON_SIGNAL: list[Callable[[], object]] = []  # run on a signal, newest first; removed by its adder
 
 
+def abandon(line: str, status: int) -> None:
+    """End the process at once, from any thread: run :data:`ON_SIGNAL`, remove the temp files
+    of writes in flight, write ``line`` to stderr, ``os._exit(status)`` (nothing unwinds)."""
+    for cleanup in reversed(list(ON_SIGNAL)):
+        with contextlib.suppress(Exception):
+            cleanup()
+    for tmp in list(IN_FLIGHT):
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+    with contextlib.suppress(OSError):
+        os.write(2, line.encode())
+    os._exit(status)
+
+
 def atomic_write(path: str | os.PathLike[str], write_fn: Callable[[Path], Any]) -> Path:
     """``write_fn(tmp)`` fills a temporary file in ``path``'s directory (same suffix:
     matplotlib reads the format from it), which then replaces ``path`` (0666 less the umask);

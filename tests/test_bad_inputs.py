@@ -311,6 +311,46 @@ def test_a_run_beyond_memory_is_refused_with_the_estimate(monkeypatch):
     )
 
 
+SIZES = {  # script -> its size flags at 10**9 (each refused before any work)
+    "ablate": ["--trials"],
+    "seeds": ["--trials", "--seeds"],
+    "train_baseline": ["--pairs", "--episodes", "--hidden", "--generations"],
+    "evolve": ["--populations", "--robots", "--starts", "--success-starts", "--crossing-starts"],
+    "bench": ["--batches", "--controller-batches", "--numpy-robots", "--matmul"],
+}
+
+
+@pytest.mark.slow
+def test_every_size_flag_beyond_memory_is_refused_by_the_library(tmp_path: Path):
+    """Each script's size flags at 10**9 (which grew until the kernel's kill, or an XLA abort):
+    one line from the library driver's check with the estimate and the largest value that
+    fits, exit 2, nothing written. One interpreter runs every case (imports, no compiles)."""
+    code = textwrap.dedent(f"""
+        import contextlib, importlib, io, sys
+        for name, flags in {SIZES!r}.items():
+            main = importlib.import_module("jaxais.scripts." + name).main
+            for flag in flags:
+                err = io.StringIO()
+                with contextlib.redirect_stderr(err), contextlib.suppress(SystemExit):
+                    main(["--out", {str(tmp_path / "out")!r} + (".json" * (name == "bench")),
+                          flag, str(10**9)])
+                print(name, flag, "|", err.getvalue().strip())
+    """)
+    proc = run_python(code, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    lines = proc.stdout.splitlines()
+    assert len(lines) == sum(map(len, SIZES.values())), proc.stdout
+    for line in lines:
+        name, flag, message = re.fullmatch(r"(\S+) (\S+) \| (.*)", line).groups()
+        assert re.fullmatch(
+            rf"{name}.py: error: (--\S+ x )*{flag}( x --\S+)*( squared)? \d+ needs about [\d.e+]+ "
+            rf"GB of memory; this machine has \d+ GB; use (--\S+ x )*{flag}( x --\S+)*"
+            rf"( squared)? <= \d+",
+            message,
+        ), line
+    assert not list(tmp_path.iterdir())
+
+
 def test_a_collision_cap_beyond_the_int32_counters_is_refused():
     """``trials.py --collision-cap 99999999999`` ended in JAX's OverflowError (a traceback)."""
     from jaxais.loop import EpisodeConfig

@@ -1,12 +1,13 @@
 """Runs across processes (``jaxais.distributed``): two CPU processes on localhost, joined by
-``jax.distributed``, give the results of one process bit for bit, and a run that cannot start
-fails fast with one line.
+``jax.distributed``, give the results of one process bit for bit and both exit 0, and a run that
+cannot start, or loses a process, fails fast with one line.
 
-The slow test starts three ``scripts/sweep.py`` runs (one alone, two joined over a loopback port)
-on a tiny grid and three ``scripts/trials.py`` runs likewise, all at once, so it costs about one
-compile's wall time. The failures (nobody at the coordinator's address, process 0 alone, flags
-that differ, a port taken, Ctrl-C while waiting) start together too, with a 4 s timeout, and end
-before any compile.
+Every process of the file starts at once in one module fixture (:func:`runs`), so the file costs
+about one compile's wall time: ``scripts/trials.py`` alone and as a joined pair on a tiny run
+(the only processes that compile), small joined runs that compile nothing (:data:`JOIN`: a
+process that ends first, processes killed mid-run, seen by the heartbeats or by gloo), and the
+failures (nobody at the coordinator's address, process 0 alone, flags that differ, a port taken,
+an id taken twice, Ctrl-C while waiting).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import signal
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -26,10 +28,8 @@ import pytest
 from jaxais import distributed
 
 ROOT = Path(__file__).resolve().parent.parent
-EMPTY_WORLD = str(ROOT / "tests" / "worlds" / "empty.toml")
-"""No visible goal: a run lasts until its time cap, so a signal always finds it running."""
-ARGS = ["--grid", "k1=0.85,1.6", "--grid", "k2=1.1", "--trials", "3", "--tau-cap", "8"]
 TRIALS = ["--system", "HDC", "--trials", "3", "--tau-cap", "8"]
+LONG = ("--timeout-s", "60")  # for processes that must not time out (the others wait 4 s)
 
 
 def _free_ports(n: int) -> list[int]:
@@ -41,65 +41,159 @@ def _free_ports(n: int) -> list[int]:
     return ports
 
 
-def _start(out: Path, *extra: str, script: str = "sweep.py") -> subprocess.Popen:
+def _python(*args: str) -> subprocess.Popen:
     env = {**os.environ, "JAXAIS_DEBUG": "", "JAXAIS_CACHE_DIR": "off"}
     for name in distributed.ENV.values():
         env.pop(name, None)
-    args = ARGS if script == "sweep.py" else TRIALS
-    return subprocess.Popen(
-        [sys.executable, f"scripts/{script}", *args, "--out", str(out), *extra],
-        cwd=ROOT,
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    return subprocess.Popen([sys.executable, *args], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)  # fmt: skip
+
+
+def _start(out: Path, *extra: str) -> subprocess.Popen:
+    return _python("scripts/trials.py", *TRIALS, "--out", str(out), *extra)
+
+
+JOIN = """
+import sys, time
+from jaxais import cli, distributed
+
+@cli.main_wrapper("join.py")
+def main():
+    parser = cli.ArgumentParser(prog="join.py")
+    parser.add_argument("--then", choices=("end", "sleep", "gather"))
+    distributed.add_arguments(parser)
+    args = parser.parse_args()
+    distributed.initialize(args)
+    if args.then == "end":  # process 0 (writing, say) ends 12 s after the others (at exit)
+        time.sleep(12 if args.process_id == 0 else 0)
+    while args.then != "end":  # until a process is lost
+        if args.then == "gather":
+            import jax.numpy as jnp
+            from jax.experimental import multihost_utils
+
+            multihost_utils.process_allgather(jnp.zeros(1))
+            print("gathered", file=sys.stderr, flush=True)
+        time.sleep(0.1)
+
+cli.run_script(main)
+"""
+"""A joined run without a compile of the task loop: ``--then end``, ``sleep`` or ``gather``."""
+
+
+def _join(port: int, n: int, pid: int, then: str, timeout: str = "60") -> subprocess.Popen:
+    where = ["--coordinator", f"127.0.0.1:{port}", "--num-processes", str(n)]
+    return _python("-c", JOIN, "--then", then, *where, "--process-id", str(pid), "--timeout-s",
+                   timeout)  # fmt: skip
+
+
+def _joined(tmp: Path, name: str, port: int, n: int, pid: int, *more: str) -> subprocess.Popen:
+    where = ["--coordinator", f"127.0.0.1:{port}", "--num-processes", str(n)]
+    return _start(tmp / f"{name}.json", *where, "--process-id", str(pid), "--timeout-s", "4",
+                  *more)  # fmt: skip
+
+
+def _read_until(proc: subprocess.Popen, text: str) -> str:
+    """``proc``'s stderr up to the first line holding ``text`` (or its end)."""
+    seen = ""
+    for line in iter(proc.stderr.readline, ""):
+        seen += line
+        if text in line:
+            break
+    return seen
 
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
+    """Every process of the file at once: ``(tmp, {name: (returncode, stderr)})``."""
     tmp = tmp_path_factory.mktemp("dist")
-    procs = {}
-    ports = iter(_free_ports(2))
-    for script, prefix, out in (("sweep.py", "", ""), ("trials.py", "trials_", ".json")):
-        joined = ["--coordinator", f"127.0.0.1:{next(ports)}", "--num-processes", "2"]
-        procs |= {
-            f"{prefix}alone": _start(tmp / f"{prefix}alone{out}", script=script),
-            f"{prefix}p0": _start(tmp / f"{prefix}p0{out}", *joined, "--process-id", "0",
-                                  script=script),
-            f"{prefix}p1": _start(tmp / f"{prefix}p1{out}", *joined, "--process-id", "1",
-                                  script=script),
-        }  # fmt: skip
-    done = {name: p.communicate(timeout=900) for name, p in procs.items()}
-    for name, p in procs.items():  # both processes of a joined run exit 0 too
-        assert p.returncode == 0, (name, done[name][1][-3000:])
-    return tmp
+    pair, late, quiet, gloo, nobody, alone, mismatch, taken, twice, stop = _free_ports(10)
+    holder = socket.create_server(("", taken))  # another program holds process 0's port
+    procs = {
+        "alone": _start(tmp / "alone.json"),
+        "p0": _joined(tmp, "p0", pair, 2, 0, *LONG),
+        "p1": _joined(tmp, "p1", pair, 2, 1, *LONG),
+        # Process 0 waits 8 s at most for the others (they wait 60), so it judges a process
+        # lost after 10 s of silence (its watchdog); with 60 s, only gloo's error comes in time.
+        "late0": _join(late, 2, 0, "end", "8"),
+        "late1": _join(late, 2, 1, "end"),
+        **{f"quiet{i}": _join(quiet, 3, i, "sleep", "8" if i == 0 else "60") for i in range(3)},
+        **{f"gloo{i}": _join(gloo, 2, i, "gather") for i in range(2)},
+        "unreachable": _joined(tmp, "unreachable", nobody, 2, 1),
+        "alone0": _joined(tmp, "alone0", alone, 2, 0),
+        "mismatch0": _joined(tmp, "mismatch0", mismatch, 2, 0, "--trials", "4", *LONG),
+        "mismatch1": _joined(tmp, "mismatch1", mismatch, 3, 1, "--trials", "6", *LONG),
+        "taken": _joined(tmp, "taken", taken, 2, 0),
+        "interrupted": _joined(tmp, "interrupted", stop, 2, 1, *LONG),
+        # Two processes say they are process 0 of 3 and two claim id 1: one of each is refused,
+        # and Ctrl-C ends the two that wait for id 2.
+        **{f"twice{i}": _joined(tmp, f"twice{i}", twice, 3, pid, *LONG)
+           for i, pid in enumerate((0, 0, 1, 1))},
+    }  # fmt: skip
+    # Once joined, quiet1 gets SIGTERM (JAX's own handler must not be installed) and quiet2
+    # SIGKILL; gloo1 SIGKILL once it has gathered: their processes 0 must notice.
+    said = {
+        name: _read_until(procs[name], text)
+        for name, text in (
+            ("quiet1", "joined the run"),
+            ("quiet2", "joined the run"),
+            ("gloo1", "gathered"),
+        )
+    }
+    procs["quiet1"].send_signal(signal.SIGTERM)
+    procs["quiet2"].kill()
+    procs["gloo1"].kill()
+    # Ctrl-C once the process says it is waiting (no sooner: the line proves where it was).
+    said["interrupted"] = _read_until(procs["interrupted"], "waiting for")
+    procs["interrupted"].send_signal(signal.SIGINT)
+    waiting = [f"twice{i}" for i in range(4)]
+    deadline = time.monotonic() + 120
+    while sum(procs[n].poll() is None for n in waiting) > 2 and time.monotonic() < deadline:
+        time.sleep(0.2)
+    for name in waiting:
+        if procs[name].poll() is None:
+            procs[name].send_signal(signal.SIGINT)
+    done = {name: p.communicate(timeout=600) for name, p in procs.items()}
+    holder.close()
+    return tmp, {name: (p.returncode, said.get(name, "") + done[name][1])
+                 for name, p in procs.items()}  # fmt: skip
 
 
-@pytest.mark.slow
-def test_two_processes_give_one_processs_results_bit_for_bit(runs):
-    alone = json.loads((runs / "alone" / "sweep.json").read_text())
-    joined = json.loads((runs / "p0" / "sweep.json").read_text())
-    assert joined["config"]["processes"] == 2 and alone["config"]["processes"] == 1
-    assert joined["config"]["devices"] == 2 * alone["config"]["devices"]
-    assert joined["points"] == alone["points"]  # every mean and interval, exactly
-    assert joined["robot_iterations"] == alone["robot_iterations"]
-
-
-@pytest.mark.slow
-def test_only_process_0_writes(runs):
-    assert (runs / "p0" / "sweep.json").is_file()
-    assert not (runs / "p1" / "sweep.json").exists()
-    assert (runs / "trials_p0.json").is_file()
-    assert not (runs / "trials_p1.json").exists()
+def _one_line(runs, name: str, status: int = 2) -> str:
+    """The error line of run ``name``: its only one, the last on stderr, and no traceback."""
+    code, err = runs[1][name]
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert code == status and "Traceback" not in err, (name, code, err[-3000:])
+    assert [line for line in lines if "error:" in line] == lines[-1:], (name, err[-3000:])
+    return lines[-1]
 
 
 @pytest.mark.slow
 def test_two_processes_give_one_processs_trials_bit_for_bit(runs):
-    alone = json.loads((runs / "trials_alone.json").read_text())
-    joined = json.loads((runs / "trials_p0.json").read_text())
+    alone = json.loads((runs[0] / "alone.json").read_text())
+    joined = json.loads((runs[0] / "p0.json").read_text())
     assert len(alone["trials"]) == 3
     assert joined["trials"] == alone["trials"] and joined["summary"] == alone["summary"]
+
+
+@pytest.mark.slow
+def test_both_processes_of_a_joined_run_exit_0_without_an_abort(runs):
+    for name in ("alone", "p0", "p1"):
+        code, err = runs[1][name]
+        assert code == 0 and "Traceback" not in err and "Check failure" not in err, (name, err)
+    assert "joined the run at 127.0.0.1:" in runs[1]["p1"][1]
+
+
+@pytest.mark.slow
+def test_a_process_that_ends_first_waits_for_the_others_without_a_loss(runs):
+    for name in ("late0", "late1"):
+        code, err = runs[1][name]
+        assert code == 0 and "error" not in err and "Check failure" not in err, (name, err)
+
+
+@pytest.mark.slow
+def test_only_process_0_writes(runs):
+    assert (runs[0] / "p0.json").is_file()
+    assert not (runs[0] / "p1.json").exists()
 
 
 @pytest.mark.parametrize(
@@ -160,75 +254,25 @@ def test_environment_variables_give_the_defaults(monkeypatch):
 # ------------------------------------------------------------------------ runs that cannot start
 
 
-def _trials(tmp: Path, name: str, port: int, n: int, pid: int, *more: str) -> subprocess.Popen:
-    where = ["--coordinator", f"127.0.0.1:{port}", "--num-processes", str(n)]
-    return _start(tmp / f"{name}.json", *where, "--process-id", str(pid), "--timeout-s", "4",
-                  *more, script="trials.py")  # fmt: skip
-
-
-@pytest.fixture(scope="module")
-def failures(tmp_path_factory):
-    """Every failing start at once: {name: (returncode, stderr)}."""
-    tmp = tmp_path_factory.mktemp("fail")
-    nobody, alone, pair, taken, interrupted, running = _free_ports(6)
-    holder = socket.create_server(("", taken))  # another program holds process 0's port
-    procs = {
-        "unreachable": _trials(tmp, "unreachable", nobody, 2, 1),
-        "alone": _trials(tmp, "alone", alone, 2, 0),
-        "mismatch0": _trials(tmp, "mismatch0", pair, 2, 0, "--trials", "4", "--timeout-s", "60"),
-        "mismatch1": _trials(tmp, "mismatch1", pair, 3, 1, "--trials", "6", "--timeout-s", "60"),
-        "taken": _trials(tmp, "taken", taken, 2, 0),
-        "interrupted": _trials(tmp, "interrupted", interrupted, 2, 1, "--timeout-s", "60"),
-    }
-    # Ctrl-C once the process says it is waiting (no sooner: the line proves where it was).
-    first = ""
-    while not first.startswith("waiting for") and procs["interrupted"].poll() is None:
-        first = procs["interrupted"].stderr.readline()
-    procs["interrupted"].send_signal(signal.SIGINT)
-    joined = [_start(tmp / f"joined{i}.json", "--coordinator", f"127.0.0.1:{running}",
-                     "--num-processes", "2", "--process-id", str(i), "--world", EMPTY_WORLD,
-                     "--tau-cap", "4000", script="trials.py") for i in (0, 1)]  # fmt: skip
-    # SIGTERM once they run (process 0's bar is up): JAX's own SIGTERM handler must not be.
-    seen = ""
-    while "%|" not in seen and joined[0].poll() is None:
-        seen += joined[0].stderr.read(1)
-    for p in joined:
-        p.send_signal(signal.SIGTERM)
-    procs |= {"joined0": joined[0], "joined1": joined[1]}
-    done = {name: p.communicate(timeout=300) for name, p in procs.items()}
-    holder.close()
-    return {name: (p.returncode, first * (name == "interrupted") + done[name][1])
-            for name, p in procs.items()}  # fmt: skip
-
-
-def _one_line(failures, name: str, status: int = 2) -> str:
-    """The error line of run ``name``: its only one, the last on stderr, and no traceback."""
-    code, err = failures[name]
-    lines = [line for line in err.splitlines() if line.strip()]
-    assert code == status and "Traceback" not in err, (name, code, err[-3000:])
-    assert [line for line in lines if "error:" in line] == lines[-1:], (name, err[-3000:])
-    return lines[-1]
-
-
 @pytest.mark.slow
-def test_an_unreachable_coordinator_is_one_line_after_the_timeout(failures):
-    line = _one_line(failures, "unreachable")
+def test_an_unreachable_coordinator_is_one_line_after_the_timeout(runs):
+    line = _one_line(runs, "unreachable")
     assert line.startswith("trials.py: error: no coordinator answers at 127.0.0.1:")
     assert "Connection refused" in line and "start process 0" in line
     assert re.search(r"^waiting for 1 of 2 processes at 127\.0\.0\.1:\d+ \(\d+ s of 4\)$",
-                     failures["unreachable"][1], re.M)  # fmt: skip
+                     runs[1]["unreachable"][1], re.M)  # fmt: skip
 
 
 @pytest.mark.slow
-def test_process_0_alone_says_who_is_missing(failures):
-    line = _one_line(failures, "alone")
+def test_process_0_alone_says_who_is_missing(runs):
+    line = _one_line(runs, "alone0")
     assert "not every process joined at 127.0.0.1:" in line and "within 4 s" in line
     assert "each with its own --process-id" in line
 
 
 @pytest.mark.slow
-def test_processes_started_with_different_flags_name_them(failures):
-    zero, one = _one_line(failures, "mismatch0"), _one_line(failures, "mismatch1")
+def test_processes_started_with_different_flags_name_them(runs):
+    zero, one = _one_line(runs, "mismatch0"), _one_line(runs, "mismatch1")
     assert zero == (
         "trials.py: error: process 1 was started with --num-processes 3, --trials 6 and this "
         "one (0) with --num-processes 2, --trials 4: start every process with the same flags"
@@ -237,18 +281,48 @@ def test_processes_started_with_different_flags_name_them(failures):
 
 
 @pytest.mark.slow
-def test_a_taken_coordinator_port_is_one_line(failures):
-    line = _one_line(failures, "taken")
+def test_a_taken_coordinator_port_is_one_line(runs):
+    line = _one_line(runs, "taken")
     assert "cannot host the coordinator at 127.0.0.1:" in line and "holds the port" in line
 
 
 @pytest.mark.slow
-def test_sigterm_stops_a_joined_run(failures):
-    for name in ("joined0", "joined1"):
-        assert _one_line(failures, name, 143) == "trials.py: error: terminated"
+def test_an_id_taken_twice_is_one_line_for_each_process(runs):
+    """Two processes 0 and two processes 1 (of 3): one of each is refused at once, without the
+    abort XLA gives a second connection of one id; the others wait until Ctrl-C."""
+    results = {name: runs[1][name] for name in ("twice0", "twice1", "twice2", "twice3")}
+    refused = sorted(name for name, (code, _) in results.items() if code == 2)
+    assert len(refused) == 2 and refused[0] in ("twice0", "twice1"), results
+    assert "cannot host the coordinator" in _one_line(runs, refused[0])
+    assert _one_line(runs, refused[1]) == (
+        "trials.py: error: --process-id 1 is already taken in the run of 3 processes: give "
+        "each process its own --process-id, 0 .. --num-processes - 1"
+    )
+    for name in sorted(set(results) - set(refused)):
+        assert _one_line(runs, name, 130) == "trials.py: error: interrupted"
 
 
 @pytest.mark.slow
-def test_ctrl_c_while_waiting_is_honoured(failures):
-    assert failures["interrupted"][1].startswith("waiting for 1 of 2 processes")
-    assert _one_line(failures, "interrupted", 130) == "trials.py: error: interrupted"
+def test_sigterm_stops_a_joined_process(runs):
+    assert _one_line(runs, "quiet1", 143) == "join.py: error: terminated"
+
+
+@pytest.mark.slow
+def test_a_process_killed_mid_run_ends_the_others_with_one_line(runs):
+    """kill -9 (and SIGTERM) of processes 1 and 2 of 3: process 0 says so within 10 s of
+    silence, or at once from gloo's error in a collective, instead of XLA's abort."""
+    assert re.fullmatch(
+        r"join\.py: error: process [12] of 3 stopped responding \(killed, or its machine is "
+        r"unreachable\); nothing half-written is left: rerun all 3 processes",
+        _one_line(runs, "quiet0"),
+    )
+    assert runs[1]["quiet2"][0] == -signal.SIGKILL and runs[1]["gloo1"][0] == -signal.SIGKILL
+    line = _one_line(runs, "gloo0")
+    assert line.startswith("join.py: error: process 1 of 2 stopped responding (killed, or its ")
+    assert "rerun all 2 processes (" in line and "Gloo" in line
+
+
+@pytest.mark.slow
+def test_ctrl_c_while_waiting_is_honoured(runs):
+    assert runs[1]["interrupted"][1].startswith("waiting for 1 of 2 processes")
+    assert _one_line(runs, "interrupted", 130) == "trials.py: error: interrupted"

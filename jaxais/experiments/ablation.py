@@ -29,7 +29,7 @@ from jaxais.immune.antibodies import Antibodies
 from jaxais.immune.network import NetworkParams
 from jaxais.immune.readings import ALPHA_ON_SELF, HOLD, SIGMA0_FLOOR, Readings
 from jaxais.immune.readings import readings as make_readings
-from jaxais.io import Run, atomic_write_json, atomic_write_text, open_run
+from jaxais.io import RUN_BYTES, Run, atomic_write_json, atomic_write_text, check_memory, open_run
 from jaxais.loop import EpisodeConfig
 from jaxais.seed import Seed
 from jaxais.systems import HAND_DESIGNED, N_SETS, hand_designed_sets, make_system, parse_label
@@ -572,6 +572,9 @@ def ablate(
         chosen = select(variants)
     except ValueError as err:
         raise ValueError(f"--variants: {err}") from None
+    if trials is not None:  # every run's record is kept to the end
+        runs = len(chosen) * sum(len(protocol.systems_for_world(w)) for w in worlds)
+        check_memory(trials, runs * RUN_BYTES, "--trials")
     settings = dict(worlds=worlds, variants=[v.name for v in chosen], trials=trials, seed=seed,
                     seeds=None if seeds is None else str(seeds), tau_cap=tau_cap,
                     collision_cap=collision_cap, share=share)  # fmt: skip

@@ -15,6 +15,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from jaxais import io
 from jaxais.baselines.config import NN_LABEL, TrainConfig
 from jaxais.experiments import protocol
 from jaxais.io import UserError, atomic_write_json, atomic_write_text, open_run, read_json_object
@@ -237,6 +238,10 @@ def baseline(
     manifest (``resume``). Returns (config.json's document, evaluation.json's), None if skipped.
     """
     config = TrainConfig() if config is None else config
+    if train:  # a generation's episodes run at once, each with its member's 13 weights a unit
+        io.check_memory(config.pairs * config.episodes, 2 * io.RUN_BYTES, "--pairs x --episodes")
+        io.check_memory(config.hidden, 104 * config.pairs * config.episodes, "--hidden")
+        io.check_memory(config.generations, 64, "--generations")  # keys and metrics, each
     if evaluate and not train:
         _check_weights(weights)  # before anything is written
     out = _output_dir(out, into_checkpoints, make=False)  # open_run makes it

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from jaxais.io import atomic_write_json
+from jaxais.io import RUN_BYTES, atomic_write_json, check_memory
 
 SCHEMA = "jaxais-bench/1"
 DEVICE_FLAG = "--xla_force_host_platform_device_count"
@@ -99,7 +99,15 @@ def bench_config(quick: bool = False, **values: Any) -> BenchConfig:
     for name in ("batches", "controller_batches"):
         if name in values:
             values[name] = _sizes(values[name], "--" + name.replace("_", "-"))
-    return BenchConfig(quick=quick, **values)
+    config = BenchConfig(quick=quick, **values)
+    for flag, count, each in (
+        ("--batches", max(config.batches), RUN_BYTES),
+        ("--controller-batches", max(config.controller_batches), RUN_BYTES),
+        ("--numpy-robots x --numpy-steps", config.numpy_robots * config.numpy_steps, 64),
+        ("--matmul squared", config.matmul**2, 12),  # three float32 matrices
+    ):
+        check_memory(count, each, flag)
+    return config
 
 
 def force_host_devices(n: int) -> None:

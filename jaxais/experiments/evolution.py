@@ -21,7 +21,7 @@ from jaxais.experiments.diversity import compare_diversity, diversity
 from jaxais.experiments.records import portable_path
 from jaxais.ga import driver
 from jaxais.ga.config import CROSSING_STARTS, MAX_SEED, ConfigError, GAConfig
-from jaxais.io import atomic_write, atomic_write_json
+from jaxais.io import RUN_BYTES, atomic_write, atomic_write_json, check_memory
 from jaxais.seed import Seed, load_seed, save_seed
 
 __all__ = ["check_seed", "evolve", "measure_crossing", "report"]
@@ -48,11 +48,17 @@ def _compile_clock():
         jax.monitoring.unregister_event_duration_listener(listen)
 
 
-def _check(seed: int, crossing_starts: int) -> None:
+def _check(seed: int, crossing_starts: int, config: GAConfig) -> None:
     if not 0 <= seed <= MAX_SEED:
         raise ConfigError("seed", f"must be in [0, {MAX_SEED}], got {seed}")
     if crossing_starts < 1:
         raise ConfigError("crossing_starts", f"must be >= 1, got {crossing_starts}")
+    # A generation's runs, and the fresh starts of every population's best, run at once.
+    p, flag = config.populations, "--populations x --robots x --starts"
+    check_memory(p * config.robots * config.starts, RUN_BYTES, flag)
+    starts = max(config.success_starts, crossing_starts)
+    which = "success" if starts > crossing_starts else "crossing"
+    check_memory(p * starts, RUN_BYTES, f"--populations x --{which}-starts")
 
 
 def _generation_record(generation: int, evaluation, best, wall: float) -> dict[str, Any]:
@@ -148,7 +154,7 @@ def evolve(
     ValueError (nothing to resume, another run's or a corrupt checkpoint, a bad world).
     """
     config = GAConfig() if config is None else config
-    _check(seed, crossing_starts)
+    _check(seed, crossing_starts, config)
     if diversity_seeds is not None and diversity_seeds < 2:
         raise ConfigError("diversity_seeds", f"must be >= 2, got {diversity_seeds}")
     if diversity_seeds is not None and config.populations < 2:
@@ -279,7 +285,7 @@ def check_seed(
     """The crossing rates of the seed in ``seed_dir`` as :func:`evolve` measures them, and those
     recorded in its seed.json (writes nothing)."""
     config = GAConfig() if config is None else config
-    _check(seed, crossing_starts)
+    _check(seed, crossing_starts, config)
     ltl_seed, meta = load_seed(seed_dir)
     world_obj = envs.load_world(world)
     start = time.perf_counter()

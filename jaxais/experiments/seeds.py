@@ -12,6 +12,7 @@ bits). Nothing here imports JAX: the subprocesses have the device.
 from __future__ import annotations
 
 import json
+import operator
 import shutil
 import signal
 import statistics
@@ -24,6 +25,8 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
+from jaxais import io
+from jaxais.experiments import protocol
 from jaxais.io import MANIFEST, ON_SIGNAL, Run, atomic_write_json, atomic_write_text, open_run
 
 __all__ = ["SeedRunError", "headline", "ltl_ledger", "ltl_state", "markdown", "summarise"]
@@ -368,6 +371,7 @@ def ltl_ledger(
         ValueError: bad arguments, or ``out`` holding another run (or none to resume).
         SeedRunError: a subprocess failed (after the running seeds finished and were written).
     """
+    io.check_memory(operator.length_hint(seeds), io.RUN_BYTES, "--seeds")  # before listing them
     out, seeds = Path(out), list(seeds)
     if not seeds or len(set(seeds)) != len(seeds):
         raise ValueError(f"seeds must be distinct and at least one, got {seeds}")
@@ -377,6 +381,9 @@ def ltl_ledger(
         raise ValueError(f"--trials must be >= 2 (t-tests need two per group), got {trials}")
     if jobs < 1:
         raise ValueError(f"--jobs must be >= 1, got {jobs}")
+    if trials is not None:  # --jobs reproduce.py side by side, each with reproduce.py's pool
+        runs = max(len(protocol.systems_for_world(w)) for w in protocol.WORLDS) + 2
+        io.check_memory(trials, min(jobs, len(seeds)) * runs * io.RUN_BYTES, "--trials")
     extra = [str(a) for a in extra_args]
     if any(a.split("=")[0] in RESERVED for a in extra):
         raise ValueError(f"extra_args may not set {', '.join(RESERVED)} (the ledger sets them)")

@@ -16,7 +16,7 @@ import jaxais
 from jaxais import envs
 from jaxais.controllers import System
 from jaxais.immune.network import NetworkParams
-from jaxais.immune.readings import DEFAULT, Readings
+from jaxais.immune.readings import DEFAULT
 from jaxais.io import UserError
 from jaxais.loop import EpisodeConfig
 from jaxais.seed import Seed, default_seed_dir, load_seed
@@ -77,14 +77,13 @@ def build_systems(
     seeds_dir: str | Path | None,
     network: NetworkParams | None = None,
     loaded: tuple[Seed, dict[str, Any]] | None = None,
-    readings: Readings | None = None,
 ) -> tuple[dict[str, System], dict[str, Any]]:
     """(label -> System, the seed's description or None), reading the LTL seed (unless
     ``loaded`` by :func:`load_ltl_seed`) only when a seeded system needs it."""
     seed, seed_info = None, None
     if any(parse_label(name)[0] in ("SIE", "SRL") for name in labels):
         seed, seed_info = loaded if loaded is not None else load_ltl_seed(seeds_dir)
-    systems = {name: make_system(name, seed, network=network, readings=readings) for name in labels}
+    systems = {name: make_system(name, seed, network=network) for name in labels}
     return systems, seed_info
 
 
@@ -95,7 +94,6 @@ def run_config(
     network: NetworkParams,
     sim_params: envs.SimParams,
     seed_info: dict[str, Any] | None,
-    readings: Readings | None = None,
 ) -> dict[str, Any]:
     """Every parameter a run used, as plain JSON (with the versions that made it)."""
     plain = lambda x: np.asarray(x).tolist()
@@ -105,7 +103,7 @@ def run_config(
         "world": {"name": world.name, "source": source},
         "episode": dataclasses.asdict(config),
         "network": fields(network),
-        "readings": fields(DEFAULT if readings is None else readings),
+        "readings": fields(DEFAULT),
         "simulator": fields(sim_params),
         "ltl_seed": seed_info,
         "versions": versions(),

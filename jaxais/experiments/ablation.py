@@ -12,7 +12,6 @@ numbers do not depend on its batch mates (``tests/test_trials.py``).
 from __future__ import annotations
 
 import dataclasses
-import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -28,7 +27,7 @@ from jaxais.experiments import claims, protocol, stats
 from jaxais.immune.network import NetworkParams
 from jaxais.immune.readings import ALPHA_ON_SELF, HOLD, SIGMA0_FLOOR, Readings
 from jaxais.immune.readings import readings as make_readings
-from jaxais.io import Run, atomic_write_json, atomic_write_text, open_run
+from jaxais.io import Run, atomic_write_json, atomic_write_text, open_run, read_json_object
 from jaxais.loop import EpisodeConfig
 from jaxais.seed import Seed
 from jaxais.systems import HAND_DESIGNED, hand_designed_sets, make_system, parse_label
@@ -265,7 +264,7 @@ def run_ablation(
     variants: Sequence[Variant],
     seed: int,
     ltl_seed: Seed | None,
-    n_trials: int | Mapping[str, int] | None = None,
+    n_trials: int | Mapping[str, int],
     base: EpisodeConfig = STL_CONFIG,
     share: bool = True,
     progress: Any = None,
@@ -274,7 +273,7 @@ def run_ablation(
     """Run every variant's protocol: per world, one :func:`~jaxais.trials.run_trials` per call.
 
     Args:
-        n_trials: trials per system (or per world name); default the paper's (30, 20 in real).
+        n_trials: trials per system (or per world name).
         base: the episode config's caps and recording; each variant sets its own rules.
         progress: optional tqdm bar, advanced in runs ended (iterations with ``base.record``);
             its total is set first.
@@ -288,15 +287,8 @@ def run_ablation(
     for world_name in worlds:
         world = envs.load_world(world_name)
         world_labels = protocol.systems_for_world(world_name)
-        if n_trials is None:
-            n = protocol.trials_for_world(world_name)
-        else:
-            n = n_trials if isinstance(n_trials, int) else n_trials[world_name]
-        systems = {
-            name: variant_systems(by_name[name], world_labels, ltl_seed)
-            for call in calls
-            for name in call.variants
-        }
+        n = n_trials if isinstance(n_trials, int) else n_trials[world_name]
+        systems = {v.name: variant_systems(v, world_labels, ltl_seed) for v in variants}
         for call in calls:
             batch, source = batch_systems(call.variants, systems, share)
             plan.append((world_name, world, n, call, batch, source))
@@ -319,7 +311,7 @@ def run_ablation(
         unit = f"batch {i}"  # its records in batches/, written whole before the manifest names it
         if folder is not None and unit in folder.units:
             timings = folder.units[unit]
-            records = json.loads((folder.out / "batches" / f"{i}.json").read_text())
+            records = read_json_object(folder.out / "batches" / f"{i}.json")
             results = {label: TrialSet(recs, None) for label, recs in records.items()}
         else:
             results = trials_module.run_trials(

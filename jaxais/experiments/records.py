@@ -4,7 +4,6 @@ with every parameter it used, so a run can be regenerated from its JSON."""
 from __future__ import annotations
 
 import dataclasses
-import json
 import platform
 from collections.abc import Mapping
 from pathlib import Path
@@ -17,7 +16,7 @@ from jaxais import envs
 from jaxais.controllers import System
 from jaxais.immune.network import NetworkParams
 from jaxais.immune.readings import DEFAULT
-from jaxais.io import UserError
+from jaxais.io import UserError, read_json_object
 from jaxais.loop import EpisodeConfig
 from jaxais.seed import Seed, default_seed_dir, load_seed
 from jaxais.systems import make_system, parse_label
@@ -145,11 +144,8 @@ def records_frame(source: str | Path | Mapping[str, Any], runs: bool = False):
     except ImportError:
         raise UserError("records_frame needs pandas: pip install pandas") from None
     where = "the document" if isinstance(source, Mapping) else str(source)
-    try:
-        doc = source if isinstance(source, Mapping) else json.loads(Path(source).read_text())
-    except ValueError as err:
-        raise UserError(f"{where}: not JSON ({err})") from None
-    fmt = doc.get("format") if isinstance(doc, Mapping) else None
+    doc = source if isinstance(source, Mapping) else read_json_object(source)
+    fmt = doc.get("format")
     if fmt == FORMATS["trials"]:
         head = {k: doc[k] for k in ("label", "system", "world", "random_set", "seed")}
         rows = [{**head, "trial": i, **r} for i, r in enumerate(doc["trials"])]

@@ -42,19 +42,6 @@ def two_tailed_p_df5(t: float) -> float:
     return 1.0 - a
 
 
-def old_trial(tau: float, c: int = 0, failed_by: str | None = None) -> dict:
-    """A record of the older schema: no capped count, no trapped time, one failure cause."""
-    return {
-        "tau": float(tau),
-        "collisions": int(c),
-        "fitness": (8 * min(c, 100) + tau) / 2,
-        "failed": failed_by is not None,
-        "failed_by": failed_by,
-        "idiotypic_difference_rate": None,
-        "iterations": int(tau / 0.032),
-    }
-
-
 def trials_with_f(f_mean: float, n: int = 8, spread: float = 4.0) -> list[dict]:
     """n trials with c = 0 whose f values are f_mean + spread * (-1.75, ..., 1.75)."""
     offsets = np.linspace(-1.75, 1.75, n) * spread
@@ -221,23 +208,10 @@ def test_table5_failure_rates_overlap():
     assert t5["world1"]["SIE"] == {"c": 0.0, "tau": 0.0, "total": 0.0}
 
 
-def test_failure_causes():
-    both = trial(4000, 2500)
-    assert stats.failure_causes(both) == {"collisions", "time"}
-    assert stats.failure_causes(trial(100, 100)) == frozenset()  # c = 100 is not > 100
-    assert stats.failure_causes(trial(100, 101)) == {"collisions"}
-    # The flags win over the list; the older single string and None are read too.
-    assert stats.failure_causes({"failed_time": True, "failed_by": []}) == {"time"}
-    assert stats.failure_causes({"failed_by": ["time", "collisions"]}) == {"time", "collisions"}
-    assert stats.failure_causes(old_trial(300, 150, "collisions")) == {"collisions"}
-    assert stats.failure_causes(old_trial(300, 5)) == frozenset()
-
-
-def test_older_records_still_load():
-    res = {"world1": {"SRL": [old_trial(300, 150, "collisions"), old_trial(4000, 4, "time")]}}
-    assert stats.table3(res)["world1"]["SRL"]["c"] == 52.0  # (min(150, 100) + 4) / 2
-    assert stats.table5(res)["world1"]["SRL"] == {"c": 50.0, "tau": 50.0, "total": 100.0}
-    assert stats.record_means(res, "trapped_s") == {"world1": {"SRL": None}}
+def test_failure_counts():
+    runs = [trial(4000, 2500), trial(100, 100), trial(100, 101), trial(4000, 3)]
+    # c = 100 is not > 100; a run can breach both caps.
+    assert stats.failure_counts(runs) == {"c": 2, "tau": 2, "total": 3}
 
 
 def test_trapped_times():

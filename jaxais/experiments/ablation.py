@@ -12,8 +12,7 @@ numbers do not depend on its batch mates (``tests/test_trials.py``).
 from __future__ import annotations
 
 import dataclasses
-import json
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,18 +24,25 @@ from jaxais import trials as trials_module
 from jaxais.controllers import System
 from jaxais.envs.struct import device_array
 from jaxais.experiments import claims, protocol, stats
-from jaxais.immune.antibodies import Antibodies
 from jaxais.immune.network import NetworkParams
 from jaxais.immune.readings import ALPHA_ON_SELF, HOLD, SIGMA0_FLOOR, Readings
 from jaxais.immune.readings import readings as make_readings
-from jaxais.io import RUN_BYTES, Run, atomic_write_json, atomic_write_text, check_memory, open_run
+from jaxais.io import (
+    RUN_BYTES,
+    Run,
+    atomic_write_json,
+    atomic_write_text,
+    check_memory,
+    open_run,
+    read_json_object,
+)
 from jaxais.loop import EpisodeConfig
 from jaxais.seed import Seed
-from jaxais.systems import HAND_DESIGNED, N_SETS, hand_designed_sets, make_system, parse_label
+from jaxais.systems import HAND_DESIGNED, hand_designed_sets, make_system, parse_label
 from jaxais.trials import STL_CONFIG, TrialSet
 
 __all__ = [
-    "VARIANTS", "Ablation", "Variant", "ablate", "document", "hdc_antibodies", "markdown",
+    "VARIANTS", "Ablation", "Variant", "ablate", "document", "markdown",
     "plan_calls", "run_ablation", "select", "variant_systems",
 ]  # fmt: skip
 
@@ -76,9 +82,9 @@ class Variant:
             alpha_on_self=self.alpha_on_self,
         )
 
-    def network(self, base: NetworkParams | None = None) -> NetworkParams:
-        """The network constants: ``base`` (default: the paper's), penalties swapped if set."""
-        net = NetworkParams() if base is None else base
+    def network(self) -> NetworkParams:
+        """The network constants: the paper's, penalties swapped if set."""
+        net = NetworkParams()
         if not self.swap_penalties:
             return net
         return net.replace(
@@ -184,26 +190,16 @@ def select(names: Sequence[str] | None) -> tuple[Variant, ...]:
     return tuple(v for v in VARIANTS if v.name in names)
 
 
-def hdc_antibodies(tracks: bool, x: int = N_SETS) -> Antibodies:
-    """The HDC's [x, 8] antibodies (every set the same), tracking the target or not."""
-    antibodies, _ = hand_designed_sets(x, TRACKING_HDC if tracks else HAND_DESIGNED)
-    return jax.tree.map(device_array, antibodies)
-
-
 def variant_systems(
-    variant: Variant,
-    labels: Sequence[str],
-    seed: Seed | None,
-    network: NetworkParams | None = None,
+    variant: Variant, labels: Sequence[str], seed: Seed | None
 ) -> dict[str, System]:
     """The systems of ``labels`` (e.g. ``"UIE-R2"``) as ``variant`` builds them."""
     out = {}
     for name in labels:
-        system = make_system(
-            name, seed, network=variant.network(network), readings=variant.readings()
-        )
+        system = make_system(name, seed, network=variant.network(), readings=variant.readings())
         if variant.hdc_tracks and parse_label(name)[0] == "HDC":
-            system = system.replace(antibodies=hdc_antibodies(True, system.paratopes.shape[0]))
+            antibodies, _ = hand_designed_sets(system.paratopes.shape[0], TRACKING_HDC)
+            system = system.replace(antibodies=jax.tree.map(device_array, antibodies))
         out[name] = system
     return out
 
@@ -276,27 +272,21 @@ def run_ablation(
     variants: Sequence[Variant],
     seed: int,
     ltl_seed: Seed | None,
-    n_trials: int | Mapping[str, int] | None = None,
+    n_trials: int | Mapping[str, int],
     base: EpisodeConfig = STL_CONFIG,
-    labels: Sequence[str] | None = None,
-    network: NetworkParams | None = None,
     share: bool = True,
     progress: Any = None,
-    runner: Callable[..., dict[str, TrialSet]] | None = None,
     folder: Run | None = None,
 ) -> Ablation:
     """Run every variant's protocol: per world, one :func:`~jaxais.trials.run_trials` per call.
 
     Args:
-        n_trials: trials per system (or per world name); default the paper's (30, 20 in real).
+        n_trials: trials per system (or per world name).
         base: the episode config's caps and recording; each variant sets its own rules.
-        labels: the systems (default: the paper's protocol in each world).
-        progress: optional tqdm-like bar, advanced in runs ended (iterations with ``base.record``);
-            its ``reset(total=...)``, if any, is called first.
-        runner: ``run_trials`` or a stand-in with its signature (tests).
+        progress: optional tqdm bar, advanced in runs ended (iterations with ``base.record``);
+            its total is set first.
         folder: each batch's records are a unit there (``batches/I.json``); a held one is read.
     """
-    run = trials_module.run_trials if runner is None else runner
     calls = plan_calls(variants, base)
     by_name = {v.name: v for v in variants}
     out: dict[str, dict[str, dict[str, TrialSet]]] = {v.name: {} for v in variants}
@@ -304,16 +294,9 @@ def run_ablation(
     plan = []  # every batch first, so the bar knows its total
     for world_name in worlds:
         world = envs.load_world(world_name)
-        world_labels = list(protocol.systems_for_world(world_name) if labels is None else labels)
-        if n_trials is None:
-            n = protocol.trials_for_world(world_name)
-        else:
-            n = n_trials if isinstance(n_trials, int) else n_trials[world_name]
-        systems = {
-            name: variant_systems(by_name[name], world_labels, ltl_seed, network)
-            for call in calls
-            for name in call.variants
-        }
+        world_labels = protocol.systems_for_world(world_name)
+        n = n_trials if isinstance(n_trials, int) else n_trials[world_name]
+        systems = {v.name: variant_systems(v, world_labels, ltl_seed) for v in variants}
         for call in calls:
             batch, source = batch_systems(call.variants, systems, share)
             plan.append((world_name, world, n, call, batch, source))
@@ -323,12 +306,12 @@ def run_ablation(
         dt = by_name[call.variants[0]].sim_params().dt
         return call.config.max_iterations(dt) if call.config.record else len(batch) * n
 
-    if progress is not None and hasattr(progress, "reset"):
+    if progress is not None:
         progress.reset(total=sum(units(n, call, batch) for _, _, n, call, batch, _ in plan))
     for i, (world_name, world, n, call, batch, source) in enumerate(plan):
         sim_params = by_name[call.variants[0]].sim_params()
-        done = _Counter(progress)
-        if progress is not None and hasattr(progress, "set_description_str"):
+        before = 0 if progress is None else progress.n
+        if progress is not None:
             progress.set_description_str(
                 f"{world_name}: {', '.join(call.variants)} ({len(batch)} systems x {n})"
             )
@@ -336,17 +319,19 @@ def run_ablation(
         unit = f"batch {i}"  # its records in batches/, written whole before the manifest names it
         if folder is not None and unit in folder.units:
             timings = folder.units[unit]
-            records = json.loads((folder.out / "batches" / f"{i}.json").read_text())
+            records = read_json_object(folder.out / "batches" / f"{i}.json")
             results = {label: TrialSet(recs, None) for label, recs in records.items()}
         else:
-            results = run(world, batch, n, seed, call.config, sim_params, done, timings)
+            results = trials_module.run_trials(
+                world, batch, n, seed, call.config, sim_params, progress, timings
+            )
             if folder is not None and folder.write:
                 (folder.out / "batches").mkdir(exist_ok=True)
                 records = {label: ts.records for label, ts in results.items()}
                 atomic_write_json(folder.out / "batches" / f"{i}.json", records)
                 folder.finish(unit, timings)
         if progress is not None:  # a batch that ended early completes its share
-            progress.update(max(0, units(n, call, batch) - done.n))
+            progress.update(max(0, units(n, call, batch) - (progress.n - before)))
         for name in call.variants:
             out[name][world_name] = {
                 label: results[tagged] for label, tagged in source[name].items()
@@ -371,18 +356,6 @@ def run_ablation(
             }
         )
     return Ablation(out, log)
-
-
-class _Counter:
-    """Passes progress on to a bar and counts it (so a call's share can be completed)."""
-
-    def __init__(self, bar: Any):
-        self.bar, self.n = bar, 0
-
-    def update(self, k: int) -> None:
-        self.n += k
-        if self.bar is not None:
-            self.bar.update(k)
 
 
 def _reported(records: Sequence[Mapping[str, Any]]) -> dict[str, float]:
@@ -497,14 +470,12 @@ def _penalty_table(doc: Mapping[str, Any], worlds: Sequence[str]) -> list[str]:
 
 def figure(doc: Mapping[str, Any]) -> Any:
     """Claims reproduced per variant, and SIE's mean f per world and variant (a Figure)."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    from jaxais.experiments.plotting import new_figure
 
     variants = doc["variants"]
     names = [v["name"] for v in variants]
     worlds = list(doc["trials"])
-    fig = Figure(figsize=(12, 0.45 * len(names) + 2.0), layout="constrained")
-    FigureCanvasAgg(fig)
+    fig = new_figure((12, 0.45 * len(names) + 2.0))
     ax_c, ax_f = fig.subplots(1, 2, sharey=True)
     y = np.arange(len(names))
     held = [v["claims"]["reproduced"] for v in variants]
@@ -551,6 +522,7 @@ def ablate(
 
     from tqdm import tqdm
 
+    from jaxais.experiments.one_system import command_line
     from jaxais.experiments.plotting import save_figure
     from jaxais.experiments.records import load_ltl_seed, versions
 
@@ -597,16 +569,13 @@ def ablate(
     atomic_write_text(out / "ablation.md", "# Ablation of our readings\n\n" + markdown(doc))
     save_figure(figure(doc), out / "ablation.png")
     # The command that regenerates the run, every flag explicit, without the output directory.
-    command = (
-        f"ablate.py --out DIR --worlds {','.join(worlds)} "
-        f"--variants {','.join(v.name for v in chosen)} --seed {seed} "
-        f"--tau-cap {tau_cap:g} --collision-cap {collision_cap}"
-        + ("" if trials is None else f" --trials {trials}")
-        + ("" if seeds is None else f" --seeds {seed_info['path']}")
-        + ("" if share else " --no-share")
-    )
+    flags = {"--out": "DIR", "--worlds": ",".join(worlds),
+             "--variants": ",".join(settings["variants"]), "--seed": seed, "--tau-cap": tau_cap,
+             "--collision-cap": collision_cap, "--trials": trials,
+             "--seeds": None if seeds is None else seed_info["path"],
+             "--no-share": not share}  # fmt: skip
     run = {
-        "command": command,
+        "command": command_line("ablate.py", flags),
         "seed": seed,
         "trials": n_trials,
         "worlds": worlds,

@@ -60,9 +60,17 @@ def compare_diversity(
     sim_params = envs.default_params() if sim_params is None else sim_params
     single = dataclasses.replace(config, populations=1, robots=config.populations * config.robots)
     done = done or {}
-    values: dict[str, list[float]] = {"multi": [], "single": []}
+    arms = {  # the GA config, the best sets kept per run (None: each population's best)
+        "multi": (config, None, "best robot of each population, final generation"),
+        "single": (
+            single,
+            config.populations,
+            f"{config.populations} best robots of the final generation",
+        ),
+    }
+    values: dict[str, list[float]] = {arm: [] for arm in arms}
     for s in seeds:
-        for arm, cfg, k in (("multi", config, None), ("single", single, config.populations)):
+        for arm, (cfg, k, _) in arms.items():
             state = done.get(s) if arm == "multi" else None
             if state is None:
                 state = driver.run(jax.random.key(s), cfg, world, sim_params)
@@ -75,31 +83,19 @@ def compare_diversity(
 
     with np.errstate(all="ignore"):
         t = stats.ttest_ind(values["multi"], values["single"], equal_var=False)
-    try:
-        u = stats.mannwhitneyu(values["multi"], values["single"], alternative="two-sided")
-        u_stat, u_p = finite(u.statistic), finite(u.pvalue)
-    except ValueError:  # all values identical
-        u_stat, u_p = None, None
-    arms = {
-        "multi": (
-            config.populations,
-            config.robots,
-            "best robot of each population, final generation",
-        ),
-        "single": (1, single.robots, f"{config.populations} best robots of the final generation"),
-    }
+    u = stats.mannwhitneyu(values["multi"], values["single"], alternative="two-sided")
     return {
         "seeds": [int(s) for s in seeds],
         **{
             arm: {
-                "populations": P,
-                "robots": R,
+                "populations": cfg.populations,
+                "robots": cfg.robots,
                 "sets": sets,
                 "diversity": values[arm],
                 "mean": float(np.mean(values[arm])),
             }
-            for arm, (P, R, sets) in arms.items()
+            for arm, (cfg, _, sets) in arms.items()
         },
         "welch_t": {"statistic": finite(t.statistic), "p_value": finite(t.pvalue)},
-        "mann_whitney_u": {"statistic": u_stat, "p_value": u_p},
+        "mann_whitney_u": {"statistic": finite(u.statistic), "p_value": finite(u.pvalue)},
     }

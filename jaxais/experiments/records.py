@@ -4,7 +4,6 @@ with every parameter it used, so a run can be regenerated from its JSON."""
 from __future__ import annotations
 
 import dataclasses
-import json
 import platform
 from collections.abc import Mapping
 from pathlib import Path
@@ -16,8 +15,8 @@ import jaxais
 from jaxais import envs
 from jaxais.controllers import System
 from jaxais.immune.network import NetworkParams
-from jaxais.immune.readings import DEFAULT, Readings
-from jaxais.io import UserError
+from jaxais.immune.readings import DEFAULT
+from jaxais.io import UserError, read_json_object
 from jaxais.loop import EpisodeConfig
 from jaxais.seed import Seed, default_seed_dir, load_seed
 from jaxais.systems import make_system, parse_label
@@ -77,14 +76,13 @@ def build_systems(
     seeds_dir: str | Path | None,
     network: NetworkParams | None = None,
     loaded: tuple[Seed, dict[str, Any]] | None = None,
-    readings: Readings | None = None,
 ) -> tuple[dict[str, System], dict[str, Any]]:
     """(label -> System, the seed's description or None), reading the LTL seed (unless
     ``loaded`` by :func:`load_ltl_seed`) only when a seeded system needs it."""
     seed, seed_info = None, None
     if any(parse_label(name)[0] in ("SIE", "SRL") for name in labels):
         seed, seed_info = loaded if loaded is not None else load_ltl_seed(seeds_dir)
-    systems = {name: make_system(name, seed, network=network, readings=readings) for name in labels}
+    systems = {name: make_system(name, seed, network=network) for name in labels}
     return systems, seed_info
 
 
@@ -95,7 +93,6 @@ def run_config(
     network: NetworkParams,
     sim_params: envs.SimParams,
     seed_info: dict[str, Any] | None,
-    readings: Readings | None = None,
 ) -> dict[str, Any]:
     """Every parameter a run used, as plain JSON (with the versions that made it)."""
     plain = lambda x: np.asarray(x).tolist()
@@ -105,7 +102,7 @@ def run_config(
         "world": {"name": world.name, "source": source},
         "episode": dataclasses.asdict(config),
         "network": fields(network),
-        "readings": fields(DEFAULT if readings is None else readings),
+        "readings": fields(DEFAULT),
         "simulator": fields(sim_params),
         "ltl_seed": seed_info,
         "versions": versions(),
@@ -147,11 +144,8 @@ def records_frame(source: str | Path | Mapping[str, Any], runs: bool = False):
     except ImportError:
         raise UserError("records_frame needs pandas: pip install pandas") from None
     where = "the document" if isinstance(source, Mapping) else str(source)
-    try:
-        doc = source if isinstance(source, Mapping) else json.loads(Path(source).read_text())
-    except ValueError as err:
-        raise UserError(f"{where}: not JSON ({err})") from None
-    fmt = doc.get("format") if isinstance(doc, Mapping) else None
+    doc = source if isinstance(source, Mapping) else read_json_object(source)
+    fmt = doc.get("format")
     if fmt == FORMATS["trials"]:
         head = {k: doc[k] for k in ("label", "system", "world", "random_set", "seed")}
         rows = [{**head, "trial": i, **r} for i, r in enumerate(doc["trials"])]

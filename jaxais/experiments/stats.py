@@ -34,11 +34,9 @@ __all__ = [
     "bootstrap_mean_ci",
     "build_tables",
     "ci_below",
-    "ci_settings",
     "cohens_d",
     "comparison_pairs",
     "comparisons",
-    "failure_causes",
     "failure_counts",
     "hypotheses",
     "in_order",
@@ -63,7 +61,7 @@ METRICS: tuple[str, ...] = ("c", "tau", "f")
 FAILURE_COLUMNS: tuple[str, ...] = ("c", "tau", "total")
 """Table 5 keys: failures by collision cap, by time cap, overall."""
 
-_RECORD_KEY = {"tau": "tau", "f": "fitness"}
+_RECORD_KEY = {"c": "collisions_capped", "tau": "tau", "f": "fitness"}
 _MEANS = ("idiotypic_difference_rate", "trapped_s", "locked_s")
 """Record fields whose per-system means the tables hold."""
 
@@ -71,6 +69,15 @@ CI_LEVEL = 0.95
 BOOTSTRAP_RESAMPLES = 2000
 """B >= 1000 for percentile intervals (Efron & Tibshirani 1993, ch. 19)."""
 BOOTSTRAP_SEED = 0
+_CI_SETTINGS = {
+    "level": CI_LEVEL,
+    "table3": "percentile bootstrap of the mean; a system's trials resampled with "
+    "replacement, c, tau and f together",
+    "resamples": BOOTSTRAP_RESAMPLES,
+    "seed": BOOTSTRAP_SEED,
+    "table5": "Wilson score interval of the proportion, in %",
+}
+"""How the tables' intervals were made (``tables.json``'s ``"ci"``)."""
 
 
 Results = Mapping[str, Sequence[Mapping[str, Any]]]
@@ -103,37 +110,16 @@ def _ordered_systems(results: Results) -> list[str]:
 
 
 def metric_values(trials: Sequence[Mapping[str, Any]], metric: str) -> np.ndarray:
-    """``metric`` ("c" capped, "tau" or "f") over ``trials``, float64 ``[n]``; records without
-    ``collisions_capped`` (older schema) are capped here."""
-    if metric == "c":
-        cap = protocol.COLLISION_CAP
-        c = [t["collisions_capped"] if "collisions_capped" in t else min(t["collisions"], cap)
-             for t in trials]  # fmt: skip
-        return np.asarray(c, dtype=np.float64)
-    key = _RECORD_KEY[metric]
-    return np.asarray([float(t[key]) for t in trials], dtype=np.float64)
-
-
-def failure_causes(trial: Mapping[str, Any]) -> frozenset[str]:
-    """The caps a trial breached, a subset of ``{"collisions", "time"}`` (older records: from
-    ``failed_by``, a list, a string or None)."""
-    if "failed_collisions" in trial or "failed_time" in trial:
-        flags = {"collisions": trial.get("failed_collisions"), "time": trial.get("failed_time")}
-        return frozenset(k for k, v in flags.items() if v)
-    by = trial.get("failed_by")
-    if by is None:
-        return frozenset()
-    return frozenset([by] if isinstance(by, str) else by)
+    """``metric`` ("c" capped, "tau" or "f") over ``trials``, float64 ``[n]``."""
+    return np.asarray([float(t[_RECORD_KEY[metric]]) for t in trials], dtype=np.float64)
 
 
 def failure_counts(trials: Sequence[Mapping[str, Any]]) -> dict[str, int]:
-    """Trials failed ``{"c": by collisions, "tau": by time, "total": by either or ``failed``}``."""
-    causes = [failure_causes(t) for t in trials]
-    failed = [bool(t.get("failed")) or bool(b) for t, b in zip(trials, causes, strict=True)]
+    """Trials failed ``{"c": by collisions, "tau": by time, "total": by either}``."""
     return {
-        "c": sum("collisions" in b for b in causes),
-        "tau": sum("time" in b for b in causes),
-        "total": sum(failed),
+        "c": sum(bool(t["failed_collisions"]) for t in trials),
+        "tau": sum(bool(t["failed_time"]) for t in trials),
+        "total": sum(bool(t["failed"]) for t in trials),
     }
 
 
@@ -619,23 +605,27 @@ def baseline_tables(
         | dict(extra)
         for world, extra in baseline_by_world.items()
     }
-    tests: dict[str, dict[str, dict[str, Any]]] = {}
-    for world, extra in baseline_by_world.items():
-        tests[world] = {}
-        for name, mine in extra.items():
-            for other in against:
-                if other not in merged[world]:
-                    continue
-                a, b = metric_values(mine, "f"), metric_values(merged[world][other], "f")
-                t, p = welch_t(a, b)
-                u, p_u = mann_whitney_u(a, b)
-                tests[world][f"{name} vs {other}"] = {
-                    "welch_t": t,
-                    "welch_p": p,
-                    "mann_whitney_u": u,
-                    "mann_whitney_p": p_u,
-                    "significant": bool(p < alpha),
-                }
+
+    def test(mine: Sequence[Mapping[str, Any]], other: Sequence[Mapping[str, Any]]) -> dict:
+        a, b = metric_values(mine, "f"), metric_values(other, "f")
+        (t, p), (u, p_u) = welch_t(a, b), mann_whitney_u(a, b)
+        return {
+            "welch_t": t,
+            "welch_p": p,
+            "mann_whitney_u": u,
+            "mann_whitney_p": p_u,
+            "significant": bool(p < alpha),
+        }
+
+    tests = {
+        world: {
+            f"{name} vs {other}": test(mine, merged[world][other])
+            for name, mine in extra.items()
+            for other in against
+            if other in merged[world]
+        }
+        for world, extra in baseline_by_world.items()
+    }
     return jsonable(
         {
             "against": list(against),
@@ -646,18 +636,6 @@ def baseline_tables(
             "tests": tests,
         }
     )
-
-
-def ci_settings() -> dict[str, Any]:
-    """How the tables' intervals were made (``tables.json``'s ``"ci"``)."""
-    return {
-        "level": CI_LEVEL,
-        "table3": "percentile bootstrap of the mean; a system's trials resampled with "
-        "replacement, c, tau and f together",
-        "resamples": BOOTSTRAP_RESAMPLES,
-        "seed": BOOTSTRAP_SEED,
-        "table5": "Wilson score interval of the proportion, in %",
-    }
 
 
 def build_tables(
@@ -676,7 +654,7 @@ def build_tables(
             "table4": table4(results_by_world),
             "table5": table5(results_by_world),
             "table5_ci": table5_ci(results_by_world),
-            "ci": ci_settings(),
+            "ci": _CI_SETTINGS,
             **{k: record_means(results_by_world, k) for k in _MEANS},
             "hypotheses": hypotheses(results_by_world, alpha, cis),
         }

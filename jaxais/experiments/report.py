@@ -203,28 +203,18 @@ def _table4_section(ours: Mapping[str, Any], paper: Mapping[str, Any]) -> list[s
             row = [pair]
             for m in stats.METRICS:
                 a, b = mine.get(pair, {}).get(m), theirs.get(pair, {}).get(m)
-                differs = a is not None and b is not None and (a >= _SIG_LEVEL) != (b >= _SIG_LEVEL)
-                row.append(f"{_num(a)} / {_num(b)}" + (f" {_SIG_MARK}" if differs else ""))
+                row.append(f"{_num(a)} / {_num(b)}" + (f" {_SIG_MARK}" if _differs(a, b) else ""))
             body.append(row)
         header = ["Comparison"] + [f"{_METRIC_NAME[m]} ours / paper" for m in stats.METRICS]
         lines += [f"**{world}**", ""] + _table(header, body)
     return lines
 
 
-def _significance_differences(ours: Mapping[str, Any], paper: Mapping[str, Any]) -> list[str]:
-    out = []
-    for world in _worlds(ours, paper):
-        for pair, row in ours.get(world, {}).items():
-            ref = paper.get(world, {}).get(pair)
-            if ref is None:
-                continue
-            for m in stats.METRICS:
-                if (row[m] >= _SIG_LEVEL) != (ref[m] >= _SIG_LEVEL):
-                    out.append(
-                        f"- {world}, Table 4 {pair}, {_METRIC_NAME[m]}: level {row[m]} "
-                        f"(paper {ref[m]})"
-                    )
-    return out
+def _differs(ours: float | None, paper: float | None) -> bool:
+    """Whether two Table 4 levels give different verdicts at the paper's 99 %."""
+    if ours is None or paper is None:
+        return False
+    return (ours >= _SIG_LEVEL) != (paper >= _SIG_LEVEL)
 
 
 def _ordering_section(diffs3: list, diffs5: list, ours4: Mapping, paper4: Mapping) -> list[str]:
@@ -244,7 +234,14 @@ def _ordering_section(diffs3: list, diffs5: list, ours4: Mapping, paper4: Mappin
                 f"  - ours: {d['ours_order']}",
                 f"  - paper: {d['paper_order']}",
             ]
-    sig = _significance_differences(ours4, paper4)
+    sig = [
+        f"- {world}, Table 4 {pair}, {_METRIC_NAME[m]}: level {row[m]} (paper {ref[m]})"
+        for world in _worlds(ours4, paper4)
+        for pair, row in ours4.get(world, {}).items()
+        if (ref := paper4.get(world, {}).get(pair)) is not None
+        for m in stats.METRICS
+        if _differs(row[m], ref[m])
+    ]
     if sig:
         lines += ["", "Table 4 verdicts at 99 % that differ from the paper's (‡):", ""] + sig
     if not (diffs3 or diffs5 or sig):
@@ -465,35 +462,20 @@ def _baseline_section(baseline: Mapping[str, Any] | None) -> list[str]:
     return lines
 
 
-def _ltl_populations(ltl: Mapping[str, Any]) -> list[dict[str, Any]]:
-    """Per-population best f (generation 0, final generation, any generation) of a summary."""
-    if "populations" in ltl:
-        keys = {"first": "generation_0", "final": "final_generation", "overall": "overall"}
-        return [{k: p.get(f"best_f_{v}") for k, v in keys.items()} for p in ltl["populations"]]
-    gens = sorted(ltl.get("generations", []), key=lambda g: g["generation"])
-    if not gens:
-        return []
-    first, last = gens[0]["populations"], gens[-1]["populations"]
-    return [
-        {"first": a.get("best_f"), "final": b.get("best_f"), "overall": None}
-        for a, b in zip(first, last, strict=False)
-    ]
-
-
 def _ltl_section(ltl: Mapping[str, Any] | None, figure: str | None) -> list[str]:
     lines = ["## Long-term learning (GA)", ""]
     if ltl is None:
         return lines + ["No LTL summary was given.", ""]
-    pops = _ltl_populations(ltl)
+    pops = ltl.get("populations", [])
     if pops:
+        keys = ["best_f_generation_0", "best_f_final_generation"]
         head = ["Population", "best f, generation 0", "best f, final generation"]
-        overall = any(p["overall"] is not None for p in pops)
-        body = [
-            [str(i), _num(p["first"], 1), _num(p["final"], 1)]
-            + ([_num(p["overall"], 1)] if overall else [])
-            for i, p in enumerate(pops)
-        ]
-        lines += _table(head + (["best f, any generation (the seed)"] if overall else []), body)
+        if any(p.get("best_f_overall") is not None for p in pops):
+            keys.append("best_f_overall")
+            head.append("best f, any generation (the seed)")
+        lines += _table(
+            head, [[str(i)] + [_num(p.get(k), 1) for k in keys] for i, p in enumerate(pops)]
+        )
     extra = {k: v for k, v in ltl.items() if k not in ("populations", "generations") and _scalar(v)}
     if extra:
         lines += _table(["Quantity", "Value"], [[k, _value(v)] for k, v in extra.items()], "lr")
@@ -570,10 +552,7 @@ def _trajectory_figure(
         if drawer is not None:
             # The boxes and goal where this trial had them (random per trial in some worlds).
             placement = (placements or {}).get(s)
-            if placement is None:
-                drawer(ax, world)
-            else:
-                drawer(ax, world, placement)
+            drawer(ax, world, *([] if placement is None else [placement]))
         xy = np.asarray(trajectories[s], dtype=float).reshape(-1, 2)
         ax.plot(xy[:, 0], xy[:, 1], lw=1.0, color="tab:blue")
         if len(xy):
@@ -631,8 +610,8 @@ def write_report(
         tables: :func:`stats.build_tables` of ``results_by_world`` (``{world: {system:
             [record]}}``), with ``"calibration"`` optionally.
         paper: :func:`load_paper_tables`.
-        ltl_summary: an ``evolve.py`` ``summary.json`` (``populations`` and/or ``generations``,
-            plus scalars listed as they are) or None.
+        ltl_summary: an ``evolve.py`` ``summary.json`` (``populations`` tabulated, ``generations``
+            drawn, scalars listed as they are) or None.
         config, timings: the run configuration (shown as JSON) and ``{stage: seconds or dict}``.
         example_trajectories: ``{world: {system: xy [T, 2]}}``, drawn over ``world_drawer``'s
             world with ``example_placements`` (``{world: {system: placement}}``).
@@ -643,11 +622,9 @@ def write_report(
         The path of ``report.md``.
     """
     out = Path(out_dir)
-    fig_dir = out / "figures"
-    fig_dir.mkdir(parents=True, exist_ok=True)
+    (out / "figures").mkdir(parents=True, exist_ok=True)
     default_caps = {"c": protocol.COLLISION_CAP, "tau": protocol.TAU_CAP}
     caps = paper.get("protocol", {}).get("caps", default_caps)
-    alpha = protocol.ALPHA
 
     figures: list[tuple[str, str]] = []
     for world in _worlds(results_by_world):
@@ -713,7 +690,7 @@ def write_report(
     ]
     lines += _table4_section(tables["table4"], p4)
     lines += _ordering_section(diffs3, diffs5, tables["table4"], p4)
-    lines += _robustness_section(stats.comparisons(results_by_world), p4, alpha)
+    lines += _robustness_section(stats.comparisons(results_by_world), p4, protocol.ALPHA)
     lines += _idiotypic_section(tables.get("idiotypic_difference_rate", {}), paper)
     lines += _calibration_section(tables.get("calibration"))
     lines += _lockup_section(tables)

@@ -295,19 +295,15 @@ def animate(
     _frame_axes(ax, world)
     ax.set_axis_off()  # tick labels would take two thirds of each frame's drawing time
     robot_artists = []
+    n_wanderers = 0 if wand is None else wand.shape[2]
     for r in range(n_r):
         colour = _robot_colour(r)
-        body = Circle((0, 0), BODY_RADIUS, facecolor=colour, edgecolor="k", lw=0.8, zorder=7)
-        ax.add_patch(body)
+        style = dict(facecolor=colour, edgecolor="k", lw=0.8, zorder=7)
+        body = ax.add_patch(Circle((0, 0), BODY_RADIUS, **style))
         (tick,) = ax.plot([], [], color="k", lw=1.5, zorder=8)
         (path,) = ax.plot([], [], color=colour, lw=1.0, alpha=0.7, zorder=5)
-        others = []
-        for _ in range(0 if wand is None else wand.shape[2]):
-            disc = Circle(
-                (0, 0), BODY_RADIUS, facecolor=WANDERER_COLOUR, edgecolor=colour, lw=1.0, zorder=6
-            )
-            ax.add_patch(disc)
-            others.append(disc)
+        disc = dict(facecolor=WANDERER_COLOUR, edgecolor=colour, lw=1.0, zorder=6)
+        others = [ax.add_patch(Circle((0, 0), BODY_RADIUS, **disc)) for _ in range(n_wanderers)]
         robot_artists.append((body, tick, path, others))
 
     def update(i: int) -> None:

@@ -108,10 +108,6 @@ def ordering_differences(
     return out
 
 
-def _flagged(diffs: Sequence[Mapping[str, Any]]) -> set[tuple[str, str, str]]:
-    return {(d["world"], s, d["column"]) for d in diffs for s in d["systems"]}
-
-
 def _claims_section(ledger: Sequence[Mapping[str, Any]]) -> list[str]:
     """The ledger's headlines, a note on unevaluated claims and a row per claim."""
     counts = claims.summary(ledger)
@@ -143,14 +139,16 @@ def _side_by_side(
     ours: Mapping[str, Any],
     paper: Mapping[str, Any],
     cols: Sequence[tuple[str, str, int]],
-    flagged: set[tuple[str, str, str]],
+    diffs: Sequence[Mapping[str, Any]],
     n_trials: Mapping[str, Mapping[str, int]] | None,
     extra: Sequence[tuple[str, Mapping[str, Mapping[str, Any]]]] = (),
     intervals: Mapping[str, Mapping[str, Mapping[str, Sequence[float]]]] | None = None,
     note: str = "",
 ) -> list[str]:
-    """Our table beside the paper's, per world; ``extra``: ``(header, {world: {system: v}})``
-    columns of ours alone; ``intervals`` (:data:`stats.CIs`): ``[lo, hi]`` after our values."""
+    """Our table beside the paper's, per world, cells ranked unlike the paper's (``diffs``,
+    :func:`ordering_differences`) marked; ``extra``: ``(header, {world: {system: v}})`` columns
+    of ours alone; ``intervals`` (:data:`stats.CIs`): ``[lo, hi]`` after our values."""
+    flagged = {(d["world"], s, d["column"]) for d in diffs for s in d["systems"]}
     lines = [f"### {title}", ""] + ([note, ""] if note else [])
     ci = f" [{_LEVEL} CI]" if intervals else ""
     for world in _worlds(ours, paper):
@@ -272,9 +270,8 @@ def _hypotheses_section(ours: Mapping[str, Any], paper: Mapping[str, Any]) -> li
     return lines
 
 
-def _robustness_section(
-    comps: Mapping[str, Any], paper4: Mapping[str, Any], alpha: float
-) -> list[str]:
+def _robustness_section(comps: Mapping[str, Any], paper4: Mapping[str, Any]) -> list[str]:
+    alpha = protocol.ALPHA
     lines = [
         "## Robustness of the comparisons",
         "",
@@ -289,8 +286,7 @@ def _robustness_section(
     header += ["Mann–Whitney U (p)", "Cohen's d", "tests agree"]
     for world in _worlds(comps):
         body = []
-        by_pair = comps[world]
-        for pair, by_metric in by_pair.items():
+        for pair, by_metric in comps[world].items():
             for m, r in by_metric.items():
                 ref = paper4.get(world, {}).get(pair, {}).get(m)
                 sig = {r["student_p"] < alpha, r["welch_p"] < alpha, r["mwu_p"] < alpha}
@@ -679,10 +675,8 @@ def write_report(
     intervals = tables.get("table3_ci")
     note = _interval_note(tables.get("ci", {})) if intervals else ""
     t3, t5 = tables["table3"], tables["table5"]
-    lines += _side_by_side(
-        _T3_TITLE, t3, p3, _T3_COLS, _flagged(diffs3), n_trials, extra, intervals, note
-    )
-    lines += _side_by_side(_T5_TITLE, t5, p5, _T5_COLS, _flagged(diffs5), None)
+    lines += _side_by_side(_T3_TITLE, t3, p3, _T3_COLS, diffs3, n_trials, extra, intervals, note)
+    lines += _side_by_side(_T5_TITLE, t5, p5, _T5_COLS, diffs5, None)
     lines += [
         "A run can breach both caps (more than 100 collisions and no finish by 4000 s), so the "
         "c-cap and τ-cap columns overlap and c + τ may exceed total, in ours as in the paper's.",
@@ -690,7 +684,7 @@ def write_report(
     ]
     lines += _table4_section(tables["table4"], p4)
     lines += _ordering_section(diffs3, diffs5, tables["table4"], p4)
-    lines += _robustness_section(stats.comparisons(results_by_world), p4, protocol.ALPHA)
+    lines += _robustness_section(stats.comparisons(results_by_world), p4)
     lines += _idiotypic_section(tables.get("idiotypic_difference_rate", {}), paper)
     lines += _calibration_section(tables.get("calibration"))
     lines += _lockup_section(tables)

@@ -154,13 +154,6 @@ def _no_failures(world: str, results: stats.Results, have: list[str]) -> dict:
     return _claim(cid, world, text, held, evidence, reading)
 
 
-def _pair_reading(held: bool, a: str, b: str, cis: Mapping) -> tuple:
-    """The interval reading of "a's f is (significantly) lower than b's"."""
-    ci_a, ci_b = cis[a]["f"], cis[b]["f"]
-    evidence = f"{a} f {_ci(ci_a)} vs {b} {_ci(ci_b)}."
-    return _ci_reading(held, stats.ci_below(ci_a, ci_b), stats.ci_below(ci_b, ci_a), evidence)
-
-
 def _f_below(
     world: str, results: stats.Results, have: list[str], cis: Mapping, claim: tuple
 ) -> dict:
@@ -179,7 +172,10 @@ def _f_below(
         _, p = stats.student_t(fa, fb)
         held = bool(held and p < alpha)
         evidence += f"; p={p:.2g} (level {stats.significance_level(p)})"
-    return _claim(cid, world, text, held, evidence + ".", _pair_reading(held, a, b, cis))
+    ci_a, ci_b = cis[a]["f"], cis[b]["f"]
+    as_claimed, against = stats.ci_below(ci_a, ci_b), stats.ci_below(ci_b, ci_a)
+    reading = _ci_reading(held, as_claimed, against, f"{a} f {_ci(ci_a)} vs {b} {_ci(ci_b)}.")
+    return _claim(cid, world, text, held, evidence + ".", reading)
 
 
 def _world_claims(world: str, results: stats.Results, alpha: float, cis: Mapping) -> list[dict]:

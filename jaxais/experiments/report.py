@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from . import claims, protocol, stats
-from .plotting import new_figure
+from .plotting import new_figure, save_figure
 from .protocol import load_paper_tables
 
 __all__ = ["load_paper_tables", "ordering_differences", "write_report"]
@@ -529,7 +529,7 @@ def _box_figure(
         ax.set_title(f"{world}: {_METRIC_NAME[m]}")
         ax.grid(axis="y", alpha=0.3)
     ax.legend(loc="best", fontsize="small")
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
 
 
 def _trajectory_figure(
@@ -560,7 +560,7 @@ def _trajectory_figure(
         ax.set_axis_off()
     axes[0].legend(loc="best", fontsize="small")
     fig.suptitle(f"{world}: one example trajectory per system")
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
 
 
 def _ltl_figure(ltl: Mapping[str, Any], path: Path) -> bool:
@@ -581,7 +581,7 @@ def _ltl_figure(ltl: Mapping[str, Any], path: Path) -> bool:
     ax.set_title("LTL: best (solid) and mean (dashed) f per population")
     ax.grid(alpha=0.3)
     ax.legend(fontsize="small")
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     return True
 
 
@@ -622,12 +622,11 @@ def write_report(
     default_caps = {"c": protocol.COLLISION_CAP, "tau": protocol.TAU_CAP}
     caps = paper.get("protocol", {}).get("caps", default_caps)
 
+    p3, p4, p5 = (paper.get(k, {}) for k in ("table3", "table4", "table5"))
     figures: list[tuple[str, str]] = []
     for world in _worlds(results_by_world):
         name = f"figures/box_{world}.png"
-        _box_figure(
-            world, results_by_world[world], paper.get("table3", {}).get(world, {}), caps, out / name
-        )
+        _box_figure(world, results_by_world[world], p3.get(world, {}), caps, out / name)
         figures.append((f"{world}: c, τ and f per system", name))
     for world, trajectories in (example_trajectories or {}).items():
         if trajectories:
@@ -640,7 +639,6 @@ def write_report(
         ltl_fig = None
 
     n_trials = {w: {s: len(t) for s, t in r.items()} for w, r in results_by_world.items()}
-    p3, p4, p5 = (paper.get(k, {}) for k in ("table3", "table4", "table5"))
     diffs3 = ordering_differences(tables["table3"], p3, stats.METRICS)
     diffs5 = ordering_differences(tables["table5"], p5, stats.FAILURE_COLUMNS)
 

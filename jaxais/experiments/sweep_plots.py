@@ -69,12 +69,10 @@ def _heatmap_figure(doc: dict[str, Any], path: Path) -> None:
         if metric == "idiotypic_difference_rate" and min(z.shape) > 1:
             if np.nanmin(z) <= CONTOUR <= np.nanmax(z):
                 ax.contour(xv, yv, z, levels=[CONTOUR], colors="w", linewidths=1.5)
-                ax.set_title(f"{title} (white: 20 %)", fontsize=9)
+                title += " (white: 20 %)"
             else:
-                extent = f"{100 * np.nanmin(z):.1f}-{100 * np.nanmax(z):.1f} %"
-                ax.set_title(f"{title}: {extent}, no 20 % contour", fontsize=9)
-        else:
-            ax.set_title(title, fontsize=9)
+                title += f": {100 * np.nanmin(z):.1f}-{100 * np.nanmax(z):.1f} %, no 20 % contour"
+        ax.set_title(title, fontsize=9)
         base = doc["base_values"]
         ax.plot(base[nx], base[ny], marker="*", ms=12, color="C3", mec="w", ls="none")
         ax.set_xlabel(nx)

@@ -319,7 +319,7 @@ def animate(
 
     def write(tmp: Any) -> None:
         writer = animation.PillowWriter(fps=fps)
-        with writer.saving(fig, os.fspath(tmp), 80):
+        with writer.saving(fig, os.fspath(tmp), dpi=80):
             for i in range(n_t):
                 update(i)
                 writer.grab_frame()

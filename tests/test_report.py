@@ -87,8 +87,9 @@ def test_ordering_differences():
 def test_write_report_full(tmp_path, paper):
     results = synthetic_results(paper)
     tables = stats.build_tables(results)
-    ltl = {
+    ltl = {  # as evolve.py writes it: per population, then per generation
         "wall_time_s": 12.5,
+        "populations": [{"best_f_generation_0": 300, "best_f_final_generation": 297}] * 5,
         "generations": [
             {"generation": g, "populations": [{"best_f": 300 - g, "mean_f": 400 - g}] * 5}
             for g in range(4)

@@ -68,26 +68,15 @@ def _fmt(x: float) -> str:
     return f"{x:.1f}" if abs(x) >= 100 else f"{x:.2f}"
 
 
+_FIELDS = ("id", "world", "text", "held", "evidence", "ci_held", "ci_verdict", "ci_evidence")
+
+
 def _claim(
-    cid: str,
-    world: str | None,
-    text: str,
-    held: bool | None,
-    evidence: str,
-    ci: tuple[bool, str, str] | None = None,
+    cid: str, world: str | None, text: str, held: bool | None, evidence: str, ci: tuple = ()
 ) -> dict:
-    """A ledger entry; ``ci = (ci_held, ci_verdict, ci_evidence)``, ``None`` when not evaluated."""
-    ci_held, ci_verdict, ci_evidence = (None, None, "") if ci is None else ci
-    return {
-        "id": cid,
-        "world": world,
-        "text": text,
-        "held": held,
-        "evidence": evidence,
-        "ci_held": ci_held,
-        "ci_verdict": ci_verdict,
-        "ci_evidence": ci_evidence,
-    }
+    """A ledger entry; ``ci = (ci_held, ci_verdict, ci_evidence)``, empty when not evaluated."""
+    values = (cid, world, text, held, evidence, *(ci or (None, None, "")))
+    return dict(zip(_FIELDS, values, strict=True))
 
 
 def _ci_reading(held: bool, as_claimed: bool, against: bool, evidence: str) -> tuple:
@@ -160,55 +149,33 @@ def _no_failures(world: str, results: stats.Results, have: list[str]) -> dict:
     )
     lo, hi = stats.proportion_ci(failed, len(trials))
     ci_evidence = f"SIE failure rate [{100 * lo:.2g}, {100 * hi:.2g}] % (Wilson)."
-    reading = (
-        (True, HELD_ZERO_IN_CI, ci_evidence)
-        if failed == 0
-        else (False, NOT_HELD_ZERO_OUT, ci_evidence)
-    )
-    return _claim(cid, world, text, failed == 0, evidence, reading)
+    held = failed == 0
+    reading = (held, HELD_ZERO_IN_CI if held else NOT_HELD_ZERO_OUT, ci_evidence)
+    return _claim(cid, world, text, held, evidence, reading)
 
 
-def _sig_below(
-    world: str, results: stats.Results, have: list[str], other: str, alpha: float, cis: Mapping
+def _f_below(
+    world: str, results: stats.Results, have: list[str], cis: Mapping, claim: tuple
 ) -> dict:
-    cid = f"{world}/SIE-f-sig-below/{other}"
-    text = (
-        f"In {protocol.WORLD_NAMES[world]}, SIE's f is significantly lower than {other}'s "
-        f"(two-tailed Student's t, {100 * (1 - alpha):g} % level)."
-    )
-    why = _missing(["SIE", other], have, world)
-    if why:
-        return _claim(cid, world, text, None, why)
-    a = stats.metric_values(results["SIE"], "f")
-    b = stats.metric_values(results[other], "f")
-    _, p = stats.student_t(a, b)
-    held = bool(a.mean() < b.mean() and p < alpha)
-    evidence = (
-        f"SIE f {_fmt(a.mean())} vs {other} {_fmt(b.mean())}; p={p:.2g} "
-        f"(level {stats.significance_level(p)})."
-    )
-    return _claim(cid, world, text, held, evidence, _pair_reading(held, "SIE", other, cis))
-
-
-def _pair_reading(held: bool, a: str, b: str, cis: Mapping) -> tuple:
-    """The interval reading of "a's f is (significantly) lower than b's"."""
-    ci_a, ci_b = cis[a]["f"], cis[b]["f"]
-    evidence = f"{a} f {_ci(ci_a)} vs {b} {_ci(ci_b)}."
-    return _ci_reading(held, stats.ci_below(ci_a, ci_b), stats.ci_below(ci_b, ci_a), evidence)
-
-
-def _lower(
-    world: str, results: stats.Results, have: list[str], a: str, b: str, text: str, cis: Mapping
-) -> dict:
-    cid = f"{world}/{a}-f-below/{b}"
+    """The claim ``(a, b, text, alpha)`` that a's mean f is lower than b's; with ``alpha`` (not
+    None), significantly (two-tailed Student's t)."""
+    a, b, text, alpha = claim
+    cid = f"{world}/{a}-f-{'below' if alpha is None else 'sig-below'}/{b}"
     text = f"In {protocol.WORLD_NAMES[world]}, {text}"
     why = _missing([a, b], have, world)
     if why:
         return _claim(cid, world, text, None, why)
-    fa, fb = _mean(results, a, "f"), _mean(results, b, "f")
-    held = fa < fb
-    reading = _pair_reading(held, a, b, cis)
-    return _claim(cid, world, text, held, f"{a} f {_fmt(fa)} vs {b} {_fmt(fb)}.", reading)
+    fa, fb = (stats.metric_values(results[s], "f") for s in (a, b))
+    held = bool(fa.mean() < fb.mean())
+    evidence = f"{a} f {_fmt(fa.mean())} vs {b} {_fmt(fb.mean())}"
+    if alpha is not None:
+        _, p = stats.student_t(fa, fb)
+        held = bool(held and p < alpha)
+        evidence += f"; p={p:.2g} (level {stats.significance_level(p)})"
+    ci_a, ci_b = cis[a]["f"], cis[b]["f"]
+    as_claimed, against = stats.ci_below(ci_a, ci_b), stats.ci_below(ci_b, ci_a)
+    reading = _ci_reading(held, as_claimed, against, f"{a} f {_ci(ci_a)} vs {b} {_ci(ci_b)}.")
+    return _claim(cid, world, text, held, evidence + ".", reading)
 
 
 def _world_claims(world: str, results: stats.Results, alpha: float, cis: Mapping) -> list[dict]:
@@ -216,10 +183,14 @@ def _world_claims(world: str, results: stats.Results, alpha: float, cis: Mapping
     have = [s for s in systems if len(results.get(s, ())) > 0]
     out = [_lowest(world, results, have, m, cis) for m in stats.METRICS]
     out.append(_no_failures(world, results, have))
-    out += [
-        _sig_below(world, results, have, u, alpha, cis) for u in protocol.UNSEEDED if u in systems
+    level = f"two-tailed Student's t, {100 * (1 - alpha):g} % level"
+    pairs = [
+        ("SIE", u, f"SIE's f is significantly lower than {u}'s ({level}).", alpha)
+        for u in protocol.UNSEEDED
+        if u in systems
     ]
-    out += [_lower(world, results, have, a, b, text, cis) for a, b, text in _PAIR_CLAIMS]
+    pairs += [(a, b, text, None) for a, b, text in _PAIR_CLAIMS]
+    out += [_f_below(world, results, have, cis, pair) for pair in pairs]
     return out
 
 

@@ -106,7 +106,6 @@ def render(
     state0, poses, wanderers = jax.device_get(
         make_run(w, params, robots, steps)(jax.random.key(seed))
     )
-    poses, wanderers = np.asarray(poses), np.asarray(wanderers)
     dt = float(params.dt)
     title = f"{w.name}: {robots} robot(s) x {steps} steps ({steps * dt:.0f} s)"
     fig = plotting.world_figure(
@@ -115,8 +114,7 @@ def render(
     plotting.save_figure(fig, out)
     if gif is None:
         return w.name, None
-    first = jax.tree.map(lambda x: np.asarray(x)[0], state0)
     frames = plotting.animate(
-        w, poses[::every], wanderers[::every], gif, fps=fps, state=first, dt=dt * every
+        w, poses[::every], wanderers[::every], gif, fps=fps, state=state0, dt=dt * every
     )
     return w.name, frames

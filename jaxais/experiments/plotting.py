@@ -13,7 +13,6 @@ from collections.abc import Sequence
 from types import SimpleNamespace
 from typing import Any
 
-import jax
 import numpy as np
 from matplotlib import animation
 from matplotlib.axes import Axes
@@ -23,7 +22,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Rectangle
 
-from jaxais.envs import GOAL, MARKER, WALL, State, World
+from jaxais.envs import GOAL, MARKER, WALL, World
 from jaxais.io import atomic_write
 
 __all__ = [
@@ -47,6 +46,14 @@ def _np(x: Any) -> np.ndarray:
     return np.asarray(x, np.float64)
 
 
+def _robot_colour(i: int) -> str:
+    return ROBOT_COLOURS[i % len(ROBOT_COLOURS)]
+
+
+def _material_colour(m: Any) -> str:
+    return MATERIAL_COLOURS.get(int(m), "k")
+
+
 def _region_rect(region: np.ndarray, **kw: Any) -> Rectangle:
     x0, y0, x1, y1 = region
     return Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, **kw)
@@ -64,13 +71,20 @@ def _is_batched(state: Placed) -> bool:
     return np.ndim(state.goal) > 1
 
 
-def _unstack(state: Placed) -> list[Placed]:
-    """A batched ``State`` or placement (leading robot axis) as a list of single ones (NumPy)."""
-    n = np.shape(state.goal)[0]
-    if isinstance(state, State):
-        return [jax.tree.map(lambda x, i=i: np.asarray(x)[i], state) for i in range(n)]
-    boxes, goal = np.asarray(state.boxes), np.asarray(state.goal)
-    return [SimpleNamespace(boxes=boxes[i], goal=goal[i]) for i in range(n)]
+def _robots(states: Placed | Sequence[Placed] | None) -> list[Placed]:
+    """``states`` (one, batched with a leading robot axis, or a list of either) as a list of one
+    robot's boxes, goal and, a ``State``'s, wanderers (NumPy)."""
+    if states is None:
+        return []
+    if not _is_placed(states):
+        return [robot for s in states for robot in _robots(s)]
+    if not _is_batched(states):
+        return [states]
+    keys = [k for k in ("boxes", "goal", "wanderers") if hasattr(states, k)]
+    arrays = {k: np.asarray(getattr(states, k)) for k in keys}
+    return [
+        SimpleNamespace(**{k: a[i] for k, a in arrays.items()}) for i in range(len(arrays["goal"]))
+    ]
 
 
 def _draw_static(ax: Axes, world: World, show_regions: bool) -> None:
@@ -80,21 +94,17 @@ def _draw_static(ax: Axes, world: World, show_regions: bool) -> None:
     ax.add_collection(
         LineCollection(
             seg.reshape(-1, 2, 2),
-            colors=[MATERIAL_COLOURS.get(int(m), "k") for m in mats],
+            colors=[_material_colour(m) for m in mats],
             linewidths=[3.0 if m != WALL else 2.0 for m in mats],
             capstyle="butt",
             zorder=3,
         )
     )
-    for (x, y, r), m, ok in zip(
-        _np(world.pillar),
-        np.asarray(world.pillar_material),
-        np.asarray(world.pillar_valid),
-        strict=True,
-    ):
-        if ok:
-            colour = MATERIAL_COLOURS.get(int(m), "k")
-            ax.add_patch(Circle((x, y), r, facecolor=colour, edgecolor="k", lw=0.5, zorder=3))
+    valid = np.asarray(world.pillar_valid)
+    mats = np.asarray(world.pillar_material)[valid]
+    for (x, y, r), m in zip(_np(world.pillar)[valid], mats, strict=True):
+        colour = _material_colour(m)
+        ax.add_patch(Circle((x, y), r, facecolor=colour, edgecolor="k", lw=0.5, zorder=3))
     if not show_regions:
         return
     regions = [(world.start_region, 1.2, START_COLOUR, "start region")]
@@ -119,7 +129,6 @@ def _draw_objects(
     *,
     alpha: float = 1.0,
     show_wanderers: bool = True,
-    body_radius: float = BODY_RADIUS,
     wanderer_label: str | None = None,
     edge: str = "k",
 ) -> None:
@@ -130,16 +139,11 @@ def _draw_objects(
     goal = _np(state.goal) if state is not None else region_centre(_np(world.goal_region))
     lw = 0.5 if edge == "k" else 1.2
     style = dict(edgecolor=edge, lw=lw, alpha=alpha, zorder=3)
-    for (cx, cy), (hx, hy), m, ok in zip(
-        boxes,
-        _np(world.box_half),
-        np.asarray(world.box_material),
-        np.asarray(world.box_valid),
-        strict=True,
-    ):
-        if ok:
-            colour = MATERIAL_COLOURS.get(int(m), "k")
-            ax.add_patch(Rectangle((cx - hx, cy - hy), 2 * hx, 2 * hy, facecolor=colour, **style))
+    valid = np.asarray(world.box_valid)
+    half, mats = _np(world.box_half)[valid], np.asarray(world.box_material)[valid]
+    for (cx, cy), (hx, hy), m in zip(boxes[valid], half, mats, strict=True):
+        colour = _material_colour(m)
+        ax.add_patch(Rectangle((cx - hx, cy - hy), 2 * hx, 2 * hy, facecolor=colour, **style))
     gh = _np(world.goal_half)
     style = dict(facecolor=MATERIAL_COLOURS[GOAL], **style)
     if world.goal_shape == "ball":
@@ -149,7 +153,7 @@ def _draw_objects(
     if state is not None and show_wanderers and hasattr(state, "wanderers"):
         for k, (x, y, _) in enumerate(_np(state.wanderers)):
             label = wanderer_label if k == 0 else None
-            disc = Circle((x, y), body_radius, facecolor=WANDERER_COLOUR, edgecolor="k", lw=0.5,
+            disc = Circle((x, y), BODY_RADIUS, facecolor=WANDERER_COLOUR, edgecolor="k", lw=0.5,
                           alpha=alpha, zorder=4, label=label)  # fmt: skip
             ax.add_patch(disc)
 
@@ -164,30 +168,16 @@ def _frame_axes(ax: Axes, world: World) -> None:
     ax.set_ylabel("y (m)")
 
 
-def draw_world(
-    ax: Axes,
-    world: World,
-    state: Placed | None = None,
-    *,
-    show_regions: bool = True,
-    show_wanderers: bool = True,
-    alpha: float = 1.0,
-    body_radius: float = BODY_RADIUS,
-) -> Axes:
-    """Draw ``world`` on ``ax`` (limits and aspect set to the arena) and return ``ax``.
-
-    ``state`` is one robot's ``State`` (boxes, goal and wanderers where it has them) or a
-    placement (boxes and goal); ``show_regions`` draws the start, goal, wanderer and random-box
-    regions; ``alpha`` is the opacity of boxes, goal and wanderers.
-    """
-    if state is not None and _is_batched(state):
-        raise ValueError("draw_world takes one robot's State; index a batched State first")
+def draw_world(ax: Axes, world: World, state: Placed | None = None) -> Axes:
+    """Draw ``world`` and its start, goal, wanderer and random-box regions on ``ax`` (limits and
+    aspect set to the arena) and return ``ax``; ``state`` is one robot's ``State`` (boxes, goal
+    and wanderers where it has them) or a placement (boxes and goal)."""
     if state is not None and not _is_placed(state):
         raise TypeError(f"draw_world: state must have boxes and goal, got {type(state).__name__}")
-    _draw_static(ax, world, show_regions)
-    _draw_objects(
-        ax, world, state, alpha=alpha, show_wanderers=show_wanderers, body_radius=body_radius
-    )
+    if state is not None and _is_batched(state):
+        raise ValueError("draw_world takes one robot's State; index a batched State first")
+    _draw_static(ax, world, show_regions=True)
+    _draw_objects(ax, world, state)
     _frame_axes(ax, world)
     return ax
 
@@ -206,17 +196,6 @@ def draw_trajectory(ax: Axes, xy: Any, label: str | None = None, **kw: Any) -> L
     return line
 
 
-def _states_list(states: Placed | Sequence[Placed] | None) -> list[Placed]:
-    if states is None:
-        return []
-    if _is_placed(states):
-        return _unstack(states) if _is_batched(states) else [states]
-    out: list[Placed] = []
-    for s in states:
-        out.extend(_states_list(s))
-    return out
-
-
 def new_figure(figsize: tuple[float, float], layout: str | None = "constrained") -> Figure:
     """A ``Figure`` on its own Agg canvas (no pyplot)."""
     fig = Figure(figsize=figsize, layout=layout)
@@ -231,7 +210,6 @@ def world_figure(
     title: str | None = None,
     *,
     labels: Sequence[str] | None = None,
-    show_regions: bool = True,
 ) -> Figure:
     """A figure (Agg canvas) of ``world`` with robots and trajectories.
 
@@ -248,26 +226,18 @@ def world_figure(
         w, h = 9.0, 45.0 / w
     fig = new_figure((w + 2.0, h + 0.7))  # room for the labels and the legend
     ax = fig.add_subplot()
-    _draw_static(ax, world, show_regions)
-    robots = _states_list(states)
-    if robots:
-        for i, s in enumerate(robots):
-            first = i == 0
-            label = "wanderer (at start)" if first else None
-            edge = ROBOT_COLOURS[i % len(ROBOT_COLOURS)] if len(robots) > 1 else "k"
-            alpha = 1.0 if first else 0.25
-            _draw_objects(ax, world, s, alpha=alpha, wanderer_label=label, edge=edge)
-    else:
-        _draw_objects(ax, world, None)
-    if trajectories is not None:
-        if isinstance(trajectories, list | tuple):
-            trajs = [np.asarray(t) for t in trajectories]
-        else:  # one array (NumPy or JAX): [T, 2+] or [N, T, 2+]
-            arr = np.asarray(trajectories)
-            trajs = [arr] if arr.ndim == 2 else list(arr)
-        for i, xy in enumerate(trajs):
-            label = labels[i] if labels is not None else f"robot {i}"
-            draw_trajectory(ax, xy, label=label, color=ROBOT_COLOURS[i % len(ROBOT_COLOURS)])
+    _draw_static(ax, world, show_regions=True)
+    robots = _robots(states)
+    for i, s in enumerate(robots or [None]):
+        label = "wanderer (at start)" if i == 0 else None
+        edge = _robot_colour(i) if len(robots) > 1 else "k"
+        _draw_objects(ax, world, s, alpha=0.25 if i else 1.0, wanderer_label=label, edge=edge)
+    if trajectories is not None and not isinstance(trajectories, list | tuple):
+        arr = np.asarray(trajectories)  # one array (NumPy or JAX): [T, 2+] or [N, T, 2+]
+        trajectories = [arr] if arr.ndim == 2 else list(arr)
+    for i, xy in enumerate(trajectories or []):
+        label = labels[i] if labels is not None else f"robot {i}"
+        draw_trajectory(ax, xy, label=label, color=_robot_colour(i))
     _frame_axes(ax, world)
     ax.set_title(title if title is not None else world.name)
     handles, _ = ax.get_legend_handles_labels()
@@ -291,17 +261,13 @@ def animate(
     *,
     state: Placed | None = None,
     dt: float | None = None,
-    title: str | None = None,
-    dpi: float = 80,
-    trail: bool = True,
-    body_radius: float = BODY_RADIUS,
 ) -> int:
     """Write a GIF of poses [T, 3] or [T, R, 3] (x, y, heading; R robots in copies of the world)
     and ``wanderers`` [T, (R,) W, 3] or None, one frame per row, atomically; returns the frame
     count.
 
     ``state``: the first robot's ``State`` or placement (boxes and goal do not move); ``dt``:
-    seconds between frames, for a clock in the title; ``trail``: each robot's path so far.
+    seconds between frames, for a clock in the title. Each robot trails its path so far.
     """
     poses = _np(poses)
     if poses.ndim == 2:
@@ -316,7 +282,7 @@ def animate(
         if wand.shape[:2] != (n_t, n_r) or wand.shape[-1] != 3:
             raise ValueError(f"wanderers {np.shape(wanderers)} do not match poses {poses.shape}")
     if state is not None and _is_batched(state):
-        state = _unstack(state)[0]
+        state = _robots(state)[0]
     if os.path.splitext(os.fspath(out_path))[1].lower() != ".gif":
         raise ValueError(f"{out_path}: an animation must be written to a .gif file")
 
@@ -328,38 +294,32 @@ def animate(
     _draw_objects(ax, world, state, show_wanderers=False)
     _frame_axes(ax, world)
     ax.set_axis_off()  # tick labels would take two thirds of each frame's drawing time
-    prefix = title if title is not None else world.name
     robot_artists = []
+    n_wanderers = 0 if wand is None else wand.shape[2]
     for r in range(n_r):
-        colour = ROBOT_COLOURS[r % len(ROBOT_COLOURS)]
-        body = Circle((0, 0), body_radius, facecolor=colour, edgecolor="k", lw=0.8, zorder=7)
-        ax.add_patch(body)
+        colour = _robot_colour(r)
+        style = dict(facecolor=colour, edgecolor="k", lw=0.8, zorder=7)
+        body = ax.add_patch(Circle((0, 0), BODY_RADIUS, **style))
         (tick,) = ax.plot([], [], color="k", lw=1.5, zorder=8)
         (path,) = ax.plot([], [], color=colour, lw=1.0, alpha=0.7, zorder=5)
-        others = []
-        for _ in range(0 if wand is None else wand.shape[2]):
-            disc = Circle(
-                (0, 0), body_radius, facecolor=WANDERER_COLOUR, edgecolor=colour, lw=1.0, zorder=6
-            )
-            ax.add_patch(disc)
-            others.append(disc)
+        disc = dict(facecolor=WANDERER_COLOUR, edgecolor=colour, lw=1.0, zorder=6)
+        others = [ax.add_patch(Circle((0, 0), BODY_RADIUS, **disc)) for _ in range(n_wanderers)]
         robot_artists.append((body, tick, path, others))
 
     def update(i: int) -> None:
         for r, (body, tick, path, others) in enumerate(robot_artists):
             x, y, th = poses[i, r]
             body.center = (x, y)
-            tick.set_data([x, x + body_radius * np.cos(th)], [y, y + body_radius * np.sin(th)])
-            if trail:
-                path.set_data(poses[: i + 1, r, 0], poses[: i + 1, r, 1])
+            tick.set_data([x, x + BODY_RADIUS * np.cos(th)], [y, y + BODY_RADIUS * np.sin(th)])
+            path.set_data(poses[: i + 1, r, 0], poses[: i + 1, r, 1])
             for k, disc in enumerate(others):
                 disc.center = tuple(wand[i, r, k, :2])
         clock = f"  t = {i * dt:.1f} s" if dt is not None else ""
-        ax.set_title(f"{prefix}{clock}")
+        ax.set_title(f"{world.name}{clock}")
 
     def write(tmp: Any) -> None:
         writer = animation.PillowWriter(fps=fps)
-        with writer.saving(fig, os.fspath(tmp), dpi):
+        with writer.saving(fig, os.fspath(tmp), dpi=80):
             for i in range(n_t):
                 update(i)
                 writer.grab_frame()

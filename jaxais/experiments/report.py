@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from . import claims, protocol, stats
-from .plotting import new_figure
+from .plotting import new_figure, save_figure
 from .protocol import load_paper_tables
 
 __all__ = ["load_paper_tables", "ordering_differences", "write_report"]
@@ -108,10 +108,6 @@ def ordering_differences(
     return out
 
 
-def _flagged(diffs: Sequence[Mapping[str, Any]]) -> set[tuple[str, str, str]]:
-    return {(d["world"], s, d["column"]) for d in diffs for s in d["systems"]}
-
-
 def _claims_section(ledger: Sequence[Mapping[str, Any]]) -> list[str]:
     """The ledger's headlines, a note on unevaluated claims and a row per claim."""
     counts = claims.summary(ledger)
@@ -143,14 +139,16 @@ def _side_by_side(
     ours: Mapping[str, Any],
     paper: Mapping[str, Any],
     cols: Sequence[tuple[str, str, int]],
-    flagged: set[tuple[str, str, str]],
+    diffs: Sequence[Mapping[str, Any]],
     n_trials: Mapping[str, Mapping[str, int]] | None,
     extra: Sequence[tuple[str, Mapping[str, Mapping[str, Any]]]] = (),
     intervals: Mapping[str, Mapping[str, Mapping[str, Sequence[float]]]] | None = None,
     note: str = "",
 ) -> list[str]:
-    """Our table beside the paper's, per world; ``extra``: ``(header, {world: {system: v}})``
-    columns of ours alone; ``intervals`` (:data:`stats.CIs`): ``[lo, hi]`` after our values."""
+    """Our table beside the paper's, per world, cells ranked unlike the paper's (``diffs``,
+    :func:`ordering_differences`) marked; ``extra``: ``(header, {world: {system: v}})`` columns
+    of ours alone; ``intervals`` (:data:`stats.CIs`): ``[lo, hi]`` after our values."""
+    flagged = {(d["world"], s, d["column"]) for d in diffs for s in d["systems"]}
     lines = [f"### {title}", ""] + ([note, ""] if note else [])
     ci = f" [{_LEVEL} CI]" if intervals else ""
     for world in _worlds(ours, paper):
@@ -203,28 +201,18 @@ def _table4_section(ours: Mapping[str, Any], paper: Mapping[str, Any]) -> list[s
             row = [pair]
             for m in stats.METRICS:
                 a, b = mine.get(pair, {}).get(m), theirs.get(pair, {}).get(m)
-                differs = a is not None and b is not None and (a >= _SIG_LEVEL) != (b >= _SIG_LEVEL)
-                row.append(f"{_num(a)} / {_num(b)}" + (f" {_SIG_MARK}" if differs else ""))
+                row.append(f"{_num(a)} / {_num(b)}" + (f" {_SIG_MARK}" if _differs(a, b) else ""))
             body.append(row)
         header = ["Comparison"] + [f"{_METRIC_NAME[m]} ours / paper" for m in stats.METRICS]
         lines += [f"**{world}**", ""] + _table(header, body)
     return lines
 
 
-def _significance_differences(ours: Mapping[str, Any], paper: Mapping[str, Any]) -> list[str]:
-    out = []
-    for world in _worlds(ours, paper):
-        for pair, row in ours.get(world, {}).items():
-            ref = paper.get(world, {}).get(pair)
-            if ref is None:
-                continue
-            for m in stats.METRICS:
-                if (row[m] >= _SIG_LEVEL) != (ref[m] >= _SIG_LEVEL):
-                    out.append(
-                        f"- {world}, Table 4 {pair}, {_METRIC_NAME[m]}: level {row[m]} "
-                        f"(paper {ref[m]})"
-                    )
-    return out
+def _differs(ours: float | None, paper: float | None) -> bool:
+    """Whether two Table 4 levels give different verdicts at the paper's 99 %."""
+    if ours is None or paper is None:
+        return False
+    return (ours >= _SIG_LEVEL) != (paper >= _SIG_LEVEL)
 
 
 def _ordering_section(diffs3: list, diffs5: list, ours4: Mapping, paper4: Mapping) -> list[str]:
@@ -244,7 +232,14 @@ def _ordering_section(diffs3: list, diffs5: list, ours4: Mapping, paper4: Mappin
                 f"  - ours: {d['ours_order']}",
                 f"  - paper: {d['paper_order']}",
             ]
-    sig = _significance_differences(ours4, paper4)
+    sig = [
+        f"- {world}, Table 4 {pair}, {_METRIC_NAME[m]}: level {row[m]} (paper {ref[m]})"
+        for world in _worlds(ours4, paper4)
+        for pair, row in ours4.get(world, {}).items()
+        if (ref := paper4.get(world, {}).get(pair)) is not None
+        for m in stats.METRICS
+        if _differs(row[m], ref[m])
+    ]
     if sig:
         lines += ["", "Table 4 verdicts at 99 % that differ from the paper's (‡):", ""] + sig
     if not (diffs3 or diffs5 or sig):
@@ -275,9 +270,8 @@ def _hypotheses_section(ours: Mapping[str, Any], paper: Mapping[str, Any]) -> li
     return lines
 
 
-def _robustness_section(
-    comps: Mapping[str, Any], paper4: Mapping[str, Any], alpha: float
-) -> list[str]:
+def _robustness_section(comps: Mapping[str, Any], paper4: Mapping[str, Any]) -> list[str]:
+    alpha = protocol.ALPHA
     lines = [
         "## Robustness of the comparisons",
         "",
@@ -292,8 +286,7 @@ def _robustness_section(
     header += ["Mann–Whitney U (p)", "Cohen's d", "tests agree"]
     for world in _worlds(comps):
         body = []
-        by_pair = comps[world]
-        for pair, by_metric in by_pair.items():
+        for pair, by_metric in comps[world].items():
             for m, r in by_metric.items():
                 ref = paper4.get(world, {}).get(pair, {}).get(m)
                 sig = {r["student_p"] < alpha, r["welch_p"] < alpha, r["mwu_p"] < alpha}
@@ -465,35 +458,20 @@ def _baseline_section(baseline: Mapping[str, Any] | None) -> list[str]:
     return lines
 
 
-def _ltl_populations(ltl: Mapping[str, Any]) -> list[dict[str, Any]]:
-    """Per-population best f (generation 0, final generation, any generation) of a summary."""
-    if "populations" in ltl:
-        keys = {"first": "generation_0", "final": "final_generation", "overall": "overall"}
-        return [{k: p.get(f"best_f_{v}") for k, v in keys.items()} for p in ltl["populations"]]
-    gens = sorted(ltl.get("generations", []), key=lambda g: g["generation"])
-    if not gens:
-        return []
-    first, last = gens[0]["populations"], gens[-1]["populations"]
-    return [
-        {"first": a.get("best_f"), "final": b.get("best_f"), "overall": None}
-        for a, b in zip(first, last, strict=False)
-    ]
-
-
 def _ltl_section(ltl: Mapping[str, Any] | None, figure: str | None) -> list[str]:
     lines = ["## Long-term learning (GA)", ""]
     if ltl is None:
         return lines + ["No LTL summary was given.", ""]
-    pops = _ltl_populations(ltl)
+    pops = ltl.get("populations", [])
     if pops:
+        keys = ["best_f_generation_0", "best_f_final_generation"]
         head = ["Population", "best f, generation 0", "best f, final generation"]
-        overall = any(p["overall"] is not None for p in pops)
-        body = [
-            [str(i), _num(p["first"], 1), _num(p["final"], 1)]
-            + ([_num(p["overall"], 1)] if overall else [])
-            for i, p in enumerate(pops)
-        ]
-        lines += _table(head + (["best f, any generation (the seed)"] if overall else []), body)
+        if any(p.get("best_f_overall") is not None for p in pops):
+            keys.append("best_f_overall")
+            head.append("best f, any generation (the seed)")
+        lines += _table(
+            head, [[str(i)] + [_num(p.get(k), 1) for k in keys] for i, p in enumerate(pops)]
+        )
     extra = {k: v for k, v in ltl.items() if k not in ("populations", "generations") and _scalar(v)}
     if extra:
         lines += _table(["Quantity", "Value"], [[k, _value(v)] for k, v in extra.items()], "lr")
@@ -551,7 +529,7 @@ def _box_figure(
         ax.set_title(f"{world}: {_METRIC_NAME[m]}")
         ax.grid(axis="y", alpha=0.3)
     ax.legend(loc="best", fontsize="small")
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
 
 
 def _trajectory_figure(
@@ -570,10 +548,7 @@ def _trajectory_figure(
         if drawer is not None:
             # The boxes and goal where this trial had them (random per trial in some worlds).
             placement = (placements or {}).get(s)
-            if placement is None:
-                drawer(ax, world)
-            else:
-                drawer(ax, world, placement)
+            drawer(ax, world, *([] if placement is None else [placement]))
         xy = np.asarray(trajectories[s], dtype=float).reshape(-1, 2)
         ax.plot(xy[:, 0], xy[:, 1], lw=1.0, color="tab:blue")
         if len(xy):
@@ -585,7 +560,7 @@ def _trajectory_figure(
         ax.set_axis_off()
     axes[0].legend(loc="best", fontsize="small")
     fig.suptitle(f"{world}: one example trajectory per system")
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
 
 
 def _ltl_figure(ltl: Mapping[str, Any], path: Path) -> bool:
@@ -606,7 +581,7 @@ def _ltl_figure(ltl: Mapping[str, Any], path: Path) -> bool:
     ax.set_title("LTL: best (solid) and mean (dashed) f per population")
     ax.grid(alpha=0.3)
     ax.legend(fontsize="small")
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     return True
 
 
@@ -631,8 +606,8 @@ def write_report(
         tables: :func:`stats.build_tables` of ``results_by_world`` (``{world: {system:
             [record]}}``), with ``"calibration"`` optionally.
         paper: :func:`load_paper_tables`.
-        ltl_summary: an ``evolve.py`` ``summary.json`` (``populations`` and/or ``generations``,
-            plus scalars listed as they are) or None.
+        ltl_summary: an ``evolve.py`` ``summary.json`` (``populations`` tabulated, ``generations``
+            drawn, scalars listed as they are) or None.
         config, timings: the run configuration (shown as JSON) and ``{stage: seconds or dict}``.
         example_trajectories: ``{world: {system: xy [T, 2]}}``, drawn over ``world_drawer``'s
             world with ``example_placements`` (``{world: {system: placement}}``).
@@ -643,18 +618,15 @@ def write_report(
         The path of ``report.md``.
     """
     out = Path(out_dir)
-    fig_dir = out / "figures"
-    fig_dir.mkdir(parents=True, exist_ok=True)
+    (out / "figures").mkdir(parents=True, exist_ok=True)
     default_caps = {"c": protocol.COLLISION_CAP, "tau": protocol.TAU_CAP}
     caps = paper.get("protocol", {}).get("caps", default_caps)
-    alpha = protocol.ALPHA
 
+    p3, p4, p5 = (paper.get(k, {}) for k in ("table3", "table4", "table5"))
     figures: list[tuple[str, str]] = []
     for world in _worlds(results_by_world):
         name = f"figures/box_{world}.png"
-        _box_figure(
-            world, results_by_world[world], paper.get("table3", {}).get(world, {}), caps, out / name
-        )
+        _box_figure(world, results_by_world[world], p3.get(world, {}), caps, out / name)
         figures.append((f"{world}: c, τ and f per system", name))
     for world, trajectories in (example_trajectories or {}).items():
         if trajectories:
@@ -667,7 +639,6 @@ def write_report(
         ltl_fig = None
 
     n_trials = {w: {s: len(t) for s, t in r.items()} for w, r in results_by_world.items()}
-    p3, p4, p5 = (paper.get(k, {}) for k in ("table3", "table4", "table5"))
     diffs3 = ordering_differences(tables["table3"], p3, stats.METRICS)
     diffs5 = ordering_differences(tables["table5"], p5, stats.FAILURE_COLUMNS)
 
@@ -702,10 +673,8 @@ def write_report(
     intervals = tables.get("table3_ci")
     note = _interval_note(tables.get("ci", {})) if intervals else ""
     t3, t5 = tables["table3"], tables["table5"]
-    lines += _side_by_side(
-        _T3_TITLE, t3, p3, _T3_COLS, _flagged(diffs3), n_trials, extra, intervals, note
-    )
-    lines += _side_by_side(_T5_TITLE, t5, p5, _T5_COLS, _flagged(diffs5), None)
+    lines += _side_by_side(_T3_TITLE, t3, p3, _T3_COLS, diffs3, n_trials, extra, intervals, note)
+    lines += _side_by_side(_T5_TITLE, t5, p5, _T5_COLS, diffs5, None)
     lines += [
         "A run can breach both caps (more than 100 collisions and no finish by 4000 s), so the "
         "c-cap and τ-cap columns overlap and c + τ may exceed total, in ours as in the paper's.",
@@ -713,7 +682,7 @@ def write_report(
     ]
     lines += _table4_section(tables["table4"], p4)
     lines += _ordering_section(diffs3, diffs5, tables["table4"], p4)
-    lines += _robustness_section(stats.comparisons(results_by_world), p4, alpha)
+    lines += _robustness_section(stats.comparisons(results_by_world), p4)
     lines += _idiotypic_section(tables.get("idiotypic_difference_rate", {}), paper)
     lines += _calibration_section(tables.get("calibration"))
     lines += _lockup_section(tables)

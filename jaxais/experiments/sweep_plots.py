@@ -28,6 +28,11 @@ def _panels(doc: dict[str, Any]) -> list[tuple[str, str]]:
     return [(m, title) for m, title in PANELS if present(m)]
 
 
+def _ci(rows: list[dict[str, Any] | None]) -> np.ndarray:
+    """The rows' ``"ci"`` [n, 2] (NaN where a row is missing)."""
+    return np.asarray([r["ci"] if r else [np.nan, np.nan] for r in rows], np.float64)
+
+
 def _line_figure(doc: dict[str, Any], path: Path) -> None:
     ((name, values),) = doc["axes"].items()
     panels = _panels(doc)
@@ -35,10 +40,7 @@ def _line_figure(doc: dict[str, Any], path: Path) -> None:
     axes = fig.subplots(1, len(panels), squeeze=False)[0]
     for ax, (metric, title) in zip(axes, panels, strict=True):
         mean = surface(doc, metric)
-        ci = np.asarray(
-            [p[metric]["ci"] if p.get(metric) else [np.nan, np.nan] for p in doc["points"]],
-            np.float64,
-        )
+        ci = _ci([p.get(metric) for p in doc["points"]])
         ax.plot(values, mean, marker="o", color="C0")
         ax.fill_between(values, ci[:, 0], ci[:, 1], color="C0", alpha=0.2, label="95 % CI")
         ax.axvline(doc["base_values"][name], color="k", ls="--", lw=1, label="operating point")
@@ -67,12 +69,10 @@ def _heatmap_figure(doc: dict[str, Any], path: Path) -> None:
         if metric == "idiotypic_difference_rate" and min(z.shape) > 1:
             if np.nanmin(z) <= CONTOUR <= np.nanmax(z):
                 ax.contour(xv, yv, z, levels=[CONTOUR], colors="w", linewidths=1.5)
-                ax.set_title(f"{title} (white: 20 %)", fontsize=9)
+                title += " (white: 20 %)"
             else:
-                extent = f"{100 * np.nanmin(z):.1f}-{100 * np.nanmax(z):.1f} %"
-                ax.set_title(f"{title}: {extent}, no 20 % contour", fontsize=9)
-        else:
-            ax.set_title(title, fontsize=9)
+                title += f": {100 * np.nanmin(z):.1f}-{100 * np.nanmax(z):.1f} %, no 20 % contour"
+        ax.set_title(title, fontsize=9)
         base = doc["base_values"]
         ax.plot(base[nx], base[ny], marker="*", ms=12, color="C3", mec="w", ls="none")
         ax.set_xlabel(nx)
@@ -86,13 +86,11 @@ def _heatmap_figure(doc: dict[str, Any], path: Path) -> None:
 
 def save_sweep_figures(doc: dict[str, Any], out: Path) -> list[Path]:
     """Draw ``doc``'s figure into ``out`` (sweep.png); none for three or more axes."""
-    path = Path(out) / "sweep.png"
-    if len(doc["axes"]) == 1:
-        _line_figure(doc, path)
-    elif len(doc["axes"]) == 2:
-        _heatmap_figure(doc, path)
-    else:
+    draw = {1: _line_figure, 2: _heatmap_figure}.get(len(doc["axes"]))
+    if draw is None:
         return []
+    path = Path(out) / "sweep.png"
+    draw(doc, path)
     return [path]
 
 
@@ -102,16 +100,13 @@ def save_noise_figure(doc: dict[str, Any], out: Path) -> Path:
     fig = new_figure((9.0, 3.6))
     axes = fig.subplots(1, 2)
     labels = list(doc["points"][0]["systems"])
-    for k, label in enumerate(labels):
-        for ax, metric in zip(axes, ("f", "failure_rate"), strict=True):
+    titles = {"f": "mean f = (8c + τ)/2 (lower is better)", "failure_rate": "failure rate"}
+    for ax, (metric, title) in zip(axes, titles.items(), strict=True):
+        for k, label in enumerate(labels):
             rows = [p["systems"][label][metric] for p in doc["points"]]
-            mean = np.asarray([r["mean"] for r in rows])
-            ci = np.asarray([r["ci"] for r in rows], np.float64)
-            ax.plot(scales, mean, marker="o", color=f"C{k}", label=label)
+            ci = _ci(rows)
+            ax.plot(scales, [r["mean"] for r in rows], marker="o", color=f"C{k}", label=label)
             ax.fill_between(scales, ci[:, 0], ci[:, 1], color=f"C{k}", alpha=0.15)
-    for ax, title in zip(
-        axes, ("mean f = (8c + τ)/2 (lower is better)", "failure rate"), strict=True
-    ):
         ax.axvline(1.0, color="k", ls="--", lw=1)
         ax.set_xlabel(f"noise scale ({', '.join(doc['kinds'])}; 1 = the world's own levels)")
         ax.set_title(title, fontsize=9)

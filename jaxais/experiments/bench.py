@@ -173,8 +173,7 @@ def make_rollout(n_steps: int, sharding: Any = None) -> Callable[..., Any]:
             keys = jax.random.split(k, n)
             wheels = v_policy(obs).astype(jnp.float32)
             if sharding is not None:
-                keys = jax.lax.with_sharding_constraint(keys, sharding)
-                wheels = jax.lax.with_sharding_constraint(wheels, sharding)
+                keys, wheels = jax.lax.with_sharding_constraint((keys, wheels), sharding)
             return v_step(keys, state, wheels, world, params), None
 
         carry, _ = jax.lax.scan(body, (state, obs), jax.random.split(key, n_steps))
@@ -190,8 +189,8 @@ def initial(b: Bench, n: int) -> tuple[Any, Any]:
 
     from jaxais import envs
 
+    chunk = min(max(*b.config.batches, b.config.numpy_robots), RESET_CHUNK)
     if "reset" not in b.cache:
-        chunk = min(max(*b.config.batches, b.config.numpy_robots), RESET_CHUNK)
 
         def reset_observe(key):
             k_reset, k_obs = jax.random.split(key)
@@ -204,10 +203,8 @@ def initial(b: Bench, n: int) -> tuple[Any, Any]:
             return s, o
 
         b.cache["reset"] = jax.device_get(jax.jit(reset_observe)(jax.random.key(0)))
-    state, obs = b.cache["reset"]
-    chunk = state.t.shape[0]
     idx = np.arange(n) % chunk
-    return jax.tree.map(lambda x: np.asarray(x)[idx], (state, obs))
+    return jax.tree.map(lambda x: x[idx], b.cache["reset"])
 
 
 def bench_machine(b: Bench) -> None:

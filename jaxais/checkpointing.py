@@ -63,14 +63,12 @@ def state_from_tree(
     tree: dict[str, np.ndarray], config: GAConfig, key_impl: str | None = None
 ) -> GAState:
     """Inverse of :func:`state_to_tree` (the key rewrapped with ``jax.random.wrap_key_data``)."""
-    leaves, treedef = jax.tree_util.tree_flatten_with_path(abstract_state(config))
-    values = []
-    for path, x in leaves:
+
+    def leaf(path, x):
         value = np.asarray(tree[_name(path)])
-        if _is_key(x):
-            value = jax.random.wrap_key_data(value, impl=key_impl)
-        values.append(value)
-    return jax.tree_util.tree_unflatten(treedef, values)
+        return jax.random.wrap_key_data(value, impl=key_impl) if _is_key(x) else value
+
+    return jax.tree_util.tree_map_with_path(leaf, abstract_state(config))
 
 
 def _first_line(err: BaseException, limit: int = 200) -> str:

@@ -2,8 +2,8 @@
 
 A directory holds ``run.json`` (the run's identity: a resume with another is refused) and an orbax
 checkpoint ``<generation>/`` per generation: ``state`` (the GAState's arrays, the key as its data)
-and ``meta`` (JSON). Orbax renames a complete save into place and the last ``max_to_keep`` are
-kept, so an interruption leaves the last complete one valid. Every failure is a one-line
+and ``meta`` (JSON). Orbax renames a complete save into place and the last two are kept, so an
+interruption leaves the last complete one valid. Every failure is a one-line
 :class:`CheckpointError`.
 """
 
@@ -63,14 +63,12 @@ def state_from_tree(
     tree: dict[str, np.ndarray], config: GAConfig, key_impl: str | None = None
 ) -> GAState:
     """Inverse of :func:`state_to_tree` (the key rewrapped with ``jax.random.wrap_key_data``)."""
-    leaves, treedef = jax.tree_util.tree_flatten_with_path(abstract_state(config))
-    values = []
-    for path, x in leaves:
+
+    def leaf(path, x):
         value = np.asarray(tree[_name(path)])
-        if _is_key(x):
-            value = jax.random.wrap_key_data(value, impl=key_impl)
-        values.append(value)
-    return jax.tree_util.tree_unflatten(treedef, values)
+        return jax.random.wrap_key_data(value, impl=key_impl) if _is_key(x) else value
+
+    return jax.tree_util.tree_map_with_path(leaf, abstract_state(config))
 
 
 def _first_line(err: BaseException, limit: int = 200) -> str:
@@ -105,22 +103,17 @@ class GACheckpointer:
     ``resume`` the directory must hold none.
     """
 
-    def __init__(
-        self,
-        directory: str | Path,
-        run_info: dict[str, Any],
-        resume: bool,
-        max_to_keep: int = 2,
-    ):
+    def __init__(self, directory: str | Path, run_info: dict[str, Any], resume: bool):
         import orbax.checkpoint as ocp
 
-        if max_to_keep < 2:
-            raise ValueError(f"max_to_keep must be >= 2, got {max_to_keep}")
         self.directory = Path(directory).absolute()
         self._ocp = ocp
         run_file = self.directory / RUN_JSON
         info = {"format": FORMAT, **json.loads(json.dumps(run_info))}
-        has_steps = self.directory.is_dir() and self._complete_steps()
+        # Orbax names complete checkpoints by their step; temporary ones carry a suffix.
+        has_steps = self.directory.is_dir() and any(
+            p.is_dir() and p.name.isdigit() for p in self.directory.iterdir()
+        )
         if resume:
             if not has_steps:
                 raise CheckpointError(
@@ -149,7 +142,7 @@ class GACheckpointer:
             self.directory.mkdir(parents=True, exist_ok=True)
             atomic_write_json(run_file, info)
         options = ocp.CheckpointManagerOptions(
-            max_to_keep=max_to_keep,
+            max_to_keep=2,  # a corrupt newest one can be deleted to resume from the one before
             create=True,
             # A save is complete when it returns: a signal ends a script at once (jaxais.cli),
             # and must not take the newest checkpoint with it.
@@ -158,19 +151,12 @@ class GACheckpointer:
         )
         self._manager = ocp.CheckpointManager(self.directory, options=options)
 
-    def _complete_steps(self) -> bool:
-        # Orbax names complete checkpoints by their step; temporary ones carry a suffix.
-        return any(p.is_dir() and p.name.isdigit() for p in self.directory.iterdir())
-
     def __enter__(self) -> GACheckpointer:
         return self
 
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
-        if exc is None:
-            self.close()
-            return
         # Already failing (e.g. Ctrl-C during a save): report that error, not a cleanup one.
-        with contextlib.suppress(Exception):
+        with contextlib.suppress(Exception) if exc is not None else contextlib.nullcontext():
             self.close()
 
     @contextlib.contextmanager
@@ -241,36 +227,33 @@ class GACheckpointer:
             if not isinstance(meta, dict) or meta.get("format") != FORMAT:
                 raise ValueError("unknown checkpoint format")
             state = state_from_tree(restored.state, config, meta.get("key_impl"))
+            _check_state(state, config, step, meta)
         except Exception as err:  # noqa: BLE001 (any failure to read is a corrupt checkpoint)
             raise CheckpointError(
                 f"{where}: corrupt checkpoint ({_first_line(err)}); {hint}"
             ) from None
-        problem = _check_state(state, config, step, meta)
-        if problem:
-            raise CheckpointError(f"{where}: corrupt checkpoint ({problem}); {hint}")
         return state, meta.get("extra", {})
 
 
-def _check_state(state: GAState, config: GAConfig, step: int, meta: dict[str, Any]) -> str | None:
-    """What is wrong with a restored state, or None."""
+def _check_state(state: GAState, config: GAConfig, step: int, meta: dict[str, Any]) -> None:
+    """ValueError saying what is wrong with a restored state."""
     if int(state.generation) != step or meta.get("generation") != step:
-        return f"it holds generation {int(state.generation)}, not {step}"
+        raise ValueError(f"it holds generation {int(state.generation)}, not {step}")
     stored = meta.get("config", {})
     for name in ("populations", "robots"):
         if stored.get(name) != getattr(config, name):
-            return f"{name} = {stored.get(name)!r}, expected {getattr(config, name)!r}"
+            raise ValueError(f"{name} = {stored.get(name)!r}, expected {getattr(config, name)!r}")
     for name, ab in (
         ("population", state.population),
         ("evaluated", state.evaluated),
         ("best", state.best.antibodies),
     ):
         if not bool(np.all(np.asarray(within_limits(ab)))):
-            return f"{name} antibodies break Table 1's limits"
+            raise ValueError(f"{name} antibodies break Table 1's limits")
     if step > 0:
         for name in ("fitness", "tau"):
             values = np.asarray(getattr(state, name))
             if not np.all(np.isfinite(values)) or np.any(values < 0):
-                return f"{name} holds invalid values"
+                raise ValueError(f"{name} holds invalid values")
         if not math.isfinite(float(np.max(np.asarray(state.best.fitness)))):
-            return "best fitness holds invalid values"
-    return None
+            raise ValueError("best fitness holds invalid values")

@@ -251,6 +251,7 @@ class STLState:
     chosen: jnp.ndarray
 
 
+@functools.cache  # one instance per variant: compiled programs are cached by controller
 def stl_controller(
     replacement: bool = True, idiotypic: bool = True, learning: bool = True
 ) -> Controller:
@@ -367,20 +368,13 @@ def stl_controller(
 LTL = ltl_controller()  # the GA's controller
 
 
-@functools.cache
-def _stl(replacement: bool, idiotypic: bool, learning: bool) -> Controller:
-    # One instance per variant: compiled programs are cached by controller.
-    return stl_controller(replacement, idiotypic, learning)
-
-
 def stl_for(systems: System) -> Controller:
     """The smallest (shared) STL controller that runs every system of a batch [n]."""
-    return _stl(
-        *(bool(np.any(f)) for f in (systems.replacement, systems.idiotypic, systems.learning))
-    )
+    parts = (systems.replacement, systems.idiotypic, systems.learning)
+    return stl_controller(*(bool(np.any(f)) for f in parts))
 
 
-STL = _stl(True, True, True)  # every part built in
+STL = stl_controller(True, True, True)  # every part built in (stl_for's arguments are positional)
 
 
 # ---------------------------------------------------------------------------- a baseline
@@ -402,11 +396,6 @@ def braitenberg_params(speed: float = 500.0, avoid: float = 1.0, steer: float = 
     return BraitenbergParams(speed=f(speed), avoid=f(avoid), steer=f(steer))
 
 
-def _proximity(ir: jnp.ndarray) -> jnp.ndarray:
-    """IR readings as proximity in [0, 1]: 0 beyond about 6 cm, 1 from about 1.5 cm."""
-    return jnp.clip((ir - 100.0) / 500.0, 0.0, 1.0)
-
-
 def braitenberg_controller() -> Controller:
     """A reactive vehicle (no state, learning or randomness): the nearer side's proximity slows
     it and turns it away; with nothing near, it turns toward the blue centroid."""
@@ -415,7 +404,8 @@ def braitenberg_controller() -> Controller:
 
     def act(key, state, pc: Percept, params: BraitenbergParams):
         del key
-        p = _proximity(pc.ir) * weights
+        # IR readings as proximity in [0, 1]: 0 beyond about 6 cm, 1 from about 1.5 cm.
+        p = jnp.clip((pc.ir - 100.0) / 500.0, 0.0, 1.0) * weights
         right, left = jnp.max(p * right_side), jnp.max(p * (1.0 - right_side))
         near = jnp.maximum(left, right)
         away = jnp.where(left >= right, 1.0, -1.0)  # + turns right (left wheel faster)

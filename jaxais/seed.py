@@ -14,10 +14,11 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import jax
 import numpy as np
 
 from jaxais.envs.struct import pytree_dataclass
-from jaxais.immune.antibodies import Antibodies, from_dicts, to_dicts, within_limits
+from jaxais.immune.antibodies import Antibodies, from_dicts, take, to_dicts, within_limits
 from jaxais.io import check_type
 from jaxais.orbax_reads import forget_abandoned_reads
 
@@ -94,18 +95,17 @@ def seed_to_json(
     seed: Seed, provenance: dict[str, Any], crossing: dict[str, Any] | None = None
 ) -> dict[str, Any]:
     """seed.json's document: provenance, ``crossing``, one entry per set."""
-    sets = []
-    for i in range(seed.tau.shape[0]):
-        one = Antibodies(**{f: np.asarray(getattr(seed.antibodies, f))[i] for f in _FIELDS})
-        sets.append(
-            {
-                "set": i,
-                "tau": float(seed.tau[i]),
-                "collisions": int(seed.collisions[i]),
-                "L": [float(x) for x in np.asarray(seed.L[i])],
-                "antibodies": to_dicts(one),
-            }
-        )
+    seed = jax.tree.map(np.asarray, seed)
+    sets = [
+        {
+            "set": i,
+            "tau": float(seed.tau[i]),
+            "collisions": int(seed.collisions[i]),
+            "L": [float(x) for x in seed.L[i]],
+            "antibodies": to_dicts(take(seed.antibodies, i)),
+        }
+        for i in range(seed.tau.shape[0])
+    ]
     doc = {"format": SEED_FORMAT, **provenance}
     if crossing is not None:
         problem = check_crossing(crossing, len(sets))
@@ -169,9 +169,7 @@ def load_seed(path: str | Path | None = None) -> tuple[Seed, dict[str, Any]]:
             arrays = ckpt.restore((path / ARRAYS_DIR).absolute())
         arrays = {k: np.asarray(v) for k, v in arrays.items()}
         antibodies = Antibodies(**{f: arrays[f"ab_{f}"] for f in _FIELDS})
-        seed = Seed(
-            antibodies=antibodies, tau=arrays["tau"], collisions=arrays["collisions"], L=arrays["L"]
-        )
+        seed = Seed(antibodies, arrays["tau"], arrays["collisions"], arrays["L"])
     except Exception as err:  # noqa: BLE001 (any failure to read is a corrupt seed)
         msg = str(err).splitlines()[0] if str(err) else type(err).__name__
         raise SeedError(f"{path}: corrupt seed ({part}: {msg[:160]}); {hint}") from None
@@ -190,24 +188,19 @@ def load_seed(path: str | Path | None = None) -> tuple[Seed, dict[str, Any]]:
         raise SeedError(f"{path}: seed antibodies break Table 1's limits ({hint})")
     # The readable file must describe the same sets as the arrays, number for number (the JSON
     # holds each float32 as its shortest round-tripping decimal, so equality is exact).
+    f32 = lambda a: np.asarray(a, np.float32)  # every field as float32 (direction as 0/1)
     try:
-        sets = meta["sets"]
-        readable = [from_dicts(s["antibodies"]) for s in sets]
-        json_tau = np.asarray([s["tau"] for s in sets], np.float32)
-        json_c = np.asarray([s["collisions"] for s in sets], np.int32)
-        json_L = np.asarray([s["L"] for s in sets], np.float32)
+        readable = [
+            Seed(from_dicts(s["antibodies"]), f32(s["tau"]), f32(s["collisions"]), f32(s["L"]))
+            for s in meta["sets"]
+        ]
     except (KeyError, TypeError, ValueError) as err:
         raise SeedError(f"{path}: {SEED_JSON} is malformed ({err}); {hint}") from None
-    f32 = lambda a: np.asarray(a, np.float32)  # every field as float32 (direction as 0/1)
-    same = (
-        len(readable) == x
-        and json_L.shape == seed.L.shape
-        and all(np.array_equal(f32(getattr(r, f)), f32(getattr(antibodies, f)[i]))
-                for i, r in enumerate(readable) for f in _FIELDS)
-        and np.array_equal(json_tau, f32(seed.tau))
-        and np.array_equal(json_c, seed.collisions.astype(np.int32))
-        and np.array_equal(json_L, f32(seed.L))
-    )  # fmt: skip
+    same = len(readable) == x and all(
+        np.array_equal(f32(a), f32(b))
+        for i, one in enumerate(readable)
+        for a, b in zip(jax.tree.leaves(one), jax.tree.leaves(take(seed, i)), strict=True)
+    )
     if not same:
         raise SeedError(f"{path}: {SEED_JSON} disagrees with {ARRAYS_DIR}/ ({hint})")
     if CROSSING in meta:

@@ -41,14 +41,14 @@ HAND_DESIGNED = [
 ]  # fmt: skip
 
 
-def random_sets(name: str, x: int = N_SETS) -> tuple[Antibodies, np.ndarray]:
-    """A fixed random initial repertoire: [x, 8] antibodies and their initial P ~ U[0.25, 0.75]."""
+def random_sets(name: str) -> tuple[Antibodies, np.ndarray]:
+    """A fixed random initial repertoire: [5, 8] antibodies and their initial P ~ U[0.25, 0.75]."""
     if name not in RANDOM_SETS:
         raise ValueError(f"unknown random set {name!r} (one of {', '.join(RANDOM_SETS)})")
     k_ab, k_p = jax.random.split(jax.random.key(RANDOM_SETS[name]))
-    antibodies = sample_antibodies(k_ab, (x, 8))
-    P = jax.random.uniform(k_p, (x * 8,), minval=UNSEEDED_P[0], maxval=UNSEEDED_P[1])
-    return antibodies, np.asarray(P.reshape(x, 8))
+    antibodies = sample_antibodies(k_ab, (N_SETS, 8))
+    P = jax.random.uniform(k_p, (N_SETS * 8,), minval=UNSEEDED_P[0], maxval=UNSEEDED_P[1])
+    return antibodies, np.asarray(P.reshape(N_SETS, 8))
 
 
 def hand_designed_sets(

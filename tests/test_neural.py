@@ -27,12 +27,11 @@ from jaxais.baselines.neural import (
     MLPParams,
     centered_ranks,
     es_gradient,
+    features,
     init_mlp,
     load_params,
     make_train,
-    obs_features,
     openes,
-    percept_features,
     policy,
     policy_in_order,
     save_params,
@@ -76,11 +75,10 @@ def test_percept_features_equal_the_gymnax_observation():
         ob = envs.observe(jax.random.split(key)[1], state.sim, p.world, p.sim)
         pc = percept_of(ob)
         _, wheels = NEURAL.act(key, NEURAL.init(key, params), pc, params)
-        return obs, percept_features(pc), wheels, ob.blue_pixels
+        return obs, features(pc.ir, pc.blue_pixels, pc.centroid), wheels, ob.blue_pixels
 
     obs, feats, wheels, blue = jax.jit(jax.vmap(both))(jax.random.split(jax.random.key(0), 64))
     np.testing.assert_array_equal(np.asarray(feats), np.asarray(obs[:, :10]))
-    np.testing.assert_array_equal(np.asarray(feats), np.asarray(jax.vmap(obs_features)(obs)))
     action = jax.vmap(policy_in_order, in_axes=(None, 0))(params, obs[:, :10])
     # Eager ops round apart from a fused program's multiply-adds: equal to float32 precision.
     np.testing.assert_allclose(np.asarray(wheels), 1000.0 * np.asarray(action), atol=1e-5)

@@ -12,7 +12,6 @@ a generation, in ``ga_maze`` where the paper's LTL trains, so the test worlds st
 from __future__ import annotations
 
 import dataclasses
-import io
 import math
 import zipfile
 import zlib
@@ -51,16 +50,6 @@ def features(ir: jnp.ndarray, blue_pixels: jnp.ndarray, centroid: jnp.ndarray) -
     return jnp.concatenate([ir / IR_FULL_SCALE, tail]).astype(jnp.float32)
 
 
-def percept_features(pc: Percept) -> jnp.ndarray:
-    """The policy's inputs [10] from what the task loop gives a controller."""
-    return features(pc.ir, pc.blue_pixels, pc.centroid)
-
-
-def obs_features(obs: jnp.ndarray) -> jnp.ndarray:
-    """The policy's inputs [10] from the gymnax observation [11] (its goal pixels dropped)."""
-    return obs[:N_FEATURES]
-
-
 # -------------------------------------------------------------------------------------- policy
 
 
@@ -72,6 +61,9 @@ class MLPParams:
     b1: jnp.ndarray
     w2: jnp.ndarray
     b2: jnp.ndarray
+
+
+_FIELDS = dataclasses.fields(MLPParams)
 
 
 def init_mlp(key: jax.Array, hidden: int) -> MLPParams:
@@ -113,7 +105,8 @@ def neural_controller() -> Controller:
 
     def act(key, state, pc: Percept, params: MLPParams):
         del key
-        return state, policy_in_order(params, percept_features(pc)) * MAX_WHEEL_SPEED
+        x = features(pc.ir, pc.blue_pixels, pc.centroid)
+        return state, policy_in_order(params, x) * MAX_WHEEL_SPEED
 
     def stats(state, params):
         del state, params
@@ -206,7 +199,7 @@ def rollout(
 
     def body(carry, k):
         obs, state, ep = carry
-        action = policy(params, obs_features(obs))
+        action = policy(params, obs[:N_FEATURES])  # the goal pixels dropped
         obs, state, reward, terminated, _, info = env.step(k, state, action, env_params)
         live = ~ep.finished
         ep = Episode(
@@ -238,8 +231,7 @@ def make_train(
     its key; ``progress(generation, metrics)`` is called from inside it each generation."""
     env = envs.make(config.world, auto_reset=False, collision_penalty=config.collision_penalty)
     env_params = env.default_params
-    template = init_mlp(jax.random.key(0), config.hidden)
-    _, unravel = ravel_pytree(template)
+    _, unravel = ravel_pytree(init_mlp(jax.random.key(0), config.hidden))
     optimizer = (
         optax.adamw(config.learning_rate, weight_decay=config.weight_decay)
         if config.weight_decay
@@ -259,8 +251,7 @@ def make_train(
         flat_b = jnp.repeat(flat, e, axis=0)  # [m * e, d]: member i's episodes are rows i*e..
         keys_b = jnp.tile(keys, m)
         if sharding is not None:
-            flat_b = jax.lax.with_sharding_constraint(flat_b, sharding)
-            keys_b = jax.lax.with_sharding_constraint(keys_b, sharding)
+            flat_b, keys_b = jax.lax.with_sharding_constraint((flat_b, keys_b), sharding)
         run = lambda k, w: rollout(k, unravel(w), env, env_params, config.steps)
         eps = jax.vmap(run)(keys_b, flat_b)
         eps = jax.tree.map(lambda a: a.reshape(m, e), eps)
@@ -288,12 +279,8 @@ def make_train(
     def train(key: jax.Array) -> TrainResult:
         k_init, k_gens = jax.random.fold_in(key, 0), jax.random.fold_in(key, 1)
         flat, _ = ravel_pytree(init_mlp(k_init, config.hidden))
-        gens = jnp.arange(config.generations)
-        state, metrics = jax.lax.scan(
-            generation,
-            es.init(flat),
-            (gens, jax.random.split(k_gens, config.generations)),
-        )
+        xs = (jnp.arange(config.generations), jax.random.split(k_gens, config.generations))
+        state, metrics = jax.lax.scan(generation, es.init(flat), xs)
         return TrainResult(params=unravel(state.mean), metrics=metrics)
 
     return train
@@ -312,16 +299,9 @@ def default_params_dir() -> Path:
 
 def save_params(directory: str | Path, params: MLPParams, info: dict[str, Any]) -> None:
     """Write ``params.npz`` and ``config.json`` (``info``) into ``directory``, atomically."""
-    d = Path(directory)
-    arrays = {f.name: np.asarray(getattr(params, f.name), np.float32) for f in _fields()}
-
-    def write(tmp: Path) -> None:
-        buf = io.BytesIO()
-        np.savez(buf, **arrays)
-        tmp.write_bytes(buf.getvalue())
-
-    atomic_write(d / PARAMS_FILE, write)
-    atomic_write_json(d / CONFIG_FILE, info)
+    arrays = {f.name: np.asarray(getattr(params, f.name), np.float32) for f in _FIELDS}
+    atomic_write(Path(directory, PARAMS_FILE), lambda tmp: np.savez(tmp, **arrays))
+    atomic_write_json(Path(directory, CONFIG_FILE), info)
 
 
 def load_params(directory: str | Path | None = None) -> tuple[MLPParams, dict[str, Any]]:
@@ -336,7 +316,7 @@ def load_params(directory: str | Path | None = None) -> tuple[MLPParams, dict[st
         if not zipfile.is_zipfile(path):
             raise ValueError("not an .npz archive")
         with np.load(path) as z:
-            arrays = {f.name: np.asarray(z[f.name], np.float32) for f in _fields()}
+            arrays = {f.name: np.asarray(z[f.name], np.float32) for f in _FIELDS}
     except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as err:
         raise UserError(
             f"{path}: not a trained neural controller's weights ({str(err)[:100]}); {hint}"
@@ -348,7 +328,3 @@ def load_params(directory: str | Path | None = None) -> tuple[MLPParams, dict[st
         if arrays[name].shape != shape or not np.all(np.isfinite(arrays[name])):
             raise UserError(f"{path}: {name} must be finite with shape {shape}")
     return MLPParams(**arrays), info
-
-
-def _fields() -> tuple[dataclasses.Field, ...]:
-    return dataclasses.fields(MLPParams)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime
+import functools
 import itertools
 import os
 import platform
@@ -123,14 +124,15 @@ def force_host_devices(n: int) -> None:
 @dataclass
 class Bench:
     """Every benchmark's input and output: config, world, constants, the timed scripts'
-    environment, the document (``results``), shared values and notes."""
+    environment, the document (``results``), the robots after reset (:func:`initial`) and
+    notes."""
 
     config: BenchConfig
     world: Any
     params: Any
     environ: dict[str, str] = field(default_factory=dict)
     results: dict[str, Any] = field(default_factory=dict)
-    cache: dict[str, Any] = field(default_factory=dict)
+    reset: Any = None
     notes: list[str] = field(default_factory=list)
 
 
@@ -181,8 +183,7 @@ def make_rollout(n_steps: int, sharding: Any = None) -> Callable[..., Any]:
             keys = jax.random.split(k, n)
             wheels = v_policy(obs).astype(jnp.float32)
             if sharding is not None:
-                keys = jax.lax.with_sharding_constraint(keys, sharding)
-                wheels = jax.lax.with_sharding_constraint(wheels, sharding)
+                keys, wheels = jax.lax.with_sharding_constraint((keys, wheels), sharding)
             return v_step(keys, state, wheels, world, params), None
 
         carry, _ = jax.lax.scan(body, (state, obs), jax.random.split(key, n_steps))
@@ -198,8 +199,8 @@ def initial(b: Bench, n: int) -> tuple[Any, Any]:
 
     from jaxais import envs
 
-    if "reset" not in b.cache:
-        chunk = min(max(*b.config.batches, b.config.numpy_robots), RESET_CHUNK)
+    chunk = min(max(*b.config.batches, b.config.numpy_robots), RESET_CHUNK)
+    if b.reset is None:
 
         def reset_observe(key):
             k_reset, k_obs = jax.random.split(key)
@@ -211,11 +212,8 @@ def initial(b: Bench, n: int) -> tuple[Any, Any]:
             )
             return s, o
 
-        b.cache["reset"] = jax.device_get(jax.jit(reset_observe)(jax.random.key(0)))
-    state, obs = b.cache["reset"]
-    chunk = state.t.shape[0]
-    idx = np.arange(n) % chunk
-    return jax.tree.map(lambda x: np.asarray(x)[idx], (state, obs))
+        b.reset = jax.device_get(jax.jit(reset_observe)(jax.random.key(0)))
+    return jax.tree.map(lambda x: x[np.arange(n) % chunk], b.reset)
 
 
 def bench_machine(b: Bench) -> None:
@@ -302,22 +300,19 @@ def bench_env(b: Bench) -> None:
     p = env.default_params
     _, state = jax.jit(jax.vmap(env.reset, in_axes=(0, None)))(jax.random.split(key, n), p)
 
-    def rollout(step):
-        v_step = jax.vmap(step, in_axes=(0, 0, 0, None))
+    @functools.partial(jax.jit, static_argnums=0)
+    def run(name, s, p):
+        v_step = jax.vmap(getattr(env, name), in_axes=(0, 0, 0, None))
 
-        def run(s, p):
-            def body(s, k):
-                actions = jax.random.uniform(k, (n, 2), minval=-1.0, maxval=1.0)
-                return v_step(jax.random.split(k, n), s, actions, p)[1], None
+        def body(s, k):
+            actions = jax.random.uniform(k, (n, 2), minval=-1.0, maxval=1.0)
+            return v_step(jax.random.split(k, n), s, actions, p)[1], None
 
-            return jax.lax.scan(body, s, jax.random.split(key, b.config.steps))[0]
-
-        return jax.jit(run)
+        return jax.lax.scan(body, s, jax.random.split(key, b.config.steps))[0]
 
     rates = {}
     for name in ("step_env", "step"):
-        run = rollout(getattr(env, name))
-        best = _timed(lambda run=run: run(state, p), b.config.repeats)["best_s"]
+        best = _timed(lambda name=name: run(name, state, p), b.config.repeats)["best_s"]
         rates[name] = n * b.config.steps / best
     b.results["env_steps_per_s"] = rates
     b.notes.append(

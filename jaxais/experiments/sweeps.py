@@ -283,14 +283,11 @@ def noisy_world(world: envs.World, scale: float, kinds: Sequence[str] = tuple(NO
 
 def _arrays(records: Sequence[dict[str, Any]]) -> dict[str, np.ndarray]:
     """Trial records as the outcome arrays :func:`summarise_point` reads."""
-    column = lambda k: np.asarray([r[k] for r in records])
-    rates = [r.get("idiotypic_difference_rate") for r in records]
-    out = {k: column(k) for k in METRICS.values()}
-    out |= {k: column(k).astype(bool) for k in ("failed_collisions", "failed_time")}
-    if any(x is not None for x in rates):
-        out["idiotypic_difference_rate"] = np.asarray(
-            [np.nan if x is None else x for x in rates], np.float64
-        )
+    keys = (*METRICS.values(), "failed_collisions", "failed_time")
+    out = {k: np.asarray([r[k] for r in records]) for k in keys}
+    rates = np.asarray([r.get("idiotypic_difference_rate") for r in records], np.float64)
+    if not np.isnan(rates).all():  # None (does not apply) reads as NaN
+        out["idiotypic_difference_rate"] = rates
     return out
 
 

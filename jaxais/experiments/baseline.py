@@ -95,6 +95,8 @@ def train_baseline(
     metrics = {k: np.asarray(v) for k, v in jax.device_get(result.metrics).items()}
     wall = time.perf_counter() - start
     tail = max(1, config.generations // 10)
+    ends = ("center_fitness", "center_finished", "center_collisions")  # means of the last tenth
+    last = {f"{k}_last_{tail}": float(metrics[k][-tail:].mean()) for k in ends}
     info = {
         "format": "jaxais-neural/1",
         "command": command,
@@ -106,12 +108,7 @@ def train_baseline(
         "wall_s": round(wall, 1),
         "first_generation_s": round(first[0], 1) if first else None,
         "devices": len(jax.local_devices()),
-        "final": {
-            "center_fitness": float(metrics["center_fitness"][-1]),
-            f"center_fitness_last_{tail}": float(metrics["center_fitness"][-tail:].mean()),
-            f"center_finished_last_{tail}": float(metrics["center_finished"][-tail:].mean()),
-            f"center_collisions_last_{tail}": float(metrics["center_collisions"][-tail:].mean()),
-        },
+        "final": {"center_fitness": float(metrics["center_fitness"][-1]), **last},
         "curve": {k: [round(float(x), 4) for x in v] for k, v in metrics.items()},
         "versions": _versions(),
     }
@@ -122,12 +119,11 @@ def train_baseline(
 
 def _plot_curve(metrics: dict[str, Any], config: TrainConfig, path: Path) -> None:
     import numpy as np
-    from matplotlib.figure import Figure
 
-    from jaxais.experiments.plotting import save_figure
+    from jaxais.experiments.plotting import new_figure, save_figure
 
     gens = np.arange(1, len(metrics["center_fitness"]) + 1)
-    fig = Figure(figsize=(8, 5.5), layout="constrained")
+    fig = new_figure((8, 5.5))
     top, bottom = fig.subplots(2, 1, sharex=True)
     top.plot(gens, metrics["fitness_mean"], lw=1, color="0.6", label="population mean")
     top.plot(gens, metrics["fitness_best"], lw=1, color="tab:green", label="population best")
@@ -153,20 +149,16 @@ def evaluate_baseline(
     *,
     seed: int = 0,
     seeds: str | Path | None = None,
-    worlds: Sequence[str] = protocol.WORLDS,
-    trials: int | None = None,
-    episode: Any = None,
     command: str | None = None,
     into_checkpoints: bool = False,
 ) -> dict[str, Any]:
-    """Run the controller in ``weights`` (None: shipped), SIE (``seeds``) and HDC in ``worlds``;
-    write evaluation.json (returned: trials, summaries, NN-vs-SIE/HDC tests of f) and
-    evaluation.md into ``out``. ``trials``, ``episode``: default the paper's."""
+    """Run the controller in ``weights`` (None: shipped), SIE (``seeds``) and HDC in the paper's
+    worlds, trials and episode; write evaluation.json (returned: trials, summaries, NN-vs-SIE/HDC
+    tests of f) and evaluation.md into ``out``."""
     if not 0 <= seed < 2**32:
         raise ValueError(f"--eval-seed must be in [0, 2**32), got {seed}")
     _check_weights(weights)
     out = _output_dir(out, into_checkpoints)
-    import numpy as np
     from tqdm import tqdm
 
     from jaxais import envs
@@ -176,7 +168,6 @@ def evaluate_baseline(
     from jaxais.immune.network import NetworkParams
     from jaxais.trials import STL_CONFIG, run_trials, summarise
 
-    episode = STL_CONFIG if episode is None else episode
     params, info = load_params(weights)
     systems, seed_info = build_systems(list(REFERENCE), seeds, NetworkParams())
     sim = envs.default_params()
@@ -185,25 +176,25 @@ def evaluate_baseline(
         "seed": seed,
         "weights": {"config": info.get("config"), "seed": info.get("seed")},
         "ltl_seed": seed_info,
-        "episode": dataclasses.asdict(episode),
+        "episode": dataclasses.asdict(STL_CONFIG),
         "versions": _versions(),
         "worlds": {},
         "timings_s": {},
     }
-    for name in worlds:
+    for name in protocol.WORLDS:
         world = envs.load_world(name)
-        n = protocol.trials_for_world(name) if trials is None else trials
+        n = protocol.trials_for_world(name)
         t0 = time.perf_counter()
         total = n * (len(systems) + 1)  # runs (the trials go through a refilling pool)
         with tqdm(total=total, desc=f"{name}", unit="run", file=sys.stderr) as bar:
-            results = run_trials(world, systems, n, seed, episode, sim, bar)
+            results = run_trials(world, systems, n, seed, STL_CONFIG, sim, bar)
             results |= run_trials(
-                world, {NN_LABEL: params}, n, seed, episode, sim, bar, controller=NEURAL
+                world, {NN_LABEL: params}, n, seed, STL_CONFIG, sim, bar, controller=NEURAL
             )
         doc["timings_s"][name] = round(time.perf_counter() - t0, 1)
         systems_doc = {k: {"summary": summarise(v.records), "trials": v.records}
                        for k, v in results.items()}  # fmt: skip
-        f = {label: np.asarray([r["fitness"] for r in ts.records]) for label, ts in results.items()}
+        f = {label: stats.metric_values(ts.records, "f") for label, ts in results.items()}
         tests = {}
         for other in REFERENCE:
             t, p = stats.welch_t(f[NN_LABEL], f[other])
@@ -376,9 +367,8 @@ def collect_baselines(dirs: Sequence[str | Path]) -> str:
             "| --- | :---: | ---: | ---: | ---: | ---: |",
         ]
         for w in worlds:
-            nn = np.asarray([t["fitness"] for t in pooled[w]])
-            sie = runs[0][0]["worlds"][w]["systems"]["SIE"]["trials"]
-            sie = np.asarray([t["fitness"] for t in sie])
+            nn = stats.metric_values(pooled[w], "f")
+            sie = stats.metric_values(runs[0][0]["worlds"][w]["systems"]["SIE"]["trials"], "f")
             _, p_t = stats.welch_t(nn, sie)
             _, p_u = stats.mann_whitney_u(nn, sie)
             lower = "lower" if nn.mean() < sie.mean() else "higher"

@@ -21,7 +21,7 @@ from jaxais.experiments.diversity import compare_diversity, diversity
 from jaxais.experiments.records import portable_path
 from jaxais.ga import driver
 from jaxais.ga.config import CROSSING_STARTS, MAX_SEED, ConfigError, GAConfig
-from jaxais.io import RUN_BYTES, atomic_write, atomic_write_json, check_memory
+from jaxais.io import RUN_BYTES, atomic_write_json, check_memory
 from jaxais.seed import Seed, load_seed, save_seed
 
 __all__ = ["check_seed", "evolve", "measure_crossing", "report"]
@@ -93,14 +93,12 @@ def _generation_record(generation: int, evaluation, best, wall: float) -> dict[s
 
 
 def _plot(path: Path, history: list[dict[str, Any]], title: str, tau_cap: float) -> None:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    from jaxais.experiments.plotting import new_figure, save_figure
 
     gens = np.array([h["generation"] for h in history])
     best = np.array([[p["best_f"] for p in h["populations"]] for h in history])
     mean = np.array([[p["mean_f"] for p in h["populations"]] for h in history])
-    fig = Figure(figsize=(7.5, 4.5), layout="constrained")
-    FigureCanvasAgg(fig)
+    fig = new_figure((7.5, 4.5))
     ax = fig.add_subplot()
     for p in range(best.shape[1]):
         color = f"C{p % 10}"
@@ -112,7 +110,7 @@ def _plot(path: Path, history: list[dict[str, Any]], title: str, tau_cap: float)
     ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(fontsize="x-small", ncol=2)
-    atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=110))
+    save_figure(fig, path, dpi=110)
 
 
 def measure_crossing(

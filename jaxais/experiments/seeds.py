@@ -11,6 +11,7 @@ bits). Nothing here imports JAX: the subprocesses have the device.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import operator
 import shutil
@@ -41,11 +42,7 @@ Runner = Callable[[list[str], Path | None], int]  # (command, log file or None) 
 
 
 class SeedRunError(RuntimeError):
-    """A seed's LTL or STL subprocess failed; ``seed`` and ``stage`` ("LTL" or "STL") say which."""
-
-    def __init__(self, seed: int, stage: str, message: str):
-        super().__init__(f"seed {seed}: {message}")
-        self.seed, self.stage = seed, stage
+    """A seed's LTL or STL subprocess failed; the message names the seed and the stage."""
 
 
 def _read_json(path: Path) -> Any:
@@ -233,11 +230,9 @@ class _Processes:
         self._lock, self._live, self._stopped = threading.Lock(), set(), False
 
     def __call__(self, cmd: list[str], log: Path | None) -> int:
-        stream = None
         if log is not None:
             log.parent.mkdir(parents=True, exist_ok=True)
-            stream = open(log, "w")  # noqa: SIM115 (closed below)
-        try:
+        with contextlib.nullcontext() if log is None else open(log, "w") as stream:
             with self._lock:
                 if self._stopped:
                     return -int(signal.SIGTERM)
@@ -249,9 +244,6 @@ class _Processes:
             finally:
                 with self._lock:
                     self._live.discard(proc)
-        finally:
-            if stream is not None:
-                stream.close()
 
     def stop(self) -> None:
         """SIGTERM to every child (evolve.py keeps its last checkpoint), SIGKILL after 60 s."""
@@ -315,7 +307,7 @@ def _run_seed(folder: Run, s: int, settings: dict, run: Runner, logs: bool, note
 
     def failed(stage: str, script: str, code: int) -> SeedRunError:
         where = f"see {log(stage.lower())}" if logs else "see its messages above"
-        return SeedRunError(s, stage, f"the {stage} ({script}) failed, exit status {code}; {where}")
+        return SeedRunError(f"seed {s}: the {stage} ({script}) failed, exit status {code}; {where}")
 
     state = ltl_state(ltl)
     if state != "done":
@@ -325,7 +317,7 @@ def _run_seed(folder: Run, s: int, settings: dict, run: Runner, logs: bool, note
         if code != 0:
             raise failed("LTL", "scripts/evolve.py", code)
         if not (ltl / "seed" / "seed.json").is_file():
-            raise SeedRunError(s, "LTL", f"scripts/evolve.py exited 0 but wrote no {ltl}/seed")
+            raise SeedRunError(f"seed {s}: scripts/evolve.py exited 0 but wrote no {ltl}/seed")
     if stop.is_set():
         return -1.0
     resume = (stl / MANIFEST).is_file()  # reproduce.py began: it finishes its own partial run
@@ -342,7 +334,7 @@ def _run_seed(folder: Run, s: int, settings: dict, run: Runner, logs: bool, note
     if code != 0:
         raise failed("STL", "scripts/reproduce.py", code)
     if not (stl / "report.md").is_file():
-        raise SeedRunError(s, "STL", f"scripts/reproduce.py exited 0 but wrote no {stl}/report.md")
+        raise SeedRunError(f"seed {s}: scripts/reproduce.py exited 0 but wrote no {stl}/report.md")
     return round(time.perf_counter() - t, 3)
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -20,17 +21,21 @@ from typing import Any
 import jax
 import numpy as np
 from scipy import stats as sps
+from tqdm import tqdm
 
 from jaxais import envs
 from jaxais.controllers import System, stl_for
-from jaxais.experiments.records import FORMATS
-from jaxais.immune.network import BOUNDS
+from jaxais.experiments import protocol
+from jaxais.experiments.records import FORMATS, build_systems, portable_command, run_config
+from jaxais.experiments.stats import CI_LEVEL
+from jaxais.immune.network import BOUNDS, NetworkParams
 from jaxais.immune.readings import readings as make_readings
-from jaxais.io import Run, atomic_write_json, open_run
+from jaxais.io import RUN_BYTES, Run, atomic_write_json, check_memory, open_run
+from jaxais.labels import SYSTEMS, label, parse_label
 from jaxais.loop import EpisodeConfig
 from jaxais.runner import run_pool, segment_length
 from jaxais.systems import PARAMETERS, system_params, with_params
-from jaxais.trials import _keys, stream_id, trial_records
+from jaxais.trials import batch_keys, run_trials, trial_records
 
 _IDIOTYPIC = ("k1", "k2", "k3", "b", "Phi", "initial_clones", "penalty_idiotypic", "alpha_on_self")
 USED_BY: dict[str, tuple[str, ...]] = {
@@ -39,18 +44,21 @@ USED_BY: dict[str, tuple[str, ...]] = {
     "sigma0_floor": ("SIE", "SRL", "UIE", "URL"),  # eq (4): the learning systems
 }  # the systems that use a parameter, where not all do (a penalty ends HDC's bout too)
 MAX_AXIS = 10**6  # values of one axis at most (the grid's size is bounded by its memory)
+_WHOLE = {int: (np.int32, "an integer parameter"), bool: (bool, "a switch, 0 (off) or 1 (on)")}
 
+_SEEDING = (
+    "rho and phi set the seeded paratopes (eqs 1-2) before the trials start; build the system "
+    "with other NetworkParams instead"
+)
 STATIC: dict[str, str] = {
     "idiotope_period": "NetworkParams.idiotope_period is a loop schedule, fixed when the "
     "program is compiled; run one sweep per value",
-    "rho": "rho and phi set the seeded paratopes (eqs 1-2) before the trials start; build the "
-    "system with other NetworkParams instead",
-    "phi": "rho and phi set the seeded paratopes (eqs 1-2) before the trials start; build the "
-    "system with other NetworkParams instead",
+    "rho": _SEEDING,
+    "phi": _SEEDING,
 }  # parameters that look sweepable but are not traced, and why
 
-METRICS = ("tau", "c", "f", "trapped_s")  # summarised per point (c capped at 100)
-_COLUMNS = ("tau", "collisions_capped", "fitness", "trapped_s")  # METRICS' outcome arrays
+# Summarised per point (c capped at 100): name -> its outcome array.
+METRICS = {"tau": "tau", "c": "collisions_capped", "f": "fitness", "trapped_s": "trapped_s"}
 PAPER_POINT = {"k1": 0.85, "k2": 1.10}  # [paper] section 5: ~20 % idiotypic difference rate
 
 
@@ -84,14 +92,11 @@ def parse_axis(spec: str) -> tuple[str, np.ndarray]:
         raise ValueError(f"--grid {spec!r}: values must be finite")
     if np.unique(grid).size < grid.size:
         raise ValueError(f"--grid {spec!r}: a value twice (each point runs once)")
-    if kind is int:
-        if not np.all(grid == np.round(grid)):
-            raise ValueError(f"--grid {name}: an integer parameter, got {values}")
-        grid = grid.astype(np.int32)
-    if kind is bool:
-        if not np.all((grid == 0) | (grid == 1)):
-            raise ValueError(f"--grid {name}: a switch, 0 (off) or 1 (on), got {values}")
-        grid = grid.astype(bool)
+    if kind in _WHOLE:  # a value its dtype changes is not one
+        dtype, what = _WHOLE[kind]
+        if not np.array_equal(grid.astype(dtype), grid):
+            raise ValueError(f"--grid {name}: {what}, got {values}")
+        grid = grid.astype(dtype)
     return name, grid
 
 
@@ -118,38 +123,37 @@ def point_systems(base: System, points: Sequence[dict[str, Any]]) -> System:
     )
 
 
-def _t_interval(x: np.ndarray, level: float) -> dict[str, Any]:
+def _t_interval(x: np.ndarray) -> dict[str, Any]:
     """The mean of ``x``'s finite values and its Student's t interval."""
     x = x[np.isfinite(x)]
     mean = float(np.mean(x)) if x.size else math.nan
     ci = [mean, mean]
     if x.size >= 2:
-        half = float(sps.t.ppf(0.5 + level / 2, x.size - 1) * np.std(x, ddof=1) / math.sqrt(x.size))
+        t = sps.t.ppf(0.5 + CI_LEVEL / 2, x.size - 1)
+        half = float(t * np.std(x, ddof=1) / math.sqrt(x.size))
         ci = [mean - half, mean + half]
     return {"mean": mean, "ci": ci}
 
 
-def _wilson(k: int, n: int, level: float) -> dict[str, Any]:
+def _wilson(k: int, n: int) -> dict[str, Any]:
     """The rate of k successes in n and its Wilson score interval."""
-    z = sps.norm.ppf(0.5 + level / 2)
+    z = sps.norm.ppf(0.5 + CI_LEVEL / 2)
     p = k / n
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
     return {"mean": p, "ci": [max(0.0, centre - half), min(1.0, centre + half)]}
 
 
-def summarise_point(result: dict[str, np.ndarray], level: float = 0.95) -> dict[str, Any]:
+def summarise_point(result: dict[str, np.ndarray]) -> dict[str, Any]:
     """One point's means and intervals from its trials' outcome arrays [n]."""
     out: dict[str, Any] = {"n": int(result["tau"].size)}
-    for name, key in zip(METRICS, _COLUMNS, strict=True):
-        out[name] = _t_interval(np.asarray(result[key], np.float64), level)
+    for name, key in METRICS.items():
+        out[name] = _t_interval(np.asarray(result[key], np.float64))
     failed = np.asarray(result["failed_collisions"]) | np.asarray(result["failed_time"])
-    out["failure_rate"] = _wilson(int(failed.sum()), failed.size, level)
+    out["failure_rate"] = _wilson(int(failed.sum()), failed.size)
     if "idiotypic_difference_rate" in result:
         idio = np.asarray(result["idiotypic_difference_rate"], np.float64)
-        out["idiotypic_difference_rate"] = (
-            None if np.isnan(idio).all() else _t_interval(idio, level)
-        )
+        out["idiotypic_difference_rate"] = None if np.isnan(idio).all() else _t_interval(idio)
     return out
 
 
@@ -172,7 +176,7 @@ def run_sweep(
     n_trials: int,
     seed: int,
     config: EpisodeConfig,
-    sim_params: envs.SimParams | None = None,
+    sim_params: envs.SimParams,
     slots: int = 1024,
     progress: Callable[[int], None] | None = None,
     run: Run | None = None,
@@ -186,7 +190,6 @@ def run_sweep(
     ``records`` keeps each point's trial records. Returns the sweep.json document, points in
     :func:`grid_points` order.
     """
-    sim_params = envs.default_params() if sim_params is None else sim_params
     points = grid_points(axes)
     grid = point_systems(base, points)
     align = segment_length(config.chunk, int(base.network.idiotope_period))
@@ -199,9 +202,8 @@ def run_sweep(
             if progress is not None:
                 progress(n_trials * (hi - lo))
         else:
-            trials = np.tile(np.arange(n_trials, dtype=np.uint32), hi - lo)
-            streams = np.full(trials.size, stream_id(label), np.uint32)
-            reset_keys, run_keys = _keys(jax.random.key(seed), streams, trials)
+            # Trial i of every point: run_trials' trial i of ``label`` (common random numbers).
+            reset_keys, run_keys = batch_keys(seed, ((label, n_trials),) * (hi - lo))
             params = jax.tree.map(lambda a, lo=lo, hi=hi: np.repeat(a[lo:hi], n_trials, 0), grid)
             res = run_pool(reset_keys, run_keys, params, world, sim_params, stl_for(grid),
                            config, slots=slots, align=align, progress=progress)  # fmt: skip
@@ -281,14 +283,11 @@ def noisy_world(world: envs.World, scale: float, kinds: Sequence[str] = tuple(NO
 
 def _arrays(records: Sequence[dict[str, Any]]) -> dict[str, np.ndarray]:
     """Trial records as the outcome arrays :func:`summarise_point` reads."""
-    column = lambda k: np.asarray([r[k] for r in records])
-    rates = [r.get("idiotypic_difference_rate") for r in records]
-    out = {k: column(k) for k in _COLUMNS}
-    out |= {k: column(k).astype(bool) for k in ("failed_collisions", "failed_time")}
-    if any(x is not None for x in rates):
-        out["idiotypic_difference_rate"] = np.asarray(
-            [np.nan if x is None else x for x in rates], np.float64
-        )
+    keys = (*METRICS.values(), "failed_collisions", "failed_time")
+    out = {k: np.asarray([r[k] for r in records]) for k in keys}
+    rates = np.asarray([r.get("idiotypic_difference_rate") for r in records], np.float64)
+    if not np.isnan(rates).all():  # None (does not apply) reads as NaN
+        out["idiotypic_difference_rate"] = rates
     return out
 
 
@@ -307,8 +306,6 @@ def run_noise_sweep(
     """Every system's trials in ``world`` with its noise scaled by each of ``scales`` (1 = its
     own levels); one batch per scale, the same seed (common random numbers); a scale is a unit
     of ``run``. Returns the reality_gap.json document."""
-    from jaxais.trials import run_trials
-
     start = time.perf_counter()
     worlds = [noisy_world(world, s, kinds) for s in scales]  # every scale checked first
     points = []
@@ -359,16 +356,7 @@ def sweep(
     Defaults as ``scripts/sweep.py --help`` says. Under ``jax.distributed`` every process computes
     the same numbers and process 0 writes. ValueError (one line) on a bad argument, before any run.
     """
-    import sys
-
-    from tqdm import tqdm
-
-    from jaxais.experiments import protocol
-    from jaxais.experiments.records import build_systems, portable_command, run_config
-    from jaxais.experiments.sweep_plots import save_noise_figure, save_sweep_figures
-    from jaxais.immune.network import NetworkParams
-    from jaxais.io import RUN_BYTES, check_memory
-    from jaxais.labels import SYSTEMS, label, parse_label
+    from jaxais.experiments.sweep_plots import save_noise_figure, save_sweep_figures  # imports us
 
     if (grid is None) == (noise is None):
         raise ValueError("give one of grid (parameter axes) and noise (noise scales)")
@@ -411,10 +399,10 @@ def sweep(
         raise ValueError(f"--noise scales must be finite and >= 0, got {list(noise)}")
     elif len(set(noise)) < len(noise):
         raise ValueError(f"--noise names a scale twice: {list(noise)}")
-    kinds = noise_kinds.split(",") if isinstance(noise_kinds, str) else noise_kinds
-    kinds = tuple(NOISE_KINDS) if kinds is None else tuple(kinds)
     if grid is not None and noise_kinds is not None:
         raise ValueError("--noise-kinds applies to --noise only")
+    kinds = noise_kinds.split(",") if isinstance(noise_kinds, str) else noise_kinds
+    kinds = tuple(NOISE_KINDS if kinds is None else kinds)
     if not kinds or len(set(kinds)) < len(kinds) or set(kinds) - set(NOISE_KINDS):
         raise ValueError(f"--noise-kinds: one or more of {', '.join(NOISE_KINDS)}, each once")
     pool = points if grid is not None else len(names)  # runs per trial index in one pool
@@ -456,11 +444,11 @@ def sweep(
     if grid is not None:
         rate = interpolate(doc, "idiotypic_difference_rate", PAPER_POINT)
         doc["paper_point"] = {"values": PAPER_POINT, "idiotypic_difference_rate": rate}
-    cfg = run_config(loaded, world, config, network, params, seed_info)
-    cfg["command"] = None if command is None else portable_command(command)
-    cfg["processes"] = jax.process_count()
-    cfg["devices"] = jax.device_count()
-    doc["config"] = cfg
+    doc["config"] = run_config(loaded, world, config, network, params, seed_info) | {
+        "command": None if command is None else portable_command(command),
+        "processes": jax.process_count(),
+        "devices": jax.device_count(),
+    }
     if lead:
         name = "sweep" if grid is not None else "reality_gap"
         atomic_write_json(run.out / f"{name}.json", doc)

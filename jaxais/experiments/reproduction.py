@@ -20,15 +20,26 @@ from typing import Any
 
 from jaxais.experiments import protocol
 from jaxais.experiments.one_system import command_line
-from jaxais.io import RUN_BYTES, atomic_write, atomic_write_json, check_memory, open_run
+from jaxais.io import RUN_BYTES, Run, atomic_write, atomic_write_json, check_memory, open_run
 
-__all__ = ["LTLRunError", "check_reproduce", "headline", "reproduce"]
+__all__ = ["LTLRunError", "check_reproduce", "headline", "reproduce", "run_ltl"]
 
 CALIBRATED = "SIE@hold=1"  # SIE selecting every iteration, on the plain label's streams
 
 
 class LTLRunError(RuntimeError):
     """The LTL run (the GA) that ``evolve=True`` starts failed."""
+
+
+def run_ltl(out: Path, seed: int, generations: int | None = None, resume: bool = False) -> Path:
+    """Run the LTL (evolve.py's defaults, GA seed ``seed``) into ``out``; returns ``out/seed``.
+    A child process, as the GA sets its own XLA flags before its JAX starts."""
+    cmd = [sys.executable, "-m", "jaxais.scripts.evolve", "--out", str(out), "--seed", str(seed)]
+    if generations is not None:
+        cmd += ["--generations", str(generations)]
+    if subprocess.run(cmd + ["--resume"] * resume).returncode != 0:
+        raise LTLRunError("the LTL run (scripts/evolve.py) failed; see its message above")
+    return out / "seed"
 
 
 def _ltl_summary(seed_dir: Path) -> dict | None:
@@ -90,8 +101,7 @@ def reproduce(
     """Run the paper's experiments into ``out`` (the flags of scripts/reproduce.py).
 
     Args:
-        evolve: run the LTL first (evolve.py's defaults, GA seed ``seed``, into ``out/ltl``)
-            and use its seed.
+        evolve: run the LTL first (:func:`run_ltl`, into ``out/ltl``) and use its seed.
         baseline: the neural controller beside SIE and HDC: True (shipped), a folder, False.
         command: recorded in run.json (default: the reproduce.py line these arguments mean).
         resume: finish the partial run in ``out``, giving the uninterrupted run's results.
@@ -115,69 +125,79 @@ def reproduce(
         out, trials=trials, seed=seed, seeds=seeds, evolve=evolve, generations=generations,
         worlds=worlds, tau_cap=tau_cap, collision_cap=collision_cap)  # fmt: skip
     import jax
-    import numpy as np
-    from tqdm import tqdm
-
-    from jaxais import envs
-    from jaxais.baselines.config import NN_LABEL
-    from jaxais.baselines.neural import NEURAL, load_params
-    from jaxais.experiments import claims, report, stats
-    from jaxais.experiments.plotting import draw_world
-    from jaxais.experiments.records import (
-        build_systems,
-        load_ltl_seed,
-        portable_command,
-        results_document,
-        run_config,
-        versions,
-    )
-    from jaxais.experiments.seeds import ltl_state
-    from jaxais.immune.network import NetworkParams
-    from jaxais.loop import EpisodeConfig
-    from jaxais.seed import default_seed_dir
-    from jaxais.trials import Placement, run_trials
 
     # Process 0 of a multi-process run writes (and checks the folder); the others read it.
     lead = not jax.distributed.is_initialized() or jax.process_index() == 0
+    from jaxais.baselines.neural import load_params
+    from jaxais.experiments.records import load_ltl_seed
+
     # Read first: a missing or corrupt seed (or baseline) fails before anything is written.
     loaded = None if evolve else load_ltl_seed(seeds)
-    nn_params = nn_info = None
+    nn = None
     if baseline is not False:
         try:
             nn_params, nn_info = load_params(None if baseline is True else baseline)
         except ValueError as err:
             raise ValueError(f"--baseline: {err}") from None
         # What made the weights (train_baseline.py's config.json holds the rest).
-        nn_info = {"config": nn_info.get("config"), "seed": nn_info.get("seed")}
-    settings = {"trials": trials, "seed": seed, "seeds": None if seeds is None else str(seeds),
-                "evolve": evolve, "generations": generations, "baseline": baseline if isinstance(
-                baseline, bool) else str(baseline), "worlds": names, "tau_cap": tau_cap,
-                "collision_cap": collision_cap}  # fmt: skip
-    run = open_run(out, "reproduce", settings, resume=resume, write=lead)
+        nn = nn_params, {"config": nn_info.get("config"), "seed": nn_info.get("seed")}
+    config = {"trials": trials, "seed": seed, "seeds": None if seeds is None else str(seeds),
+              "evolve": evolve, "generations": generations, "baseline": baseline if isinstance(
+              baseline, bool) else str(baseline), "worlds": names, "tau_cap": tau_cap,
+              "collision_cap": collision_cap}  # fmt: skip
+    run = open_run(out, "reproduce", config, resume=resume, write=lead)
 
     started = time.perf_counter()
     timings: dict[str, float] = {}
     if evolve:
-        ltl = out / "ltl"
+        ltl = run.out / "ltl"
         if "ltl" not in run.units:
+            from jaxais.experiments.seeds import ltl_state
+
             t, state = time.perf_counter(), ltl_state(ltl)
             if state == "fresh" and ltl.exists():
                 shutil.rmtree(ltl)  # this run's own LTL, killed before its first checkpoint
-            if state != "done":  # a child process: the GA sets its XLA flags before JAX starts
-                cmd = [sys.executable, "-m", "jaxais.scripts.evolve", "--out", str(ltl)]
-                cmd += ["--seed", str(seed)]
-                if generations is not None:
-                    cmd += ["--generations", str(generations)]
-                if subprocess.run(cmd + ["--resume"] * (state == "resume")).returncode != 0:
-                    raise LTLRunError(
-                        "the LTL run (scripts/evolve.py) failed; see its message above"
-                    )
+            if state != "done":
+                run_ltl(ltl, seed, generations, resume=state == "resume")
             run.finish("ltl", {"ltl_s": time.perf_counter() - t})
         timings["ltl_s"] = run.units["ltl"]["ltl_s"]
         seeds = ltl / "seed"
         loaded = load_ltl_seed(seeds)
+    return _run(run, names, trials, seed, seeds, loaded, nn, tau_cap, collision_cap,
+                progress=progress, command=command, started=started, timings=timings,
+                lead=lead)  # fmt: skip
 
+
+def _run(run: Run, worlds: list[str], n_trials: int | None, seed: int,
+         seeds: str | os.PathLike[str] | None, loaded: tuple, nn: tuple | None, tau_cap: float,
+         collision_cap: int, *, progress: bool, command: str, started: float,
+         timings: dict[str, float], lead: bool) -> dict[str, Any] | None:  # fmt: skip
+    """:func:`reproduce` once checked and read (``nn``: weights and their info, or None): every
+    world not finished in ``run``, then the tables, claims and report."""
+    import numpy as np
+    from tqdm import tqdm
+
+    from jaxais import envs
+    from jaxais.baselines.config import NN_LABEL
+    from jaxais.baselines.neural import NEURAL
+    from jaxais.experiments import claims, report, stats
+    from jaxais.experiments.plotting import draw_world
+    from jaxais.experiments.records import (
+        build_systems,
+        portable_command,
+        results_document,
+        run_config,
+        versions,
+    )
+    from jaxais.immune.network import NetworkParams
+    from jaxais.loop import EpisodeConfig
+    from jaxais.seed import default_seed_dir
+    from jaxais.trials import Placement, run_trials
+
+    out = run.out
     seeds_dir = Path(seeds) if seeds else default_seed_dir()
+    nn_params, nn_info = nn or (None, None)
+
     network = NetworkParams()
     params = envs.default_params()
     config = EpisodeConfig(tau_cap=tau_cap, collision_cap=collision_cap)
@@ -186,10 +206,10 @@ def reproduce(
     results_by_world, baseline_by_world, trajectories, placements, configs = {}, {}, {}, {}, {}
     calibration_by_world = {}
     (out / "trials").mkdir(exist_ok=True)
-    for name in names:
+    for name in worlds:
         world = envs.load_world(name)
         labels = list(protocol.systems_for_world(name))
-        n = trials if trials is not None else protocol.trials_for_world(name)
+        n = n_trials if n_trials is not None else protocol.trials_for_world(name)
         systems, seed_info = build_systems(labels, seeds_dir, network, loaded)
         cfg = run_config(world, name, config, network, params, seed_info)
         configs[name] = cfg
@@ -198,7 +218,7 @@ def reproduce(
         nn_cfg = {k: v for k, v in cfg.items() if k not in ("network", "readings", "ltl_seed")}
         nn_cfg["baseline"] = nn_info
         files = {label: (label, cfg) for label in labels} | {"SIE_hold1": (CALIBRATED, hold1_cfg)}
-        files |= {NN_LABEL: (NN_LABEL, nn_cfg)} if nn_params is not None else {}
+        files |= {NN_LABEL: (NN_LABEL, nn_cfg)} if nn is not None else {}
         if name in run.units:  # a finished world: its trials and examples from its files
             if not lead:
                 continue
@@ -214,12 +234,12 @@ def reproduce(
             sie = systems["SIE"]
             hold1 = {CALIBRATED: sie.replace(readings=sie.readings.replace(hold=np.int32(1)))}
             world_t = {}
-            k = len(labels) + 1 + (nn_params is not None)
+            k = len(labels) + 1 + (nn is not None)
             with tqdm(total=n * k, desc=f"{name}: {k} systems x {n} trials", unit="run",
                       file=sys.stderr, disable=not (lead and progress)) as bar:  # fmt: skip
                 sets = run_trials(world, systems | hold1, n, seed, config, params, bar, world_t)
                 sets["SIE_hold1"] = sets.pop(CALIBRATED)
-                if nn_params is not None:
+                if nn is not None:
                     sets |= run_trials(
                         world, {NN_LABEL: nn_params}, n, seed, config, params, bar, world_t,
                         controller=NEURAL,
@@ -246,7 +266,7 @@ def reproduce(
             timings[key] = timings.get(key, 0.0) + value
         results_by_world[name] = {k: records[k] for k in labels}
         calibration_by_world[name] = {"SIE": records["SIE_hold1"]}
-        if nn_params is not None:
+        if nn is not None:
             baseline_by_world[name] = {NN_LABEL: records[NN_LABEL]}
 
     if not lead:
@@ -269,14 +289,14 @@ def reproduce(
     run_doc = {
         "command": portable_command(command),
         "seed": seed,
-        "trials": trials,
+        "trials": n_trials,
         "ltl_seed": loaded[1],
         "worlds": configs,
         "versions": versions(),
         "timings_s": timings,
     }
     atomic_write_json(out / "run.json", run_doc)
-    drawn = {name: envs.load_world(name) for name in names}
+    drawn = {name: envs.load_world(name) for name in worlds}
     report_path = report.write_report(
         out,
         tables,

@@ -6,6 +6,9 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def run_python(
@@ -19,4 +22,19 @@ def run_python(
     env = {**os.environ, "JAX_PLATFORMS": "cpu"} if env is None else env
     return subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=timeout
+    )
+
+
+def start_script(script: str, *args: object, **env: str) -> subprocess.Popen:
+    """Start ``scripts/{script}`` with ``args`` from the repository root, its output captured as
+    text, in this process's environment with ``env`` on top: no ``XLA_FLAGS`` (a script sets its
+    own) and one-line errors (``JAXAIS_DEBUG`` off)."""
+    base = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    return subprocess.Popen(
+        [sys.executable, f"scripts/{script}", *map(str, args)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**base, "JAXAIS_DEBUG": "", **env},
     )

@@ -20,8 +20,9 @@ from jaxais import _speed, envs
 # Scripts keep a persistent compilation cache in the user's home by default; tests must not write
 # there (a test that wants a cache names its own directory).
 os.environ["JAXAIS_CACHE_DIR"] = "off"
-# The scripts' XLA flags for the tests' own programs too, before JAX starts its backend: they
-# leave every number as it is and cut the tests' CPU time by about a quarter (compilation).
+# The scripts' XLA flags for the tests' own programs too, before JAX starts its backend: the
+# tests then check what the scripts run, in about a quarter less CPU time (compilation). They
+# leave the STL's numbers as they are, not the neural baseline's (tests/test_neural.py).
 _speed.setup(cache=False)
 
 
@@ -33,8 +34,6 @@ def _scripts_share_a_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
     base = tmp_path_factory.getbasetemp()
     shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
     os.environ["JAXAIS_CACHE_DIR"] = str(shared / "xla")
-    if os.environ.get("JAXAIS_TESTS_CACHE", "1") == "1":
-        jax.config.update("jax_compilation_cache_dir", str(shared / "xla"))
 
 
 BATCH = 8

@@ -10,7 +10,6 @@ one compilation cache, so each program compiles once.
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -20,11 +19,11 @@ from pathlib import Path
 import _stl_fixtures as F
 import numpy as np
 import pytest
+from _python import start_script
 from test_seeds import FakeScripts
 
 from jaxais.io import MANIFEST, UserError, open_run
 
-ROOT = Path(__file__).resolve().parent.parent
 EXIT = {signal.SIGINT: 130, signal.SIGTERM: 143, signal.SIGKILL: -9}
 
 
@@ -110,17 +109,6 @@ def cache(tmp_path_factory) -> dict[str, str]:
     return {"JAXAIS_CACHE_DIR": str(d), "JAX_COMPILATION_CACHE_DIR": str(d)}
 
 
-def start(script: str, *args: object, env: dict[str, str] | None = None) -> subprocess.Popen:
-    return subprocess.Popen(
-        [sys.executable, f"scripts/{script}", *map(str, args)],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env={**os.environ, "JAXAIS_DEBUG": "", **(env or {})},
-    )
-
-
 def finish(proc: subprocess.Popen, status: int = 0) -> tuple[str, str]:
     out, err = proc.communicate(timeout=600)
     assert proc.returncode == status, err[-3000:]
@@ -152,11 +140,11 @@ def test_sweep_killed_twice_and_resumed_gives_the_uninterrupted_sweep(tmp_path, 
     args = ("--grid", "k1=0.85,1.6", "--grid", "k2=1.1,2", "--trials", 1, "--slots", 1,
             "--tau-cap", 4)  # fmt: skip
     ref, out = tmp_path / "ref", tmp_path / "out"
-    finish(start("sweep.py", *args, "--out", ref, env=cache))
-    kill_after(start("sweep.py", *args, "--out", out, env=cache), out, 1, signal.SIGINT)
-    again = start("sweep.py", *args, "--out", out, "--resume", env=cache)
+    finish(start_script("sweep.py", *args, "--out", ref, **cache))
+    kill_after(start_script("sweep.py", *args, "--out", out, **cache), out, 1, signal.SIGINT)
+    again = start_script("sweep.py", *args, "--out", out, "--resume", **cache)
     kill_after(again, out, 2, signal.SIGKILL)
-    finish(start("sweep.py", *args, "--out", out, "--resume", env=cache))
+    finish(start_script("sweep.py", *args, "--out", out, "--resume", **cache))
     a, b = (json.loads((d / "sweep.json").read_text()) for d in (ref, out))
     for key in ("axes", "base_values", "points", "runs", "robot_iterations", "paper_point"):
         assert a[key] == b[key], key
@@ -170,11 +158,11 @@ def test_ablate_killed_after_a_batch_and_resumed_gives_the_same_ablation(tmp_pat
     args = ("--worlds", "world1", "--variants", "ours,collision_rule=entry", "--trials", 2,
             "--tau-cap", 5, "--seeds", seeds)  # fmt: skip
     ref, out = tmp_path / "ref", tmp_path / "out"
-    finish(start("ablate.py", *args, "--out", ref, env=cache))
-    kill_after(start("ablate.py", *args, "--out", out, env=cache), out, 1, signal.SIGTERM)
-    bad = finish(start("ablate.py", *args[:5], 3, *args[6:], "--out", out, "--resume"), 2)[1]
+    finish(start_script("ablate.py", *args, "--out", ref, **cache))
+    kill_after(start_script("ablate.py", *args, "--out", out, **cache), out, 1, signal.SIGTERM)
+    bad = finish(start_script("ablate.py", *args[:5], 3, *args[6:], "--out", out, "--resume"), 2)[1]
     assert "--trials: the run in" in bad and bad.count("\n") == 1  # other settings: refused
-    finish(start("ablate.py", *args, "--out", out, "--resume", env=cache))
+    finish(start_script("ablate.py", *args, "--out", out, "--resume", **cache))
     for name in ("ablation.json", "ablation.md", "batches/0.json", "batches/1.json"):
         assert (ref / name).read_text() == (out / name).read_text(), name
     runs = [json.loads((d / "run.json").read_text()) for d in (ref, out)]
@@ -189,9 +177,11 @@ def test_train_baseline_killed_and_resumed_trains_the_same_weights(tmp_path, cac
     args = ("--world", "real", "--generations", 3, "--pairs", 4, "--episodes", 2, "--steps", 60,
             "--hidden", 8, "--no-eval")  # fmt: skip
     ref, out = tmp_path / "ref", tmp_path / "out"
-    finish(start("train_baseline.py", *args, "--out", ref, env=cache))
-    kill_after(start("train_baseline.py", *args, "--out", out, env=cache), out, 0, signal.SIGINT)
-    finish(start("train_baseline.py", *args, "--out", out, "--resume", env=cache))
+    finish(start_script("train_baseline.py", *args, "--out", ref, **cache))
+    kill_after(
+        start_script("train_baseline.py", *args, "--out", out, **cache), out, 0, signal.SIGINT
+    )
+    finish(start_script("train_baseline.py", *args, "--out", out, "--resume", **cache))
     a, b = (json.loads((d / "config.json").read_text()) for d in (ref, out))
     for key in ("final", "curve", "config", "seed", "parameters"):
         assert a[key] == b[key], key
@@ -199,9 +189,9 @@ def test_train_baseline_killed_and_resumed_trains_the_same_weights(tmp_path, cac
         assert x.files == y.files and all(np.array_equal(x[k], y[k]) for k in x.files)
     # Resuming a complete run skips its finished stage; no --resume into it is refused.
     before = (out / "params.npz").stat().st_mtime_ns
-    again = start("train_baseline.py", *args, "--out", out, "--resume", env=cache)
-    fresh = start("train_baseline.py", *args, "--out", out)
-    nothing = start("train_baseline.py", *args, "--out", tmp_path / "none", "--resume")
+    again = start_script("train_baseline.py", *args, "--out", out, "--resume", **cache)
+    fresh = start_script("train_baseline.py", *args, "--out", out)
+    nothing = start_script("train_baseline.py", *args, "--out", tmp_path / "none", "--resume")
     assert "trained in" in finish(again)[0] and (out / "params.npz").stat().st_mtime_ns == before
     for proc, message in ((fresh, "holds a complete train_baseline run"),
                           (nothing, "none: no run to resume")):  # fmt: skip

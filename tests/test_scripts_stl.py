@@ -11,15 +11,13 @@ one tiny
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import _stl_fixtures as F
 import pytest
-from _python import run_python
+from _python import run_python, start_script
 
 from jaxais.systems import LABELS
 from jaxais.trials import summarise
@@ -59,22 +57,6 @@ TWO_DEVICES = {"XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
 ONE_DEVICE = {"XLA_FLAGS": "--xla_force_host_platform_device_count=1"}
 
 
-def _env(**extra: str) -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-    return {**env, "JAXAIS_DEBUG": "", **extra}
-
-
-def _start(script: str, *args: object, **env: str) -> subprocess.Popen:
-    return subprocess.Popen(
-        [sys.executable, f"scripts/{script}", *map(str, args)],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=_env(**env),
-    )
-
-
 def _finish(proc: subprocess.Popen) -> subprocess.CompletedProcess:
     out, err = proc.communicate(timeout=TIMEOUT)
     return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
@@ -112,17 +94,17 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     one_device.mkdir()
     one_args = (*trials_args[:-4], "--out", one_device / "results.json")
     rep_dir = base / "reproduce"
-    rep = _start(
+    rep = start_script(
         "reproduce.py", "--trials", 2, "--tau-cap", 10, "--worlds", "world1",
         "--seeds", seeds, "--out", rep_dir,
     )  # fmt: skip
-    first = _finish(_start("trials.py", *trials_args, **cache, **TWO_DEVICES))
+    first = _finish(start_script("trials.py", *trials_args, **cache, **TWO_DEVICES))
     _ok(first)
-    single = _start("trials.py", *one_args, JAXAIS_CACHE_DIR="off", **ONE_DEVICE)
+    single = start_script("trials.py", *one_args, JAXAIS_CACHE_DIR="off", **ONE_DEVICE)
     cached = sorted(p.name.split("-")[0] for p in (base / "jax_cache").iterdir())
     shutil.move(out / "results.json", out / "first.json")
     shutil.move(out / "plot.png", out / "first.png")
-    second = _finish(_start("trials.py", *trials_args, **cache, **TWO_DEVICES))
+    second = _finish(start_script("trials.py", *trials_args, **cache, **TWO_DEVICES))
     return {
         "one_device": _finish(single),
         "one_device_json": one_device / "results.json",
@@ -208,8 +190,8 @@ def test_trials_script_user_errors(tmp_path: Path):
         (["--system", "HDC", "--seeds", tmp_path], ["--seeds"]),
         (["--system", "SIE", "--random-set", "R2"], ["--random-set"]),
     ]
-    procs = [_start("trials.py", *args, "--out", out) for args, _ in cases]
-    bad_suffix = _start("trials.py", "--system", "HDC", "--out", tmp_path / "r.txt")
+    procs = [start_script("trials.py", *args, "--out", out) for args, _ in cases]
+    bad_suffix = start_script("trials.py", "--system", "HDC", "--out", tmp_path / "r.txt")
     for (_, words), proc in zip(cases, procs, strict=True):
         assert_user_error(_finish(proc), "trials.py", *words)
     assert_user_error(_finish(bad_suffix), "trials.py", ".json")
@@ -226,7 +208,9 @@ def test_trials_script_user_errors(tmp_path: Path):
     ids=["trials-unknown-system", "trials-bad-int", "reproduce-bad-int"],
 )
 def test_argparse_errors_are_one_line(script, args, tmp_path):
-    proc = _finish(_start(script, *[tmp_path / a if a in ("r.json", "d") else a for a in args]))
+    proc = _finish(
+        start_script(script, *[tmp_path / a if a in ("r.json", "d") else a for a in args])
+    )
     assert_user_error(proc, script)
 
 
@@ -337,11 +321,13 @@ def test_reproduce_user_errors(tmp_path: Path):
         (["--baseline", tmp_path / "none", "--worlds", "world1"], ["--baseline", "none"]),
         (["--baseline", "", "--worlds", "world1"], ["--baseline: .: not a trained"]),  # not NN
     ]
-    procs = [_start("reproduce.py", *args, "--out", out) for args, _ in cases]
+    procs = [start_script("reproduce.py", *args, "--out", out) for args, _ in cases]
     for (_, words), proc in zip(cases, procs, strict=True):
         assert_user_error(_finish(proc), "reproduce.py", *words)
     missing = _finish(
-        _start("reproduce.py", "--worlds", "world1", "--seeds", tmp_path / "none", "--out", out)
+        start_script(
+            "reproduce.py", "--worlds", "world1", "--seeds", tmp_path / "none", "--out", out
+        )
     )
     assert_user_error(missing, "reproduce.py", "no such seed directory")
     assert not (out / "tables.json").exists()
@@ -359,16 +345,18 @@ def test_reproduce_killed_and_resumed_gives_the_uninterrupted_run(runs, tmp_path
 
     ref, out = runs["reproduce_dir"], tmp_path / "rep"
     args = ("--trials", 2, "--tau-cap", 10, "--worlds", "world1", "--seeds", runs["seeds"])
-    nothing = _start("reproduce.py", *args, "--out", tmp_path / "none", "--resume")
-    kill_after(_start("reproduce.py", *args, "--out", out), out, 0, signal.SIGKILL)
-    kill_after(_start("reproduce.py", *args, "--out", out, "--resume"), out, 1, signal.SIGTERM)
-    other = _start("reproduce.py", "--trials", 3, *args[2:], "--out", out, "--resume")
-    fresh = _start("reproduce.py", *args, "--out", out)
+    nothing = start_script("reproduce.py", *args, "--out", tmp_path / "none", "--resume")
+    kill_after(start_script("reproduce.py", *args, "--out", out), out, 0, signal.SIGKILL)
+    kill_after(
+        start_script("reproduce.py", *args, "--out", out, "--resume"), out, 1, signal.SIGTERM
+    )
+    other = start_script("reproduce.py", "--trials", 3, *args[2:], "--out", out, "--resume")
+    fresh = start_script("reproduce.py", *args, "--out", out)
     assert_user_error(_finish(other), "reproduce.py", f"--trials: the run in {out} has 2, not 3")
     assert_user_error(_finish(fresh), "reproduce.py", f"{out} holds a partial reproduce run")
     assert_user_error(_finish(nothing), "reproduce.py", "none: no run to resume")
     assert not (tmp_path / "none").exists()
-    _ok(_finish(_start("reproduce.py", *args, "--out", out, "--resume")))
+    _ok(_finish(start_script("reproduce.py", *args, "--out", out, "--resume")))
     files = sorted(p.name for p in (ref / "trials").iterdir())
     assert sorted(p.name for p in (out / "trials").iterdir()) == files
     for name in ["tables.json", "claims.json", *(f"trials/{f}" for f in files if ".json" in f)]:
@@ -397,7 +385,9 @@ def test_trials_script_bad_worlds_and_seeds_are_one_line(tmp_path: Path):
         (["--seed", 2**32], ["--seed must be in [0, 2**32), got 4294967296"]),
     ]
     procs = [
-        _start("trials.py", "--system", "HDC", "--trials", 2, "--tau-cap", 5, *args, "--out", out)
+        start_script(
+            "trials.py", "--system", "HDC", "--trials", 2, "--tau-cap", 5, *args, "--out", out
+        )
         for args, _ in cases
     ]
     for (_, words), proc in zip(cases, procs, strict=True):

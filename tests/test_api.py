@@ -201,6 +201,7 @@ def test_flat_params_round_trip_and_sweep_points_are_with_params():
         jax.tree.map(lambda g, o, i=i: np.testing.assert_array_equal(g[i], o), grid, one)
 
 
+@pytest.mark.slow
 def test_cmaes_example_tunes_k1_and_k2_in_one_jitted_search():
     tune = runpy.run_path(str(ROOT / "examples" / "tune_k1_k2.py"))["tune"]
     network, history = tune(generations=2, population=4, trials=2, tau_cap=10.0)

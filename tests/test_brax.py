@@ -124,6 +124,7 @@ print("es", steps, float(metrics["eval/episode_collision"]))
 """
 
 
+@pytest.mark.slow
 def test_ppo_and_es_train():
     """examples/brax_ppo.py (brax's PPO on world1) and brax's ES (on the cheapest world to
     compile), each with evaluations."""

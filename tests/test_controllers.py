@@ -82,6 +82,7 @@ def test_vmap_over_seeds_and_a_parameter_grid_equals_a_loop():
             np.testing.assert_array_equal(np.asarray(batched[k][i]), np.asarray(one[k]), k)
 
 
+@pytest.mark.slow
 def test_a_new_controller_plugs_into_the_loop_unchanged():
     # The Braitenberg vehicle is not an immune network: no antibodies, no state, no stats.
     got = as_records(braitenberg_run()(jax.random.key(3), braitenberg_params()))

@@ -70,6 +70,7 @@ def test_make_and_spaces(env):
     np.testing.assert_array_equal(act_space.high, 1.0)
 
 
+@pytest.mark.slow
 def test_reset_step_shapes_match_spaces(env):
     key = jax.random.key(0)
     obs, state = env.reset(key, env.default_params)
@@ -106,6 +107,7 @@ def test_same_key_same_result_and_keys_matter(env):
     np.testing.assert_array_equal(s1.sim.pose, state.sim.pose)
 
 
+@pytest.mark.slow
 def test_jit_vmap_step_equals_loop(env, env_no_reset):
     n = 3
     keys = jax.random.split(jax.random.key(7), n)

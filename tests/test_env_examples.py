@@ -18,6 +18,7 @@ import pytest
 from _python import run_python
 from conftest import fast_compile_options
 
+pytestmark = pytest.mark.slow  # each test reads the one run of all three
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
 

@@ -362,6 +362,7 @@ def test_check_seed_and_out_refusals(tmp_path: Path, capsys, full_run: Path):
     assert len(err.strip().splitlines()) == 1 and "no such seed directory" in err
 
 
+@pytest.mark.slow
 def test_diversity_comparison(tmp_path: Path):
     summary = run_main(
         "--generations", "1", "--out", str(tmp_path / "d"), "--diversity", "--diversity-seeds", "2"

@@ -293,6 +293,7 @@ def test_the_checked_best_is_the_elite_through_a_real_run(success_run):
         np.testing.assert_array_equal(a[:, 0], b)
 
 
+@pytest.mark.slow
 def test_elite_survives_through_a_real_run_without_checks():
     state = ga.run(jax.random.key(0), NOCHECK, maze())
     state = jax.tree.map(np.asarray, state.replace(key=jax.random.key_data(state.key)))
@@ -392,6 +393,7 @@ def test_run_is_reproducible_and_consistent():
 # ------------------------------------------------------------------------------- robust runs
 
 
+@pytest.mark.slow
 def test_robust_evaluation_is_the_mean_of_one_start_evaluations(easy):
     """Three starts per robot, in one rollout, give each robot the mean τ, c, L and f of three
     one-start evaluations from the same start keys (and the sum of their crossings)."""
@@ -416,6 +418,7 @@ def test_robust_evaluation_is_the_mean_of_one_start_evaluations(easy):
     np.testing.assert_array_equal(np.asarray(by_key.tau), np.asarray(ones[0].tau))
 
 
+@pytest.mark.slow
 def test_crossing_rates_do_not_depend_on_batching(easy):
     sets = jax.tree.map(lambda x: x[:, 0], fresh_state(13).population)  # [2, 8]
     key, params = jax.random.key(14), envs.default_params()
@@ -587,6 +590,7 @@ def test_final_sets():
     np.testing.assert_array_equal(top.speed, np.asarray(state.evaluated.speed)[0, order])
 
 
+@pytest.mark.slow
 def test_compare_diversity_reports_both_tests():
     out = compare_diversity([0, 1], TINY, maze(), done={0: tiny_run(0)})
     assert out["single"]["robots"] == 8 and out["multi"]["populations"] == 2

@@ -62,6 +62,7 @@ def percept_of(ob: envs.Observation) -> Percept:
 # ------------------------------------------------------------------------------------ features
 
 
+@pytest.mark.slow
 def test_percept_features_equal_the_gymnax_observation():
     """For the same state, the controller's inputs are the environment's first 10 entries, and
     the controller's wheels are the policy's action x 1000, whether or not blue is seen."""
@@ -177,6 +178,7 @@ def tiny_train():
     return make_train(TINY)
 
 
+@pytest.mark.slow
 def test_training_is_deterministic_and_finite():
     train = tiny_train()
     a, b, c = (train(jax.random.key(s)) for s in (0, 0, 1))

@@ -135,6 +135,7 @@ def kill_after(proc: subprocess.Popen, out: Path, units: int, sig: signal.Signal
     assert _manifest(out)["status"] == "partial"
 
 
+@pytest.mark.slow
 def test_sweep_killed_twice_and_resumed_gives_the_uninterrupted_sweep(tmp_path, cache):
     # 4 chunks of one point each: 4 units.
     args = ("--grid", "k1=0.85,1.6", "--grid", "k2=1.1,2", "--trials", 1, "--slots", 1,
@@ -152,6 +153,7 @@ def test_sweep_killed_twice_and_resumed_gives_the_uninterrupted_sweep(tmp_path, 
     assert _manifest(ref) == _manifest(out)  # the same units, each point's numbers exactly
 
 
+@pytest.mark.slow
 def test_ablate_killed_after_a_batch_and_resumed_gives_the_same_ablation(tmp_path, cache):
     seeds = F.write_seed(tmp_path / "seed", seed=0)
     # Two batches (another collision rule compiles its own program): two units.
@@ -173,6 +175,7 @@ def test_ablate_killed_after_a_batch_and_resumed_gives_the_same_ablation(tmp_pat
     assert runs[0] == runs[1]
 
 
+@pytest.mark.slow
 def test_train_baseline_killed_and_resumed_trains_the_same_weights(tmp_path, cache):
     args = ("--world", "real", "--generations", 3, "--pairs", 4, "--episodes", 2, "--steps", 60,
             "--hidden", 8, "--no-eval")  # fmt: skip

@@ -55,6 +55,7 @@ def assert_user_error(proc: subprocess.CompletedProcess, prog: str, *words: str)
 # ---------------------------------------------------------------------------------- render.py
 
 
+@pytest.mark.slow
 def test_render_writes_png_and_gif(tmp_path):
     out, gif = tmp_path / "w.png", tmp_path / "w.gif"
     args = ("--world", "world1", "--steps", 20, "--robots", 2, "--seed", 3)
@@ -124,6 +125,7 @@ def test_render_malformed_world(tmp_path, text, words):
     ]
 
 
+@pytest.mark.slow
 def test_render_world_just_within_the_surface_limit(tmp_path):
     world = tmp_path / "full.toml"
     world.write_text(many_walls(57))  # 64 surfaces: the most a world may have
@@ -170,6 +172,8 @@ def test_bench_quick_json(tmp_path):
         "bench.py",
         *("--quick", "--devices", 2, "--batches", 2, "--steps", 3, "--repeats", 1),
         *("--numpy-robots", 2, "--numpy-steps", 2, "--matmul", 64, "--out", out),
+        # 3 robots do not split over 2 devices: the controller's sharded layout is skipped
+        *("--controller-batches", 3, "--controller-steps", 5),
     )
     assert proc.returncode == 0, proc.stderr
     r = json.loads(out.read_text())
@@ -189,6 +193,8 @@ def test_bench_quick_json(tmp_path):
     assert set(r["jax_steps_per_s"]) == {"2"} and r["jax_steps_per_s"]["2"] > 0
     assert r["machine"]["device_count"] == 2  # --devices took effect before JAX was imported
     assert set(r["jax_steps_per_s_sharded"]) == {"2"}
+    assert set(r["controller_iterations_per_s"]) == {"3"} and not r["controller_compile_s_sharded"]
+    assert set(r["env_steps_per_s"]) == {"step", "step_env"}
     assert r["flops_per_step"] > 0 and 0 < r["fraction_of_peak"] < 1
     assert {"platform", "cpu_count", "jax", "backend", "device_kinds", "date"} <= set(r["machine"])
     assert "wrote" in proc.stdout

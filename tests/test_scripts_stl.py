@@ -333,6 +333,7 @@ def test_reproduce_user_errors(tmp_path: Path):
     assert not (out / "tables.json").exists()
 
 
+@pytest.mark.slow
 def test_reproduce_killed_and_resumed_gives_the_uninterrupted_run(runs, tmp_path: Path):
     """Killed before its world ends (SIGKILL) and after (SIGTERM, while it makes the tables and
     report), each time resumed: the trials, tables and claims of the fixture's uninterrupted

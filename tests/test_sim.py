@@ -412,6 +412,7 @@ def test_push_out_matches_the_numpy_reference(sim) -> None:
     assert pushed.any() and not pushed.all()  # some discs were pushed out, some moved freely
 
 
+@pytest.mark.slow
 def test_ir_noise_has_the_webots_relative_std(sim) -> None:
     """IR readings in a noiseless world spread by Webots' per-distance relative std (SPEC 2)."""
     world = sim.world("world1")
@@ -431,6 +432,7 @@ def test_ir_noise_has_the_webots_relative_std(sim) -> None:
     assert abs(rel.mean()) < 0.003
 
 
+@pytest.mark.slow
 def test_camera_noise_never_invents_a_target(sim, probe_world) -> None:
     """Blob-level camera noise (SPEC 2): a clear view never reads "target seen"; a view of the
     goal is missed at about the miss rate, shifted by one column at about the shift rate, and

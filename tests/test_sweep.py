@@ -48,6 +48,7 @@ def pool(seed: int, system, n: int = N, **kw):
     )
 
 
+@pytest.mark.slow
 def test_one_slot_refilled_gives_make_trials_runs_bit_for_bit():
     # One slot: trial 1 starts when trial 0 has ended, at a tick aligned to the idiotope's period
     # (120 iterations; 600 = 24 chunks). Its idiotope redraws then fall where they fall in a
@@ -271,18 +272,9 @@ def _sweep_script(*args: str, tmp: Path) -> subprocess.CompletedProcess:
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--grid", "k9=0:1:2"], "unknown parameter"),
-        (["--grid", "idiotope_period=10,20"], "not traced"),
-        (["--grid", "k1=0:1:2", "--grid", "k1=3"], "names a parameter twice"),
-        (["--grid", "k1=0:1:2", "--trials", "0"], "--trials must be >= 1"),
-        (["--grid", "k1=-1,1"], "k1 must be >= 0"),
-        (["--grid", "k1=1", "--system", "SIE,HDC"], "one system"),
-        (["--grid", "k1=1", "--system", "XYZ"], "unknown system 'XYZ'"),
+        (["--grid", "k9=0:1:2"], "--grid k9: unknown parameter"),  # the library's check
         (["--grid", "k1=1", "--noise", "1"], "not allowed with argument"),
         (["--noise", "0,x"], "comma-separated numbers"),
-        (["--noise=-1,1"], "finite and >= 0"),
-        (["--noise", "1,nan"], "finite and >= 0"),
-        (["--noise", "1", "--noise-kinds", "ir,sonar"], "--noise-kinds"),
         (["--grid", "k1=1", "--coordinator", "nohost"], "HOST:PORT"),
     ],
 )
@@ -291,6 +283,29 @@ def test_sweep_script_bad_input_is_one_line(args, message, tmp_path):
     assert out.returncode == 2, out.stderr
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("sweep.py: error:") and message in lines[0]
+    assert not (tmp_path / "o").exists()
+
+
+def test_sweep_checks_every_argument_before_it_runs(tmp_path):
+    """What the script passes on, as ``sweep.py`` passes it: a one-line ValueError (the script's
+    one-line error), before anything is written."""
+    cases = [
+        ({"grid": ["idiotope_period=10,20"]}, "not traced"),
+        ({"grid": ["k1=0:1:2", "k1=3"]}, "names a parameter twice"),
+        ({"grid": ["k1=0:1:2"], "trials": 0}, "--trials must be >= 1"),
+        ({"grid": ["k1=-1,1"]}, "k1 must be >= 0"),
+        ({"grid": ["k1=1"], "system": "SIE,HDC"}, "one system"),
+        ({"grid": ["k1=1"], "system": "XYZ"}, "unknown system 'XYZ'"),
+        ({"grid": ["hold=0,1"]}, "hold must be an int >= 1"),  # as readings() says
+        ({"noise": [-1.0, 1.0]}, "finite and >= 0"),
+        ({"noise": [1.0, math.nan]}, "finite and >= 0"),
+        ({"noise": [1.0], "noise_kinds": "ir,sonar"}, "--noise-kinds"),
+    ]
+    for kw, message in cases:
+        with pytest.raises(ValueError, match=message) as err:
+            sweep.sweep(tmp_path / "o", **kw)
+        assert "\n" not in str(err.value)
+    assert not (tmp_path / "o").exists()
 
 
 @pytest.mark.slow

@@ -324,6 +324,7 @@ def same_trials(a: TrialSet, b: TrialSet, n: int | None = None) -> bool:
     )
 
 
+@pytest.mark.slow
 def test_trial_records_are_consistent():
     res = trials(SIE_HDC, 0)
     assert list(res) == ["SIE", "HDC"]
@@ -547,6 +548,7 @@ def test_run_trials_rejects_seeds_outside_their_range():
             run_trials(F.world(), sie, 2, seed, F.CONFIG)
 
 
+@pytest.mark.slow
 def test_pooled_trials_equal_the_recorded_batch():
     """Without recording, run_trials goes through the refilling pool: with one slot, each run
     starts when the one before ended, and every record and placement is the batch's."""

@@ -54,6 +54,9 @@ def main(argv: list[str] | None = None) -> None:
     except ValueError:
         raise UserError(f"--noise must be comma-separated numbers, got {args.noise!r}") from None
     distributed.check(args)
+    from jaxais import _speed  # its importlib.metadata: after the signal handlers are ours
+
+    _speed.setup()  # the XLA flags and compilation cache of every script (docs/performance.md)
     distributed.initialize(args)  # before JAX computes anything
     import jax
 

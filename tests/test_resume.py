@@ -106,7 +106,7 @@ def test_resume_removes_the_temporary_files_a_sigkill_left(tmp_path):
 def cache(tmp_path_factory) -> dict[str, str]:
     """One compilation cache for every script run here: each program compiles once."""
     d = tmp_path_factory.mktemp("xla_cache")
-    return {"JAXAIS_CACHE_DIR": str(d), "JAX_COMPILATION_CACHE_DIR": str(d)}
+    return {"JAXAIS_CACHE_DIR": str(d)}
 
 
 def finish(proc: subprocess.Popen, status: int = 0) -> tuple[str, str]:
@@ -142,6 +142,14 @@ def test_sweep_killed_twice_and_resumed_gives_the_uninterrupted_sweep(tmp_path, 
             "--tau-cap", 4)  # fmt: skip
     ref, out = tmp_path / "ref", tmp_path / "out"
     finish(start_script("sweep.py", *args, "--out", ref, **cache))
+    # The uninterrupted run, as a user reads it: its record and figure, no machine paths.
+    doc = json.loads((ref / "sweep.json").read_text())
+    assert doc["runs"] == 4 and len(doc["points"]) == 4
+    assert doc["config"]["command"].startswith("sweep.py --grid k1=0.85,1.6")
+    assert str(tmp_path) not in json.dumps(doc)
+    assert (ref / "sweep.png").stat().st_size > 10_000
+    # Like every script, sweep.py keeps its compiled programs in JAXAIS_CACHE_DIR for the next run.
+    assert any(p.name.startswith("jit__") for p in Path(cache["JAXAIS_CACHE_DIR"]).iterdir())
     kill_after(start_script("sweep.py", *args, "--out", out, **cache), out, 1, signal.SIGINT)
     again = start_script("sweep.py", *args, "--out", out, "--resume", **cache)
     kill_after(again, out, 2, signal.SIGKILL)

@@ -11,13 +11,20 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 
+def shipped_env() -> dict[str, str]:
+    """This process's environment without the tests' XLA flags (tests/conftest.py): a fresh
+    interpreter then compiles as a user's session does (a script adds its own flags)."""
+    return {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"} | {"JAX_PLATFORMS": "cpu"}
+
+
 def run_python(
     code: str, env: dict[str, str] | None = None, timeout: float = 120
 ) -> subprocess.CompletedProcess:
     """Run ``code`` with this interpreter and capture its output as text.
 
     Args:
-        env: the environment (default: this process's, with JAX on the CPU).
+        env: the environment (default: this process's, with JAX on the CPU and the tests' XLA
+            flags).
     """
     env = {**os.environ, "JAX_PLATFORMS": "cpu"} if env is None else env
     return subprocess.run(
@@ -27,9 +34,11 @@ def run_python(
 
 def start_script(script: str, *args: object, **env: str) -> subprocess.Popen:
     """Start ``scripts/{script}`` with ``args`` from the repository root, its output captured as
-    text, in this process's environment with ``env`` on top: no ``XLA_FLAGS`` (a script sets its
-    own) and one-line errors (``JAXAIS_DEBUG`` off)."""
-    base = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    text, in this process's environment with ``env`` on top: the tests' XLA flag alone in
+    ``XLA_FLAGS`` (a script adds its own to a user's), one-line errors (``JAXAIS_DEBUG`` off)."""
+    from conftest import TEST_XLA_FLAGS
+
+    base = os.environ | {"XLA_FLAGS": TEST_XLA_FLAGS}
     return subprocess.Popen(
         [sys.executable, f"scripts/{script}", *map(str, args)],
         cwd=ROOT,

@@ -100,48 +100,25 @@ def unstack(tree: object, i: int) -> object:
     return jax.tree.map(lambda a: a[i], tree)
 
 
-# ---------------------------------------------------------------------------------- compiling
-
-
-@functools.cache
-def fast_options() -> dict:
-    """XLA options that compile these test programs several times faster (and run them a little
-    slower): the tests check semantics, not speed. Options this XLA lacks are dropped."""
-    for options in (
-        {"xla_backend_optimization_level": 0, "xla_cpu_use_fusion_emitters": False},
-        {"xla_backend_optimization_level": 0},
-    ):
-        try:
-            jax.jit(lambda x: x + 1, compiler_options=options)(jnp.zeros(2))
-        except Exception:  # noqa: BLE001 (an option this XLA does not know)
-            continue
-        return options
-    return {}
-
-
-def jit(fun, **kwargs):
-    return jax.jit(fun, compiler_options=fast_options(), **kwargs)
-
-
 # ---------------------------------------------------------------------------------- controller
 
 
 @functools.cache
 def init_fn():
     """``STL.init`` under one ``jax.jit``."""
-    return jit(STL.init)
+    return jax.jit(STL.init)
 
 
 @functools.cache
 def learn_fn():
     """``STL.learn`` under one ``jax.jit`` (every unit test calls this one)."""
-    return jit(STL.learn)
+    return jax.jit(STL.learn)
 
 
 @functools.cache
 def act_fn():
     """``STL.act`` under one ``jax.jit``."""
-    return jit(STL.act)
+    return jax.jit(STL.act)
 
 
 def percept(
@@ -233,7 +210,7 @@ def state(
 @functools.cache
 def start_fn():
     """``vmap(start)`` over BATCH runs, jitted once."""
-    return jit(jax.vmap(start, in_axes=(0, 0, None, None, None, 0)), static_argnums=(4,))
+    return jax.jit(jax.vmap(start, in_axes=(0, 0, None, None, None, 0)), static_argnums=(4,))
 
 
 def iterate_key(key, run, tick, world, sim_params, controller, params, config):
@@ -244,13 +221,13 @@ def iterate_key(key, run, tick, world, sim_params, controller, params, config):
 @functools.cache
 def iterate_fn():
     """Unbatched :func:`iterate_key` (STL controller, :data:`CONFIG`), jitted once."""
-    return jit(iterate_key, static_argnums=(5, 7))
+    return jax.jit(iterate_key, static_argnums=(5, 7))
 
 
 @functools.cache
 def iterate_batch_fn():
     """``vmap(iterate_key)`` over BATCH runs (keys and runs batched), jitted once."""
-    return jit(
+    return jax.jit(
         jax.vmap(iterate_key, in_axes=(0, 0, None, None, None, None, 0, None)),
         static_argnums=(5, 7),
     )

@@ -3,20 +3,18 @@
 OpenAI-ES through its GymnaxProblem) and examples/rejax_ppo.py (rejax's PPO), third-party training
 code on ``gymnax.make("jaxais/world1")``.
 
-All run in one fresh interpreter with XLA's fast-compile options (tests/conftest.py's): each
-compiles its whole training run once, which is most of its time.
+All run in one fresh interpreter with the tests' XLA flags (tests/conftest.py): each compiles its
+whole training run once, which is most of its time.
 """
 
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 from _python import run_python
-from conftest import fast_compile_options
 
 pytestmark = pytest.mark.slow  # each test reads the one run of all three
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
@@ -24,15 +22,13 @@ EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
 @pytest.fixture(scope="module")
 def output() -> str:
-    flags = " ".join(f"--{k}={str(v).lower()}" for k, v in fast_compile_options().items())
     code = (
         "import runpy, sys\n"
         "for name in ('gymnax_ppo', 'evosax_policy', 'rejax_ppo'):\n"
         "    sys.argv = [name, '--tiny']\n"
         f"    runpy.run_path(f'{EXAMPLES}/{{name}}.py', run_name='__main__')\n"
     )
-    env = {**os.environ, "JAX_PLATFORMS": "cpu", "XLA_FLAGS": flags}
-    proc = run_python(code, env=env, timeout=600)
+    proc = run_python(code, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return proc.stdout
 

@@ -18,6 +18,7 @@ from pathlib import Path
 import _stl_fixtures as F
 import pytest
 from _python import run_python, start_script
+from conftest import TEST_XLA_FLAGS
 
 from jaxais.systems import LABELS
 from jaxais.trials import summarise
@@ -52,9 +53,9 @@ SUMMARY_KEYS = {
 }
 
 
-TWO_DEVICES = {"XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
+TWO_DEVICES = {"XLA_FLAGS": f"{TEST_XLA_FLAGS} --xla_force_host_platform_device_count=2"}
 """Two CPU devices, over which a script's batch is sharded (the scripts make one per core)."""
-ONE_DEVICE = {"XLA_FLAGS": "--xla_force_host_platform_device_count=1"}
+ONE_DEVICE = {"XLA_FLAGS": f"{TEST_XLA_FLAGS} --xla_force_host_platform_device_count=1"}
 
 
 def _finish(proc: subprocess.Popen) -> subprocess.CompletedProcess:

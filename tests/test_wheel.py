@@ -20,6 +20,7 @@ import venv
 from pathlib import Path
 
 import pytest
+from conftest import TEST_XLA_FLAGS
 
 ROOT = Path(__file__).resolve().parent.parent
 CONSOLE = {"jaxais-evolve", "jaxais-trials", "jaxais-reproduce", "jaxais-sweep", "jaxais-ablate"}
@@ -57,7 +58,7 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def _start(bin_dir: Path, cwd: Path, *args: object) -> subprocess.Popen:
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "XLA_FLAGS")}
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"} | {"XLA_FLAGS": TEST_XLA_FLAGS}
     return subprocess.Popen(
         [str(a) for a in args], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
         text=True, env={**env, "JAXAIS_CACHE_DIR": "off", "PATH": f"{bin_dir}:{env['PATH']}"},

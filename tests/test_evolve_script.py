@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from _python import run_python
+from conftest import TEST_XLA_FLAGS
 from test_ga import TINY
 
 from jaxais import ga
@@ -163,10 +164,11 @@ def test_check_seed_measures_the_recorded_rates(full_run: Path, capsys):
 
 @pytest.mark.slow
 def test_run_as_a_user_runs_it(tmp_path: Path, full_run: Path):
-    """The script as a process, with its XLA flags (jaxais._speed): status 0, the same seed as the
-    in-process run (whose JAX started without them), nothing on stderr but the progress bar."""
+    """The script as a process, with its XLA flags (jaxais._speed: the GA's one-kernel loops,
+    which the in-process run has not): status 0, the same seed as the in-process run, nothing on
+    stderr but the progress bar."""
     out = tmp_path / "run"
-    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    env = os.environ | {"XLA_FLAGS": TEST_XLA_FLAGS}
     cmd = [sys.executable, str(SCRIPT), *TINY_ARGS, "--generations", "3", "--out", str(out)]
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]

@@ -31,6 +31,21 @@ os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {TEST_XLA_FLAGS}".
 _speed.setup(cache=False)
 
 
+LONGEST_FIRST = (
+    "test_resume.py", "test_scripts_stl.py", "test_trials.py", "test_brax.py",
+    "test_scripts_render_bench.py", "test_env_examples.py", "test_ga.py", "test_behaviour_level.py",
+    "test_controllers.py", "test_ablate.py", "test_distributed.py", "test_evolve_script.py",
+)  # fmt: skip
+"""Test files of over about 35 s (``--durations=0``, summed per file), longest first."""
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The longest files first: ``-n 2 --dist loadfile`` hands out files in this order as the
+    workers free up, so the run ends on short files, not on one worker alone in a long one."""
+    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
+
 @pytest.fixture(scope="session", autouse=True)
 def _scripts_share_a_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
     """The scripts the tests start share one compilation cache in this run's temporary folder

@@ -9,6 +9,8 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+TEST_XLA_FLAGS = "--xla_backend_optimization_level=0"
+"""What every test program compiles with (tests/conftest.py): LLVM's optimisations off."""
 
 
 def shipped_env() -> dict[str, str]:
@@ -36,8 +38,6 @@ def start_script(script: str, *args: object, **env: str) -> subprocess.Popen:
     """Start ``scripts/{script}`` with ``args`` from the repository root, its output captured as
     text, in this process's environment with ``env`` on top: the tests' XLA flag alone in
     ``XLA_FLAGS`` (a script adds its own to a user's), one-line errors (``JAXAIS_DEBUG`` off)."""
-    from conftest import TEST_XLA_FLAGS
-
     base = os.environ | {"XLA_FLAGS": TEST_XLA_FLAGS}
     return subprocess.Popen(
         [sys.executable, f"scripts/{script}", *map(str, args)],

@@ -14,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import reference_sim as ref
+from _python import TEST_XLA_FLAGS
 
 from jaxais import _speed, envs
 
@@ -25,8 +26,7 @@ os.environ["JAXAIS_CACHE_DIR"] = "off"
 # scripts the tests start inherit it (tests/_python.py), as a user's XLA_FLAGS; the scripts' own
 # XLA flags follow (_speed.setup), before JAX starts its backend. The few claims that hold only
 # for the shipped settings (one program's bits against another's) run in a fresh interpreter
-# without it (tests/_python.py: SHIPPED_XLA).
-TEST_XLA_FLAGS = "--xla_backend_optimization_level=0"
+# without it (tests/_python.py: shipped_env).
 os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {TEST_XLA_FLAGS}".strip()
 _speed.setup(cache=False)
 

@@ -18,8 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _python import run_python
-from conftest import TEST_XLA_FLAGS
+from _python import TEST_XLA_FLAGS, run_python
 from test_ga import TINY
 
 from jaxais import ga

@@ -14,8 +14,7 @@ from pathlib import Path
 
 import _stl_fixtures as F
 import pytest
-from _python import run_python, start_script
-from conftest import TEST_XLA_FLAGS
+from _python import TEST_XLA_FLAGS, run_python, start_script
 
 from jaxais.systems import LABELS
 from jaxais.trials import summarise

@@ -20,7 +20,7 @@ import venv
 from pathlib import Path
 
 import pytest
-from conftest import TEST_XLA_FLAGS
+from _python import TEST_XLA_FLAGS
 
 ROOT = Path(__file__).resolve().parent.parent
 CONSOLE = {"jaxais-evolve", "jaxais-trials", "jaxais-reproduce", "jaxais-sweep", "jaxais-ablate"}

@@ -102,8 +102,9 @@ def test_policy_in_order_is_the_mlp():
 def test_the_controllers_wheels_are_the_same_bits_in_any_batch():
     """A trial is the same run alone, in a batch or in the refilling pool only if the controller
     computes each robot's wheels the same way in every program: the MLP sums in a fixed order.
-    (XLA picks a dot's order per program: with ``policy``, 21 of 30 rows of a 30-robot batch
-    differ from the same rows in a batch of 257, and 16 of 20 rows run alone.)"""
+    (XLA picks a dot's order per program: with ``policy``, in a plain Python session, 21 of 30
+    rows of a 30-robot batch differ from the same rows in a batch of 257, and 16 of 20 rows run
+    alone; this test fails with it.)"""
     params = load_params()[0]
     k1, k2, k3 = jax.random.split(jax.random.key(4), 3)
     n = 64

@@ -13,6 +13,12 @@ TEST_XLA_FLAGS = "--xla_backend_optimization_level=0"
 """What every test program compiles with (tests/conftest.py): LLVM's optimisations off."""
 
 
+def script_env() -> dict[str, str]:
+    """This process's environment with the tests' XLA flag alone in ``XLA_FLAGS``: a script adds
+    its own flags to a user's."""
+    return os.environ | {"XLA_FLAGS": TEST_XLA_FLAGS}
+
+
 def shipped_env() -> dict[str, str]:
     """This process's environment without the tests' XLA flags (tests/conftest.py): a fresh
     interpreter then compiles as a user's session does (a script adds its own flags)."""
@@ -38,7 +44,7 @@ def start_script(script: str, *args: object, **env: str) -> subprocess.Popen:
     """Start ``scripts/{script}`` with ``args`` from the repository root, its output captured as
     text, in this process's environment with ``env`` on top: the tests' XLA flag alone in
     ``XLA_FLAGS`` (a script adds its own to a user's), one-line errors (``JAXAIS_DEBUG`` off)."""
-    base = os.environ | {"XLA_FLAGS": TEST_XLA_FLAGS}
+    base = script_env()
     return subprocess.Popen(
         [sys.executable, f"scripts/{script}", *map(str, args)],
         cwd=ROOT,

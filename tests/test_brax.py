@@ -2,7 +2,8 @@
 
 brax is in the test extra. The wrapper checks share one compiled ``training.wrap`` pair on a
 small world; brax's trainers (``examples/brax_ppo.py``'s PPO, then ES) run in one subprocess
-with XLA's fast-compile flags, since they jit internally and compiling dominates their cost.
+with the tests' XLA flag (tests/conftest.py), since they jit internally and compiling dominates
+their cost.
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _python import TEST_XLA_FLAGS, run_python
+from _python import run_python, script_env
 from test_ga import TINY
 
 from jaxais import ga
@@ -167,7 +167,7 @@ def test_run_as_a_user_runs_it(tmp_path: Path, full_run: Path):
     which the in-process run has not): status 0, the same seed as the in-process run, nothing on
     stderr but the progress bar."""
     out = tmp_path / "run"
-    env = os.environ | {"XLA_FLAGS": TEST_XLA_FLAGS}
+    env = script_env()
     cmd = [sys.executable, str(SCRIPT), *TINY_ARGS, "--generations", "3", "--out", str(out)]
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]

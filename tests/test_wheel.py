@@ -10,7 +10,6 @@ stays out of the way. The console scripts then run from a temporary folder outsi
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import subprocess
 import sys
@@ -20,7 +19,7 @@ import venv
 from pathlib import Path
 
 import pytest
-from _python import TEST_XLA_FLAGS
+from _python import script_env
 
 ROOT = Path(__file__).resolve().parent.parent
 CONSOLE = {"jaxais-evolve", "jaxais-trials", "jaxais-reproduce", "jaxais-sweep", "jaxais-ablate"}
@@ -58,7 +57,7 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def _start(bin_dir: Path, cwd: Path, *args: object) -> subprocess.Popen:
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"} | {"XLA_FLAGS": TEST_XLA_FLAGS}
+    env = {k: v for k, v in script_env().items() if k != "PYTHONPATH"}
     return subprocess.Popen(
         [str(a) for a in args], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
         text=True, env={**env, "JAXAIS_CACHE_DIR": "off", "PATH": f"{bin_dir}:{env['PATH']}"},

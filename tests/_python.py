@@ -11,6 +11,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 TEST_XLA_FLAGS = "--xla_backend_optimization_level=0"
 """What every test program compiles with (tests/conftest.py): LLVM's optimisations off."""
+OPTIMISED = {"xla_backend_optimization_level": 3}
+"""``jax.jit(f, compiler_options=OPTIMISED)``: LLVM's optimisations back on (XLA's default) for
+a program a test runs so long that its unoptimised code would cost more than compiling saves."""
 
 
 def script_env() -> dict[str, str]:

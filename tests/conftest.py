@@ -6,7 +6,10 @@ the same batch size: one compilation per world for the session.
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
+import tempfile
 from typing import Any
 
 import jax
@@ -18,9 +21,6 @@ from _python import TEST_XLA_FLAGS
 
 from jaxais import _speed, envs
 
-# Scripts keep a persistent compilation cache in the user's home by default; tests must not write
-# there (a test that wants a cache names its own directory).
-os.environ["JAXAIS_CACHE_DIR"] = "off"
 # Every test program compiles without LLVM's optimisations (XLA's own passes still run): compiling
 # is most of the suite's time, and a test checks what a program computes, not how fast. The
 # scripts the tests start inherit it (tests/_python.py), as a user's XLA_FLAGS; the scripts' own
@@ -29,6 +29,17 @@ os.environ["JAXAIS_CACHE_DIR"] = "off"
 # without it (tests/_python.py: shipped_env).
 os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {TEST_XLA_FLAGS}".strip()
 _speed.setup(cache=False)
+# One compilation cache for the whole run: the test processes (xdist's workers, which inherit
+# this variable from the process that made the folder) and the scripts they start, every program
+# however fast it compiled. A program that several tests, workers or script runs compile (the
+# same program from a fresh jit, a fixture that two files share) compiles once.
+if "JAXAIS_TESTS_CACHE" not in os.environ:
+    os.environ["JAXAIS_TESTS_CACHE"] = tempfile.mkdtemp(prefix="jaxais-tests-xla-")
+    atexit.register(shutil.rmtree, os.environ["JAXAIS_TESTS_CACHE"], ignore_errors=True)
+os.environ["JAXAIS_CACHE_DIR"] = os.environ["JAXAIS_TESTS_CACHE"]
+os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+jax.config.update("jax_compilation_cache_dir", os.environ["JAXAIS_TESTS_CACHE"])
 
 
 LONGEST_FIRST = (
@@ -44,16 +55,6 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     workers free up, so the run ends on short files, not on one worker alone in a long one."""
     rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
-
-
-@pytest.fixture(scope="session", autouse=True)
-def _scripts_share_a_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
-    """The scripts the tests start share one compilation cache in this run's temporary folder
-    (xdist's workers too: their folders' parent), so a program that several script runs compile
-    is compiled once; pytest removes it with the run's other old temporary folders."""
-    base = tmp_path_factory.getbasetemp()
-    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
-    os.environ["JAXAIS_CACHE_DIR"] = str(shared / "xla")
 
 
 BATCH = 8

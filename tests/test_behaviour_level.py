@@ -29,6 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _python import OPTIMISED
 
 from jaxais import envs, loop
 from jaxais.controllers import Controller, ltl_controller
@@ -138,7 +139,7 @@ def _loop(runs, n_steps, world, sim_params, robots):
     return jax.lax.fori_loop(0, n_steps, body, (runs, trace))
 
 
-_loop_jit = jax.jit(_loop)
+_loop_jit = jax.jit(_loop, compiler_options=OPTIMISED)  # minutes of robot time per batch
 
 
 @dataclass

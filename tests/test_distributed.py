@@ -310,16 +310,20 @@ def test_sigterm_stops_a_joined_process(runs):
 @pytest.mark.slow
 def test_a_process_killed_mid_run_ends_the_others_with_one_line(runs):
     """kill -9 (and SIGTERM) of processes 1 and 2 of 3: process 0 says so within 10 s of
-    silence, or at once from gloo's error in a collective, instead of XLA's abort."""
+    silence, or at once from gloo's error in a collective, instead of XLA's abort. Which comes
+    first in the collective depends on the machine's load: either is the one line."""
     assert re.fullmatch(
         r"join\.py: error: process [12] of 3 stopped responding \(killed, or its machine is "
         r"unreachable\); nothing half-written is left: rerun all 3 processes",
         _one_line(runs, "quiet0"),
     )
     assert runs[1]["quiet2"][0] == -signal.SIGKILL and runs[1]["gloo1"][0] == -signal.SIGKILL
-    line = _one_line(runs, "gloo0")
-    assert line.startswith("join.py: error: process 1 of 2 stopped responding (killed, or its ")
-    assert "rerun all 2 processes (" in line and "Gloo" in line
+    assert re.fullmatch(
+        r"join\.py: error: process 1 of 2 stopped responding \(killed, or its machine is "
+        r"unreachable\); nothing half-written is left: rerun all 2 processes( \(.*gloo.*\))?",
+        _one_line(runs, "gloo0"),
+        re.IGNORECASE,
+    )
 
 
 @pytest.mark.slow

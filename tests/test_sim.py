@@ -423,7 +423,9 @@ def test_ir_noise_has_the_webots_relative_std(sim) -> None:
     )
     ir = np.asarray(obs.ir)  # one pose, 2000 independent noise draws
     clean = np.asarray(
-        envs.observe(keys[0], jax.tree.map(lambda a: a[0], state), world, sim.quiet_params).ir
+        jax.jit(envs.observe)(
+            keys[0], jax.tree.map(lambda a: a[0], state), world, sim.quiet_params
+        ).ir
     )
     far = clean < 67.2  # nothing within 7 cm: the last table value and its noise (0.04897)
     assert far.any()
@@ -442,8 +444,9 @@ def test_camera_noise_never_invents_a_target(sim, probe_world) -> None:
     keys = jax.random.split(jax.random.key(5), 4000)
     clear = observe(keys, _goal_ahead(0.5, heading=math.pi), world, sim.quiet_params)
     assert int(np.asarray(clear.blue_pixels).max()) == 0
-    seen = observe(keys, _goal_ahead(0.5, box=(2.7, 0.4)), world, sim.quiet_params)
-    clean = envs.observe(keys[0], _goal_ahead(0.5, box=(2.7, 0.4)), probe_world, sim.quiet_params)
+    goal = _goal_ahead(0.5, box=(2.7, 0.4))
+    seen = observe(keys, goal, world, sim.quiet_params)
+    clean = jax.jit(envs.observe)(keys[0], goal, probe_world, sim.quiet_params)
     n_clean, centroid = int(clean.blue_pixels), float(clean.blue_centroid)
     pixels, centroids = np.asarray(seen.blue_pixels), np.asarray(seen.blue_centroid)
     assert 0 < n_clean < 45 and (pixels <= n_clean).all()

@@ -28,18 +28,17 @@ from jaxais import _speed, envs
 # for the shipped settings (one program's bits against another's) run in a fresh interpreter
 # without it (tests/_python.py: shipped_env).
 os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {TEST_XLA_FLAGS}".strip()
-_speed.setup(cache=False)
-# One compilation cache for the whole run: the test processes (xdist's workers, which inherit
-# this variable from the process that made the folder) and the scripts they start, every program
+# One compilation cache for the whole run, never the user's: the test processes (xdist's workers
+# inherit the folder from the process that made it) and the scripts they start, every program
 # however fast it compiled. A program that several tests, workers or script runs compile (the
 # same program from a fresh jit, a fixture that two files share) compiles once.
 if "JAXAIS_TESTS_CACHE" not in os.environ:
     os.environ["JAXAIS_TESTS_CACHE"] = tempfile.mkdtemp(prefix="jaxais-tests-xla-")
     atexit.register(shutil.rmtree, os.environ["JAXAIS_TESTS_CACHE"], ignore_errors=True)
-os.environ["JAXAIS_CACHE_DIR"] = os.environ["JAXAIS_TESTS_CACHE"]
+os.environ[_speed.CACHE_ENV] = os.environ["JAXAIS_TESTS_CACHE"]
 os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
-jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-jax.config.update("jax_compilation_cache_dir", os.environ["JAXAIS_TESTS_CACHE"])
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)  # read at JAX's import
+_speed.setup()
 
 
 LONGEST_FIRST = (

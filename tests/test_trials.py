@@ -419,20 +419,10 @@ import sys
 sys.path.insert(0, {tests!r})
 from jaxais import _speed
 _speed.setup(cache=False)  # the scripts' settings, before JAX starts
-import _stl_fixtures as F
-import numpy as np
-from jaxais.trials import run_trials
+from test_trials import SIE_HDC, same_trials, trials
 
-def trials(counts):
-    systems = {{k: F.systems()[k] for k in counts}}
-    return run_trials(F.world(), systems, counts, 0, F.CONFIG, F.sim_params())
-
-def same(a, b, n):
-    paths = [np.array_equal(x, y) for x, y in zip(a.trajectories[:n], b.trajectories[:n])]
-    return a.records[:n] == b.records[:n] and all(paths)
-
-small, full = trials({{"SIE": 2, "HDC": 2}}), trials({{"SIE": 2, "UIE-R1": 1, "HDC": 1}})
-print(same(small["SIE"], full["SIE"], 2), same(small["HDC"], full["HDC"], 1))
+small, full = trials(SIE_HDC, 0), trials((("SIE", 2), ("UIE-R1", 1), ("HDC", 1)), 0)
+print(same_trials(small["SIE"], full["SIE"]), same_trials(small["HDC"], full["HDC"], 1))
 """
 
 

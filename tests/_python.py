@@ -3,6 +3,9 @@ import loads, how a process exits, what it leaves on stderr)."""
 
 from __future__ import annotations
 
+import contextlib
+import importlib
+import io
 import os
 import subprocess
 import sys
@@ -41,6 +44,25 @@ def run_python(
     return subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=timeout
     )
+
+
+def call_main(script: str, *args: object) -> subprocess.CompletedProcess:
+    """``jaxais.scripts.{script}``'s ``main(args)`` in this process, with its exit status, stdout
+    and stderr as :func:`start_script`'s process would give them: for mistakes a script answers
+    after JAX has loaded, which a fresh interpreter spends a second or two reaching."""
+    module = importlib.import_module(f"jaxais.scripts.{script.removesuffix('.py')}")
+    out, err = io.StringIO(), io.StringIO()
+    environ = dict(os.environ)  # a script's speed settings add XLA flags for its own processes
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            module.main([str(a) for a in args])
+            status = 0
+        except SystemExit as exit:
+            status = exit.code
+        finally:
+            os.environ.clear()
+            os.environ.update(environ)
+    return subprocess.CompletedProcess([script, *args], status, out.getvalue(), err.getvalue())
 
 
 def start_script(script: str, *args: object, **env: str) -> subprocess.Popen:

@@ -14,15 +14,13 @@ import dataclasses
 import importlib.util
 import io
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import _stl_fixtures as F
 import jax
 import numpy as np
 import pytest
+from _python import call_main
 from tqdm import tqdm
 
 from jaxais import envs
@@ -334,11 +332,7 @@ def test_script_writes_its_files(ran, tmp_path: Path):
     ],
 )
 def test_bad_flags_give_one_line_errors(args, words, tmp_path: Path):
-    proc = subprocess.run(
-        [sys.executable, "scripts/ablate.py", "--out", str(tmp_path / "o"), *args],
-        cwd=ROOT, capture_output=True, text=True, timeout=120,
-        env={**os.environ, "JAXAIS_DEBUG": "", "JAX_PLATFORMS": "cpu"},
-    )  # fmt: skip
+    proc = call_main("ablate.py", "--out", tmp_path / "o", *args)
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert len(lines) == 1 and lines[0].startswith("ablate.py: error: "), proc.stderr

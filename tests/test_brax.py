@@ -130,5 +130,5 @@ def test_ppo_and_es_train():
     assert out.returncode == 0, out.stderr[-3000:]
     lines = out.stdout.splitlines()
     evals = [line for line in lines if "steps: reward" in line]
-    assert len(evals) == 3 and evals[-1].split()[0] == "4096", out.stdout
+    assert len(evals) == 2 and evals[-1].split()[0] == "4096", out.stdout
     assert any(line.startswith("es [0, 2048]") for line in lines), out.stdout

@@ -19,7 +19,7 @@ from pathlib import Path
 import _stl_fixtures as F
 import numpy as np
 import pytest
-from _python import start_script
+from _python import call_main, start_script
 from test_seeds import FakeScripts
 
 from jaxais.io import MANIFEST, UserError, open_run
@@ -170,8 +170,9 @@ def test_ablate_killed_after_a_batch_and_resumed_gives_the_same_ablation(tmp_pat
     ref, out = tmp_path / "ref", tmp_path / "out"
     finish(start_script("ablate.py", *args, "--out", ref, **cache))
     kill_after(start_script("ablate.py", *args, "--out", out, **cache), out, 1, signal.SIGTERM)
-    bad = finish(start_script("ablate.py", *args[:5], 3, *args[6:], "--out", out, "--resume"), 2)[1]
-    assert "--trials: the run in" in bad and bad.count("\n") == 1  # other settings: refused
+    bad = call_main("ablate.py", *args[:5], 3, *args[6:], "--out", out, "--resume")
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1  # other settings: refused
+    assert "--trials: the run in" in bad.stderr
     finish(start_script("ablate.py", *args, "--out", out, "--resume", **cache))
     for name in ("ablation.json", "ablation.md", "batches/0.json", "batches/1.json"):
         assert (ref / name).read_text() == (out / name).read_text(), name
@@ -201,14 +202,13 @@ def test_train_baseline_killed_and_resumed_trains_the_same_weights(tmp_path, cac
     # Resuming a complete run skips its finished stage; no --resume into it is refused.
     before = (out / "params.npz").stat().st_mtime_ns
     again = start_script("train_baseline.py", *args, "--out", out, "--resume", **cache)
-    fresh = start_script("train_baseline.py", *args, "--out", out)
-    nothing = start_script("train_baseline.py", *args, "--out", tmp_path / "none", "--resume")
     assert "trained in" in finish(again)[0] and (out / "params.npz").stat().st_mtime_ns == before
+    fresh = call_main("train_baseline.py", *args, "--out", out)
+    nothing = call_main("train_baseline.py", *args, "--out", tmp_path / "none", "--resume")
     for proc, message in ((fresh, "holds a complete train_baseline run"),
                           (nothing, "none: no run to resume")):  # fmt: skip
-        err = finish(proc, 2)[1]
-        assert err.startswith("train_baseline.py: error: ") and err.count("\n") == 1
-        assert message in err
+        assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+        assert proc.stderr.startswith("train_baseline.py: error: ") and message in proc.stderr
     assert not (tmp_path / "none").exists()
 
 

@@ -1,5 +1,6 @@
-"""End-to-end tests of scripts/render.py and scripts/bench.py (run as subprocesses), and of the
-error and atomic-write helpers in jaxais.cli that they share."""
+"""End-to-end tests of scripts/render.py and scripts/bench.py (run as subprocesses; mistakes
+answered after JAX loads through the script's ``main``, ``_python.call_main``), and of the error
+and atomic-write helpers in jaxais.cli that they share."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from _python import run_python
+from _python import call_main, run_python
 
 from jaxais import cli
 from jaxais.experiments import bench
@@ -70,7 +71,7 @@ def test_render_writes_png_and_gif(tmp_path):
 def test_render_bad_world_path(tmp_path):
     out = tmp_path / "w.png"
     out.write_bytes(b"old")
-    proc = run_script("render.py", "--world", tmp_path / "nope.toml", "--steps", 5, "--out", out)
+    proc = call_main("render.py", "--world", tmp_path / "nope.toml", "--steps", 5, "--out", out)
     assert_user_error(proc, "render.py", "nope.toml")
     assert out.read_bytes() == b"old"  # a failed run leaves an earlier output alone
 
@@ -117,7 +118,7 @@ def test_render_malformed_world(tmp_path, text, words):
     world.write_text(text)
     out = tmp_path / "w.png"
     out.write_bytes(b"old")
-    proc = run_script("render.py", "--world", world, "--steps", 5, "--out", out)
+    proc = call_main("render.py", "--world", world, "--steps", 5, "--out", out)
     assert_user_error(proc, "render.py", *words)
     assert out.read_bytes() == b"old" and sorted(p.name for p in tmp_path.iterdir()) == [
         "bad.toml",
@@ -150,7 +151,7 @@ def test_render_world_just_within_the_surface_limit(tmp_path):
 )
 def test_render_bad_values(tmp_path, args, word):
     base = ["--steps", 5, "--out", tmp_path / "w.png"]
-    proc = run_script("render.py", *base, *args, timeout=60)
+    proc = call_main("render.py", *base, *args)
     assert_user_error(proc, "render.py", word)
 
 

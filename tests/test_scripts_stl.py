@@ -3,7 +3,8 @@
 Each real run pays JAX's start-up and a full compile, so the module starts the few runs it needs
 at once (in a module fixture) and the tests read their outputs: one tiny ``trials.py`` run with
 ``--plot`` on two devices (filling a compilation cache of its own), the same on one device, and one
-tiny ``reproduce.py`` run. Flag errors that answer before JAX loads are cheap and run in parallel.
+tiny ``reproduce.py`` run. Flag errors that answer before JAX loads run as processes (cheap);
+mistakes answered after it run through the script's ``main`` here (``_python.call_main``).
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from pathlib import Path
 
 import _stl_fixtures as F
 import pytest
-from _python import TEST_XLA_FLAGS, run_python, start_script
+from _python import TEST_XLA_FLAGS, call_main, run_python, start_script
 
 from jaxais.systems import LABELS
 from jaxais.trials import summarise
@@ -174,11 +175,10 @@ def test_trials_script_user_errors(tmp_path: Path):
         (["--system", "HDC", "--seeds", tmp_path], ["--seeds"]),
         (["--system", "SIE", "--random-set", "R2"], ["--random-set"]),
     ]
-    procs = [start_script("trials.py", *args, "--out", out) for args, _ in cases]
-    bad_suffix = start_script("trials.py", "--system", "HDC", "--out", tmp_path / "r.txt")
-    for (_, words), proc in zip(cases, procs, strict=True):
-        assert_user_error(_finish(proc), "trials.py", *words)
-    assert_user_error(_finish(bad_suffix), "trials.py", ".json")
+    for args, words in cases:
+        assert_user_error(call_main("trials.py", *args, "--out", out), "trials.py", *words)
+    bad_suffix = call_main("trials.py", "--system", "HDC", "--out", tmp_path / "r.txt")
+    assert_user_error(bad_suffix, "trials.py", ".json")
     assert not out.exists() and not (tmp_path / "r.txt").exists()
 
 
@@ -305,13 +305,10 @@ def test_reproduce_user_errors(tmp_path: Path):
         (["--baseline", tmp_path / "none", "--worlds", "world1"], ["--baseline", "none"]),
         (["--baseline", "", "--worlds", "world1"], ["--baseline: .: not a trained"]),  # not NN
     ]
-    procs = [start_script("reproduce.py", *args, "--out", out) for args, _ in cases]
-    for (_, words), proc in zip(cases, procs, strict=True):
-        assert_user_error(_finish(proc), "reproduce.py", *words)
-    missing = _finish(
-        start_script(
-            "reproduce.py", "--worlds", "world1", "--seeds", tmp_path / "none", "--out", out
-        )
+    for args, words in cases:
+        assert_user_error(call_main("reproduce.py", *args, "--out", out), "reproduce.py", *words)
+    missing = call_main(
+        "reproduce.py", "--worlds", "world1", "--seeds", tmp_path / "none", "--out", out
     )
     assert_user_error(missing, "reproduce.py", "no such seed directory")
     assert not (out / "tables.json").exists()
@@ -330,16 +327,16 @@ def test_reproduce_killed_and_resumed_gives_the_uninterrupted_run(runs, tmp_path
 
     ref, out = runs["reproduce_dir"], tmp_path / "rep"
     args = ("--trials", 2, "--tau-cap", 10, "--worlds", "world1", "--seeds", runs["seeds"])
-    nothing = start_script("reproduce.py", *args, "--out", tmp_path / "none", "--resume")
     kill_after(start_script("reproduce.py", *args, "--out", out), out, 0, signal.SIGKILL)
     kill_after(
         start_script("reproduce.py", *args, "--out", out, "--resume"), out, 1, signal.SIGTERM
     )
-    other = start_script("reproduce.py", "--trials", 3, *args[2:], "--out", out, "--resume")
-    fresh = start_script("reproduce.py", *args, "--out", out)
-    assert_user_error(_finish(other), "reproduce.py", f"--trials: the run in {out} has 2, not 3")
-    assert_user_error(_finish(fresh), "reproduce.py", f"{out} holds a partial reproduce run")
-    assert_user_error(_finish(nothing), "reproduce.py", "none: no run to resume")
+    other = call_main("reproduce.py", "--trials", 3, *args[2:], "--out", out, "--resume")
+    fresh = call_main("reproduce.py", *args, "--out", out)
+    nothing = call_main("reproduce.py", *args, "--out", tmp_path / "none", "--resume")
+    assert_user_error(other, "reproduce.py", f"--trials: the run in {out} has 2, not 3")
+    assert_user_error(fresh, "reproduce.py", f"{out} holds a partial reproduce run")
+    assert_user_error(nothing, "reproduce.py", "none: no run to resume")
     assert not (tmp_path / "none").exists()
     _ok(_finish(start_script("reproduce.py", *args, "--out", out, "--resume")))
     files = sorted(p.name for p in (ref / "trials").iterdir())
@@ -369,12 +366,9 @@ def test_trials_script_bad_worlds_and_seeds_are_one_line(tmp_path: Path):
         (["--seed", -1], ["--seed must be in [0, 2**32), got -1"]),
         (["--seed", 2**32], ["--seed must be in [0, 2**32), got 4294967296"]),
     ]
-    procs = [
-        start_script(
+    for args, words in cases:
+        proc = call_main(
             "trials.py", "--system", "HDC", "--trials", 2, "--tau-cap", 5, *args, "--out", out
         )
-        for args, _ in cases
-    ]
-    for (_, words), proc in zip(cases, procs, strict=True):
-        assert_user_error(_finish(proc), "trials.py", *words)
+        assert_user_error(proc, "trials.py", *words)
     assert not out.exists()

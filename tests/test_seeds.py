@@ -3,7 +3,8 @@
 Nothing real runs: the summary is checked on hand-made documents shaped like reproduce.py's
 tables.json and claims.json and evolve.py's seed.json and summary.json, against hand-worked
 numbers; the ledger's resume logic with a fake runner that writes those documents where the
-scripts would; the script's flag errors in subprocesses that stop before any run.
+scripts would; the script's flag errors through its ``main`` (``_python.call_main``), which
+stop before any run.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import time
 from pathlib import Path
 
 import pytest
+from _python import call_main
 
 from jaxais.experiments import seeds as S
 
@@ -344,39 +346,21 @@ def test_default_runner_logs_and_stops_children(tmp_path):
 def test_script_flag_errors_are_one_line(tmp_path):
     a_file = tmp_path / "file"
     a_file.write_text("")
-    cases = {
-        "--seeds 0": "--seeds must be >= 1",
-        "--jobs 0": "--jobs must be >= 1",
-        "--trials 1": "--trials must be >= 2",
-        "--first -1": "--first must be in",
-        "--seeds x": "invalid int value",
-    }
-    runs = {
-        flags: subprocess.Popen(
-            [
-                sys.executable,
-                str(ROOT / "scripts" / "seeds.py"),
-                "--out",
-                str(tmp_path / "o"),
-                *flags.split(),
-            ],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-        )  # fmt: skip
-        for flags in cases
-    }
-    for out, match in [(a_file, "not a directory"), (a_file / "sub", "Not a directory")]:
-        cmd = [sys.executable, str(ROOT / "scripts" / "seeds.py"), "--out", str(out)]
-        runs[str(out)] = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                          text=True)  # fmt: skip
-        cases[str(out)] = match
-    for key, proc in runs.items():
-        stdout, stderr = proc.communicate(timeout=60)
-        assert proc.returncode == 2, (key, stderr)
-        assert stdout == "" and "Traceback" not in stderr
-        assert stderr.count("\n") == 1 and stderr.startswith("seeds.py: error: "), stderr
-        assert cases[key] in stderr, stderr
+    out = ("--out", tmp_path / "o")
+    cases = [
+        ((*out, "--seeds", 0), "--seeds must be >= 1"),
+        ((*out, "--jobs", 0), "--jobs must be >= 1"),
+        ((*out, "--trials", 1), "--trials must be >= 2"),
+        ((*out, "--first", -1), "--first must be in"),
+        ((*out, "--seeds", "x"), "invalid int value"),
+        (("--out", a_file), "not a directory"),
+        (("--out", a_file / "sub"), "Not a directory"),
+    ]
+    for args, match in cases:
+        proc = call_main("seeds.py", *args)
+        assert proc.returncode == 2, (args, proc.stderr)
+        assert proc.stdout == "" and proc.stderr.count("\n") == 1, proc.stderr
+        assert proc.stderr.startswith("seeds.py: error: ") and match in proc.stderr, proc.stderr
     assert not (tmp_path / "o").exists()
 
 

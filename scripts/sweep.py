@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from jaxais import distributed
-from jaxais.cli import ArgumentParser, UserError, main_wrapper, run_script
+from jaxais.cli import ArgumentParser, main_wrapper, run_script
 from jaxais.experiments import protocol
 from jaxais.labels import RANDOM_SETS, SYSTEMS
 
@@ -49,10 +49,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 @main_wrapper("sweep.py")
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
-    try:
-        noise = None if args.noise is None else [float(v) for v in args.noise.split(",")]
-    except ValueError:
-        raise UserError(f"--noise must be comma-separated numbers, got {args.noise!r}") from None
     distributed.check(args)
     from jaxais import _speed  # its importlib.metadata: after the signal handlers are ours
 
@@ -64,17 +60,18 @@ def main(argv: list[str] | None = None) -> None:
 
     command = "sweep.py " + " ".join(w for w in argv or sys.argv[1:] if w != "--resume")
     doc = sweep(
-        args.out, grid=args.grid, noise=noise, noise_kinds=args.noise_kinds,
+        args.out, grid=args.grid, noise=args.noise, noise_kinds=args.noise_kinds,
         system=args.system, random_set=args.random_set, world=args.world, trials=args.trials,
         seed=args.seed, seeds=args.seeds, tau_cap=args.tau_cap, collision_cap=args.collision_cap,
         slots=args.slots, command=command, resume=args.resume, records=args.records,
     )  # fmt: skip
     if jax.process_index() != 0:  # process 0 reports
         return
-    what, name = f"{len(noise or ())} noise levels x {doc['trials']} trials", "reality_gap.json"
     if args.grid:
         its = doc["robot_iterations_per_s"] / 1e6
         what, name = f"{doc['runs']} runs ({its:.2f} M robot-iterations/s)", "sweep.json"
+    else:
+        what, name = f"{len(doc['scales'])} levels x {doc['trials']} trials", "reality_gap.json"
     print(f"{doc['system']} in {doc['world']}: {what} in {doc['wall_s_total']:.0f} s, compile "
           f"included; wrote {Path(args.out) / name} and its figure")  # fmt: skip
 

@@ -334,7 +334,7 @@ def sweep(
     out: str | Path,
     *,
     grid: Sequence[str] | None = None,
-    noise: Sequence[float] | None = None,
+    noise: str | Sequence[float] | None = None,
     noise_kinds: str | Sequence[str] | None = None,
     system: str | None = None,
     random_set: str | None = None,
@@ -350,14 +350,20 @@ def sweep(
     records: bool = False,
 ) -> dict[str, Any]:
     """A grid over the STL's parameters (``grid``: :func:`parse_axis` specs) or the reality gap
-    (``noise``: scales of the world's noise), written into ``out`` (missing or empty; ``resume``
-    finishes an interrupted run) as sweep.json/.png or reality_gap.json/.png; returns it.
+    (``noise``: scales of the world's noise, or them comma-separated), written into ``out``
+    (missing or empty; ``resume`` finishes an interrupted run) as sweep.json/.png or
+    reality_gap.json/.png; returns it.
 
     Defaults as ``scripts/sweep.py --help`` says. Under ``jax.distributed`` every process computes
     the same numbers and process 0 writes. ValueError (one line) on a bad argument, before any run.
     """
     from jaxais.experiments.sweep_plots import save_noise_figure, save_sweep_figures  # imports us
 
+    if isinstance(noise, str):  # scripts/sweep.py's --noise
+        try:
+            noise = [float(v) for v in noise.split(",")]
+        except ValueError:
+            raise ValueError(f"--noise must be comma-separated numbers, got {noise!r}") from None
     if (grid is None) == (noise is None):
         raise ValueError("give one of grid (parameter axes) and noise (noise scales)")
     if world is None:  # "" is a world the loader refuses, not the default

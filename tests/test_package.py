@@ -98,3 +98,14 @@ def test_envs_and_immune_are_the_installed_packages_not_a_path_hack():
     assert list(jaxais.__path__) == [str(Path(jaxais.__file__).parent)]
     assert Path(jaxais.immune.__file__).parent.parent == Path(jaxais.__file__).parent
     assert (Path(jaxais.envs.__file__).parent / "worlds" / "world1.toml").is_file()
+
+
+def test_scripts_are_thin_and_no_library_module_imports_the_cli():
+    """Each entry point parses flags, calls the library and prints (at most 80 lines); the CLI
+    layer is the scripts' alone."""
+    root = Path(__file__).resolve().parent.parent
+    lengths = {p.name: len(p.read_text().splitlines()) for p in (root / "scripts").glob("*.py")}
+    assert {name: n for name, n in lengths.items() if n > 80} == {}
+    for folder in ("jaxais", "envs"):
+        users = {f for f, names in _jaxais_imports(folder).items() if "jaxais.cli" in names}
+        assert users == set(), users

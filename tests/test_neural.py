@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 import pytest
-from _python import run_python
+from _python import call_main, run_python
 
 from jaxais import envs
 from jaxais.baselines import TrainConfig
@@ -357,10 +357,7 @@ def test_script_collects_runs_into_one_table(tmp_path):
         final = {"center_fitness_last_20": -20.0 - seed}
         (d / "config.json").write_text(json.dumps({"seed": seed, "final": final}))
         dirs.append(str(d))
-    out = run_python(
-        f"import runpy\nrunpy.run_path({str(SCRIPT)!r}, run_name='x')['main']"
-        f"(['--collect', *{dirs!r}])"
-    )
+    out = call_main("train_baseline.py", "--collect", *dirs)
     assert out.returncode == 0, out.stderr[-2000:]
     rows = out.stdout.splitlines()
     assert rows[2] == "| SIE | – | – | 60.0 (0) |" and rows[3] == "| HDC | – | – | 2.0 (0) |"

@@ -18,6 +18,7 @@ import _stl_fixtures as F
 import jax
 import numpy as np
 import pytest
+from _python import call_main
 from scipy import stats as sps
 
 from jaxais.controllers import stl_for
@@ -269,16 +270,18 @@ def _sweep_script(*args: str, tmp: Path) -> subprocess.CompletedProcess:
 
 
 @pytest.mark.parametrize(
-    ("args", "message"),
+    ("args", "message", "library"),
     [
-        (["--grid", "k9=0:1:2"], "--grid k9: unknown parameter"),  # the library's check
-        (["--grid", "k1=1", "--noise", "1"], "not allowed with argument"),
-        (["--noise", "0,x"], "comma-separated numbers"),
-        (["--grid", "k1=1", "--coordinator", "nohost"], "HOST:PORT"),
+        (["--grid", "k9=0:1:2"], "--grid k9: unknown parameter", True),
+        (["--grid", "k1=1", "--noise", "1"], "not allowed with argument", False),
+        (["--noise", "0,x"], "comma-separated numbers", True),
+        (["--grid", "k1=1", "--coordinator", "nohost"], "HOST:PORT", False),
     ],
 )
-def test_sweep_script_bad_input_is_one_line(args, message, tmp_path):
-    out = _sweep_script(*args, "--out", str(tmp_path / "o"), tmp=tmp_path)
+def test_sweep_script_bad_input_is_one_line(args, message, library, tmp_path):
+    # The library's checks answer once JAX has loaded: through the script's main, in this process.
+    args = (*args, "--out", str(tmp_path / "o"))
+    out = call_main("sweep.py", *args) if library else _sweep_script(*args, tmp=tmp_path)
     assert out.returncode == 2, out.stderr
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("sweep.py: error:") and message in lines[0]

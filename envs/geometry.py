@@ -167,22 +167,6 @@ def kind_gaps(p: jnp.ndarray, radius: jnp.ndarray, scene: Scene):
     return out
 
 
-def disc_gaps(p: jnp.ndarray, radius: jnp.ndarray, scene: Scene):
-    """Gaps [S + B + C] between the disc (p [2], radius) and every surface (inf where invalid),
-    and the unit normals [S + B + C, 2] towards p."""
-    kinds = kind_gaps(p, radius, scene)
-    return (
-        jnp.concatenate([g for g, _, _ in kinds]),
-        jnp.stack(
-            [
-                jnp.concatenate([nx for _, nx, _ in kinds]),
-                jnp.concatenate([ny for _, _, ny in kinds]),
-            ],
-            axis=1,
-        ),
-    )
-
-
 def min_gap(p: jnp.ndarray, radius: jnp.ndarray, scene: Scene) -> jnp.ndarray:
     """Smallest clearance (m) between a disc and the scene; negative means overlap."""
     gaps = [g.min() for g, _, _ in kind_gaps(p, radius, scene)]

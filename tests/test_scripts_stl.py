@@ -295,7 +295,6 @@ def test_reproduce_end_to_end(runs):
     assert "Report:" in proc.stdout
 
 
-@pytest.mark.slow
 def test_reproduce_user_errors(tmp_path: Path):
     out = tmp_path / "rep"
     cases = [

@@ -39,6 +39,17 @@ os.environ[_speed.CACHE_ENV] = os.environ["JAXAIS_TESTS_CACHE"]
 os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)  # read at JAX's import
 _speed.setup()
+XLA_FLAGS = os.environ["XLA_FLAGS"]
+"""The flags every test starts with: the tests' and the scripts' own (``_speed.setup``)."""
+
+
+@pytest.fixture(autouse=True)
+def _suite_xla_flags():
+    """After each test, the suite's XLA flags again: a script's ``main`` run in a test process
+    adds its own (a device per core, one-kernel loops), which the processes that later tests of
+    this worker start would otherwise inherit."""
+    yield
+    os.environ["XLA_FLAGS"] = XLA_FLAGS
 
 
 LONGEST_FIRST = (

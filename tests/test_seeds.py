@@ -21,7 +21,6 @@ from _python import call_main
 
 from jaxais.experiments import seeds as S
 
-ROOT = Path(__file__).resolve().parent.parent
 WORLDS = ("world1", "real")
 CLAIMS = {
     "world1/SIE-lowest-c": "In Simulated World 1, SIE has the lowest mean c.",

@@ -49,19 +49,16 @@ def run_python(
 def call_main(script: str, *args: object) -> subprocess.CompletedProcess:
     """``jaxais.scripts.{script}``'s ``main(args)`` in this process, with its exit status, stdout
     and stderr as :func:`start_script`'s process would give them: for mistakes a script answers
-    after JAX has loaded, which a fresh interpreter spends a second or two reaching."""
+    after JAX has loaded, which a fresh interpreter spends a second or two reaching. (The XLA
+    flags the script adds to ``os.environ`` are undone after the test: tests/conftest.py.)"""
     module = importlib.import_module(f"jaxais.scripts.{script.removesuffix('.py')}")
     out, err = io.StringIO(), io.StringIO()
-    environ = dict(os.environ)  # a script's speed settings add XLA flags for its own processes
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         try:
             module.main([str(a) for a in args])
             status = 0
         except SystemExit as exit:
             status = exit.code
-        finally:
-            os.environ.clear()
-            os.environ.update(environ)
     return subprocess.CompletedProcess([script, *args], status, out.getvalue(), err.getvalue())
 
 

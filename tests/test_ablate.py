@@ -2,18 +2,16 @@
 
 The variants' settings and their batching are checked on data alone (a stand-in for
 ``run_trials`` records the batches). Real trials run in world1 with 2 trials, an 8 s time cap and
-a made-up LTL seed: the ablation's batch (ours, hold=1 and the tracking HDC together) compiles
-once and the script's in-process run reuses that program; a second, small program runs two
+a made-up LTL seed: the ablation's batch (ours, hold=1 and the tracking HDC together), and two
 systems alone, to show that a variant's trials are those of its system run by itself (common
-random numbers).
+random numbers). ``scripts/ablate.py``'s files are checked on its uninterrupted run in
+``tests/test_resume.py``.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import io
-import json
 from pathlib import Path
 
 import _stl_fixtures as F
@@ -30,17 +28,12 @@ from jaxais.immune.readings import DEFAULT, LITERAL, readings
 from jaxais.systems import HAND_DESIGNED, LABELS, make_system
 from jaxais.trials import STL_CONFIG, TrialSet, run_trials
 
-ROOT = Path(__file__).resolve().parent.parent
 BASE = dataclasses.replace(STL_CONFIG, tau_cap=8.0)
 """8 s runs: 250 iterations."""
 RECORD = dataclasses.replace(BASE, record=True)
 RUN_VARIANTS = ("ours", "hold=1", "hdc_tracks=True")
 """The variants of the real runs: one batch (traced differences only)."""
 TRACK = TYPE_NAMES.index("track markers")
-
-_spec = importlib.util.spec_from_file_location("ablate_script", ROOT / "scripts" / "ablate.py")
-ablate_script = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(ablate_script)
 
 
 def by_name(name: str) -> ablation.Variant:
@@ -291,37 +284,6 @@ def test_a_variant_runs_as_its_system_run_alone(ran):
                 )
     assert not same(got["hold=1"]["SIE"], got["ours"]["SIE"])
     assert got["hdc_tracks=True"]["SIE"] is got["ours"]["SIE"]
-
-
-@pytest.mark.slow
-def test_script_writes_its_files(ran, tmp_path: Path):
-    seeds = F.write_seed(tmp_path / "seed", seed=0)
-    out = tmp_path / "out"
-    ablate_script.main(
-        ["--out", str(out), "--worlds", "world1", "--trials", "2", "--tau-cap", "8",
-         "--variants", ",".join(RUN_VARIANTS), "--seeds", str(seeds)]
-    )  # fmt: skip
-    assert {p.name for p in out.iterdir()} >= {
-        "ablation.json", "ablation.md", "ablation.png", "run.json",
-    }  # fmt: skip
-    doc = json.loads((out / "ablation.json").read_text())
-    assert [v["name"] for v in doc["variants"]] == list(RUN_VARIANTS)
-    ours = doc["variants"][0]
-    assert ours["settings"]["hold"] == 31 and doc["variants"][1]["settings"]["hold"] == 1
-    sie = [r["fitness"] for r in ran.trials["ours"]["world1"]["SIE"].records]
-    assert ours["worlds"]["world1"]["SIE"]["f"] == pytest.approx(np.mean(sie))
-    assert ours["claims"]["total"] == 32 and 0 <= ours["claims"]["reproduced"] <= 32
-    assert len(ours["held"]) == ours["claims"]["reproduced"]
-    md = (out / "ablation.md").read_text()
-    assert all(f"| `{name}` |" in md for name in RUN_VARIANTS)
-    assert (out / "ablation.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    text = (out / "run.json").read_text()
-    run = json.loads(text)
-    assert str(tmp_path) not in text and '"/' not in text  # no absolute paths
-    assert run["seed"] == 0 and run["trials"] == {"world1": 2}
-    assert len(run["calls"]) == 1 and run["calls"][0]["variants"] == list(RUN_VARIANTS)
-    assert {"jaxais", "jax", "numpy"} <= set(run["versions"])
-    assert run["timings_s"]["total_s"] > 0
 
 
 @pytest.mark.parametrize(

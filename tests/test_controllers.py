@@ -70,9 +70,10 @@ def test_make_trials_gives_run_trials_trials():
 @pytest.mark.slow
 def test_vmap_over_seeds_and_a_parameter_grid_equals_a_loop():
     sie = F.systems()["SIE"]
-    k1 = jnp.array([0.5, 1.5], jnp.float32)  # a two-point grid of eq (7)'s k1
-    grid = jax.tree.map(lambda a: jnp.stack([a, a]), sie)
-    grid = grid.replace(network=grid.network.replace(k1=k1))
+    # A two-point grid of eq (7)'s k1. Each point is typed as SIE's own params (k1 a Python
+    # float), so the loop reuses test_make_trials_gives_run_trials_trials' program.
+    points = [sie.replace(network=sie.network.replace(k1=k1)) for k1 in (0.5, 1.5)]
+    grid = jax.tree.map(lambda *a: jnp.stack(a), *points)
     keys = jax.random.split(jax.random.key(7), 2)
     batched = jax.jit(jax.vmap(stl_run(), in_axes=(0, 0)))(keys, grid)
     for i in range(2):

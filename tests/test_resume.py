@@ -169,6 +169,26 @@ def test_ablate_killed_after_a_batch_and_resumed_gives_the_same_ablation(tmp_pat
             "--tau-cap", 5, "--seeds", seeds)  # fmt: skip
     ref, out = tmp_path / "ref", tmp_path / "out"
     finish(start_script("ablate.py", *args, "--out", ref, **cache))
+    # The uninterrupted run's files, as a user reads them: no machine paths.
+    assert {p.name for p in ref.iterdir()} >= {
+        "ablation.json", "ablation.md", "ablation.png", "run.json",
+    }  # fmt: skip
+    doc = json.loads((ref / "ablation.json").read_text())
+    variants = ["ours", "collision_rule=entry"]
+    assert [v["name"] for v in doc["variants"]] == variants
+    assert [v["settings"]["collision_rule"] for v in doc["variants"]] == ["episode", "entry"]
+    ours = doc["variants"][0]
+    assert ours["claims"]["total"] == 32 and 0 <= ours["claims"]["reproduced"] <= 32
+    assert len(ours["held"]) == ours["claims"]["reproduced"]
+    md = (ref / "ablation.md").read_text()
+    assert all(f"| `{name}` |" in md for name in variants)
+    assert (ref / "ablation.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    text = (ref / "run.json").read_text()
+    assert str(tmp_path) not in text and '"/' not in text
+    run = json.loads(text)
+    assert run["seed"] == 0 and run["trials"] == {"world1": 2}
+    assert [c["variants"] for c in run["calls"]] == [variants[:1], variants[1:]]
+    assert {"jaxais", "jax", "numpy"} <= set(run["versions"]) and run["timings_s"]["total_s"] > 0
     kill_after(start_script("ablate.py", *args, "--out", out, **cache), out, 1, signal.SIGTERM)
     bad = call_main("ablate.py", *args[:5], 3, *args[6:], "--out", out, "--resume")
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1  # other settings: refused

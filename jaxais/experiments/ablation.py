@@ -287,8 +287,8 @@ def run_ablation(
             its total is set first.
         folder: each batch's records are a unit there (``batches/I.json``); a held one is read.
     """
-    calls = plan_calls(variants, base)
     by_name = {v.name: v for v in variants}
+    sim = {call: by_name[call.variants[0]].sim_params() for call in plan_calls(variants, base)}
     out: dict[str, dict[str, dict[str, TrialSet]]] = {v.name: {} for v in variants}
     log: list[dict[str, Any]] = []
     plan = []  # every batch first, so the bar knows its total
@@ -297,21 +297,18 @@ def run_ablation(
         world_labels = protocol.systems_for_world(world_name)
         n = n_trials if isinstance(n_trials, int) else n_trials[world_name]
         systems = {v.name: variant_systems(v, world_labels, ltl_seed) for v in variants}
-        for call in calls:
+        for call, sim_params in sim.items():
             batch, source = batch_systems(call.variants, systems, share)
-            plan.append((world_name, world, n, call, batch, source))
-
-    def units(n: int, call: Call, batch: dict) -> int:
-        """The progress a batch makes: its runs, or its iterations when it keeps poses."""
-        dt = by_name[call.variants[0]].sim_params().dt
-        return call.config.max_iterations(dt) if call.config.record else len(batch) * n
-
+            # The progress a batch makes: its runs, or its iterations when it keeps poses.
+            units = len(batch) * n
+            if call.config.record:
+                units = call.config.max_iterations(sim_params.dt)
+            plan.append((world_name, world, n, call, batch, source, units))
     if progress is not None:
-        progress.reset(total=sum(units(n, call, batch) for _, _, n, call, batch, _ in plan))
-    for i, (world_name, world, n, call, batch, source) in enumerate(plan):
-        sim_params = by_name[call.variants[0]].sim_params()
-        before = 0 if progress is None else progress.n
+        progress.reset(total=sum(p[-1] for p in plan))
+    for i, (world_name, world, n, call, batch, source, units) in enumerate(plan):
         if progress is not None:
+            before = progress.n
             progress.set_description_str(
                 f"{world_name}: {', '.join(call.variants)} ({len(batch)} systems x {n})"
             )
@@ -323,7 +320,7 @@ def run_ablation(
             results = {label: TrialSet(recs, None) for label, recs in records.items()}
         else:
             results = trials_module.run_trials(
-                world, batch, n, seed, call.config, sim_params, progress, timings
+                world, batch, n, seed, call.config, sim[call], progress, timings
             )
             if folder is not None and folder.write:
                 (folder.out / "batches").mkdir(exist_ok=True)
@@ -331,7 +328,7 @@ def run_ablation(
                 atomic_write_json(folder.out / "batches" / f"{i}.json", records)
                 folder.finish(unit, timings)
         if progress is not None:  # a batch that ended early completes its share
-            progress.update(max(0, units(n, call, batch) - (progress.n - before)))
+            progress.update(max(0, units - (progress.n - before)))
         for name in call.variants:
             out[name][world_name] = {
                 label: results[tagged] for label, tagged in source[name].items()
@@ -424,9 +421,8 @@ def markdown(doc: Mapping[str, Any]) -> str:
         row = [f"`{v['name']}`", f"{c['reproduced']} of {c['evaluated']}"]
         for w in worlds:
             by = v["worlds"].get(w, {})
-            get = lambda label, key, by=by: by.get(label, {}).get(key)
-            fail = get("SIE", "failure_rate")
-            row += [_cell(get(label, "f"), ".0f") for label in reported]
+            row += [_cell(by.get(label, {}).get("f"), ".0f") for label in reported]
+            fail = by.get("SIE", {}).get("failure_rate")
             row.append(_cell(None if fail is None else 100 * fail, ".0f"))
         lines.append("| " + " | ".join(row) + " |")
     trials = ", ".join(f"{w} {n}" for w, n in doc["trials"].items())

@@ -88,8 +88,7 @@ def bench_config(quick: bool = False, **values: Any) -> BenchConfig:
     """A checked :class:`BenchConfig` (None: the default or :data:`QUICK`'s); batch sizes may be
     ``"1,30,1000"``; one-line ValueError on a bad value."""
     values = (QUICK if quick else {}) | {k: v for k, v in values.items() if v is not None}
-    counts = ("steps", "repeats", "numpy_robots", "numpy_steps", "matmul", "controller_steps")
-    for name in counts:
+    for name in ("steps", "repeats", "numpy_robots", "numpy_steps", "matmul", "controller_steps"):
         if values.get(name, 1) <= 0:
             flag = "--" + name.replace("_", "-")
             raise ValueError(f"{flag} must be a positive integer, got {values[name]}")
@@ -123,9 +122,8 @@ def force_host_devices(n: int) -> None:
 
 @dataclass
 class Bench:
-    """Every benchmark's input and output: config, world, constants, the timed scripts'
-    environment, the document (``results``), the robots after reset (:func:`initial`) and
-    notes."""
+    """Every benchmark's input and output: ``results`` is the JSON document, ``reset`` holds
+    :func:`initial`'s robots, ``environ`` the timed scripts' environment."""
 
     config: BenchConfig
     world: Any
@@ -269,7 +267,7 @@ def _bench_batches(b: Bench, batches: list[int], sharding: Any = None) -> dict[s
         compiled = rollout.lower(key, state, obs, b.world, b.params).compile()
         compile_s = time.perf_counter() - t0
         t = _timed(
-            lambda c=compiled, s=state, o=obs: c(key, s, o, b.world, b.params), b.config.repeats
+            functools.partial(compiled, key, state, obs, b.world, b.params), b.config.repeats
         )
         out[str(n)] = {
             "compile_s": compile_s,
@@ -385,8 +383,7 @@ def bench_numpy(b: Bench) -> None:
     sample = jax.jit(jax.vmap(jax.vmap(envs.sample_step_noise, in_axes=(0, None)), (0, None)))
     noise = ref.noise_to_numpy(sample(keys, b.world))
     world_np, params_np = ref.world_to_numpy(b.world), ref.params_to_numpy(b.params)
-    states = ref.state_to_numpy(state)
-    observations = ref.obs_to_numpy(obs)
+    states, observations = ref.state_to_numpy(state), ref.obs_to_numpy(obs)
 
     t0 = time.perf_counter()
     for i in range(n_r):
@@ -415,10 +412,9 @@ def bench_flops(b: Bench) -> None:
     ca = v_step.lower(keys, state, wheels, b.world, b.params).compile().cost_analysis()
     if isinstance(ca, list | tuple):  # older jax: one dict per computation
         ca = ca[0] if ca else {}
-    cost = {k: float(v) for k, v in (ca or {}).items()}
-    per_robot = {
-        k: cost[k] / n for k in ("flops", "transcendentals", "bytes accessed") if k in cost
-    }
+    ca = ca or {}
+    kinds = ("flops", "transcendentals", "bytes accessed")
+    per_robot = {k: float(ca[k]) / n for k in kinds if k in ca}
     flops = per_robot.get("flops")
     b.results["flops_per_step"] = flops
     b.results["cost_analysis_per_step"] = {str(n): per_robot}
@@ -432,9 +428,7 @@ def bench_peak(b: Bench) -> None:
     import jax.numpy as jnp
 
     n = b.config.matmul
-    ka, kb = jax.random.split(jax.random.key(4))
-    x = jax.random.normal(ka, (n, n), jnp.float32)
-    y = jax.random.normal(kb, (n, n), jnp.float32)
+    x, y = (jax.random.normal(k, (n, n), jnp.float32) for k in jax.random.split(jax.random.key(4)))
     dot = jax.jit(jnp.dot)
     t = _timed(lambda: dot(x, y), max(b.config.repeats, 3))
     b.results["peak_flops"] = 2.0 * n**3 / t["best_s"]
@@ -477,9 +471,7 @@ def bench_controller(b: Bench) -> None:
             loop = jax.jit(advance, static_argnums=(3, 5)).lower(start.out_info, *args).compile()
             compile_s[str(n)] = time.perf_counter() - t0
             batch = start(reset_keys, run_keys, b.world, b.params, params)
-            t = _timed(
-                lambda lp=loop, bt=batch, p=params: lp(bt, b.world, b.params, p), b.config.repeats
-            )
+            t = _timed(functools.partial(loop, batch, b.world, b.params, params), b.config.repeats)
             rates[str(n)] = n * steps / t["best_s"]
         b.results[f"controller_iterations_per_s{suffix}"] = rates
         b.results[f"controller_compile_s{suffix}"] = compile_s

@@ -74,7 +74,9 @@ _FIELDS = ("id", "world", "text", "held", "evidence", "ci_held", "ci_verdict", "
 def _claim(
     cid: str, world: str | None, text: str, held: bool | None, evidence: str, ci: tuple = ()
 ) -> dict:
-    """A ledger entry; ``ci = (ci_held, ci_verdict, ci_evidence)``, empty when not evaluated."""
+    """A ledger entry; ``ci = (ci_held, ci_verdict, ci_evidence)``, empty when not evaluated; a
+    world's claim text opens with the world's name."""
+    text = text if world is None else f"In {protocol.WORLD_NAMES[world]}, {text}"
     values = (cid, world, text, held, evidence, *(ci or (None, None, "")))
     return dict(zip(_FIELDS, values, strict=True))
 
@@ -101,22 +103,15 @@ def _missing(needed: Sequence[str], have: Sequence[str], world: str) -> str | No
     return f"No results for {', '.join(lacking)} in {world}." if lacking else None
 
 
-def _mean(results: stats.Results, system: str, metric: str) -> float:
-    return float(stats.metric_values(results[system], metric).mean())
-
-
 def _lowest(world: str, results: stats.Results, have: list[str], metric: str, cis: Mapping) -> dict:
     cid = f"{world}/SIE-lowest-{metric}"
-    text = (
-        f"In {protocol.WORLD_NAMES[world]}, the seeded idiotypic system (SIE) has "
-        f"{_METRIC_WORDS[metric]}."
-    )
+    text = f"the seeded idiotypic system (SIE) has {_METRIC_WORDS[metric]}."
     others = [s for s in have if s != "SIE"]
     why = _missing(["SIE"], have, world) or (None if others else f"No other system in {world}.")
     if why:
         return _claim(cid, world, text, None, why)
-    sie = _mean(results, "SIE", metric)
-    means = {s: _mean(results, s, metric) for s in others}
+    means = {s: float(stats.metric_values(results[s], metric).mean()) for s in have}
+    sie = means.pop("SIE")
     best = min(means, key=means.__getitem__)
     held = all(sie <= v for v in means.values())
     tie = " (a tie)" if sie == means[best] else ""
@@ -137,7 +132,7 @@ def _lowest(world: str, results: stats.Results, have: list[str], metric: str, ci
 
 def _no_failures(world: str, results: stats.Results, have: list[str]) -> dict:
     cid = f"{world}/SIE-no-failures"
-    text = f"In {protocol.WORLD_NAMES[world]}, SIE has a 0 % failure rate."
+    text = "SIE has a 0 % failure rate."
     why = _missing(["SIE"], have, world)
     if why:
         return _claim(cid, world, text, None, why)
@@ -161,7 +156,6 @@ def _f_below(
     None), significantly (two-tailed Student's t)."""
     a, b, text, alpha = claim
     cid = f"{world}/{a}-f-{'below' if alpha is None else 'sig-below'}/{b}"
-    text = f"In {protocol.WORLD_NAMES[world]}, {text}"
     why = _missing([a, b], have, world)
     if why:
         return _claim(cid, world, text, None, why)

@@ -137,8 +137,7 @@ def _draw_objects(
     region_centre = lambda r: 0.5 * (r[..., :2] + r[..., 2:])
     boxes = _np(state.boxes) if state is not None else region_centre(_np(world.box_region))
     goal = _np(state.goal) if state is not None else region_centre(_np(world.goal_region))
-    lw = 0.5 if edge == "k" else 1.2
-    style = dict(edgecolor=edge, lw=lw, alpha=alpha, zorder=3)
+    style = dict(edgecolor=edge, lw=0.5 if edge == "k" else 1.2, alpha=alpha, zorder=3)
     valid = np.asarray(world.box_valid)
     half, mats = _np(world.box_half)[valid], np.asarray(world.box_material)[valid]
     for (cx, cy), (hx, hy), m in zip(boxes[valid], half, mats, strict=True):
@@ -240,8 +239,7 @@ def world_figure(
         draw_trajectory(ax, xy, label=label, color=_robot_colour(i))
     _frame_axes(ax, world)
     ax.set_title(title if title is not None else world.name)
-    handles, _ = ax.get_legend_handles_labels()
-    if handles:
+    if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize="small", frameon=False)
     return fig
 
@@ -275,12 +273,11 @@ def animate(
     if poses.ndim != 3 or poses.shape[-1] != 3 or poses.shape[0] == 0:
         raise ValueError(f"animate needs poses [T, 3] or [T, R, 3], got {np.shape(poses)}")
     n_t, n_r = poses.shape[:2]
-    wand = None if wanderers is None else _np(wanderers)
-    if wand is not None:
-        if wand.ndim == 3:
-            wand = wand[:, None]
-        if wand.shape[:2] != (n_t, n_r) or wand.shape[-1] != 3:
-            raise ValueError(f"wanderers {np.shape(wanderers)} do not match poses {poses.shape}")
+    wand = np.zeros((n_t, n_r, 0, 3)) if wanderers is None else _np(wanderers)  # [T, R, W, 3]
+    if wand.ndim == 3:
+        wand = wand[:, None]
+    if wand.shape[:2] != (n_t, n_r) or wand.shape[-1] != 3:
+        raise ValueError(f"wanderers {np.shape(wanderers)} do not match poses {poses.shape}")
     if state is not None and _is_batched(state):
         state = _robots(state)[0]
     if os.path.splitext(os.fspath(out_path))[1].lower() != ".gif":
@@ -295,7 +292,6 @@ def animate(
     _frame_axes(ax, world)
     ax.set_axis_off()  # tick labels would take two thirds of each frame's drawing time
     robot_artists = []
-    n_wanderers = 0 if wand is None else wand.shape[2]
     for r in range(n_r):
         colour = _robot_colour(r)
         style = dict(facecolor=colour, edgecolor="k", lw=0.8, zorder=7)
@@ -303,7 +299,7 @@ def animate(
         (tick,) = ax.plot([], [], color="k", lw=1.5, zorder=8)
         (path,) = ax.plot([], [], color=colour, lw=1.0, alpha=0.7, zorder=5)
         disc = dict(facecolor=WANDERER_COLOUR, edgecolor=colour, lw=1.0, zorder=6)
-        others = [ax.add_patch(Circle((0, 0), BODY_RADIUS, **disc)) for _ in range(n_wanderers)]
+        others = [ax.add_patch(Circle((0, 0), BODY_RADIUS, **disc)) for _ in range(wand.shape[2])]
         robot_artists.append((body, tick, path, others))
 
     def update(i: int) -> None:

@@ -25,8 +25,6 @@ _T5_COLS = (("c", "c cap", 0), ("tau", "τ cap", 0), ("total", "total", 0))
 _T3_TITLE = "Table 3: mean c, τ and f"
 _T5_TITLE = "Table 5: failure rates (%) by collision cap, by time cap and overall"
 _METRIC_NAME = {"c": "c", "tau": "τ", "f": "f", "total": "total"}
-_RANK_MARK = "†"
-_SIG_MARK = "‡"
 _LEVEL = f"{100 * stats.CI_LEVEL:g} %"
 _SIG_LEVEL = stats.significance_level(protocol.ALPHA)  # 99
 
@@ -100,10 +98,9 @@ def ordering_differences(
             r_ours, r_paper = _ranks(mine), _ranks(theirs)
             differ = [s for s in common if r_ours[s] != r_paper[s]]
             if differ:
-                orders = {"ours_order": _order_string(mine), "paper_order": _order_string(theirs)}
                 out.append(
                     dict(world=world, column=col, systems=differ, ours=r_ours, paper=r_paper)
-                    | orders
+                    | {"ours_order": _order_string(mine), "paper_order": _order_string(theirs)}
                 )
     return out
 
@@ -151,18 +148,16 @@ def _side_by_side(
     flagged = {(d["world"], s, d["column"]) for d in diffs for s in d["systems"]}
     lines = [f"### {title}", ""] + ([note, ""] if note else [])
     ci = f" [{_LEVEL} CI]" if intervals else ""
+    header = ["System"] + (["n"] if n_trials is not None else [])
+    header += [f"{h} ours{ci} / paper" for _, h, _ in cols] + [head for head, _ in extra]
     for world in _worlds(ours, paper):
         mine, theirs = ours.get(world, {}), paper.get(world, {})
-        header = ["System"] + (["n"] if n_trials is not None else [])
-        header += [f"{h} ours{ci} / paper" for _, h, _ in cols]
-        header += [head for head, _ in extra]
         body = []
         for s in _rows(mine, theirs):
             row = [s] + ([str(n_trials.get(world, {}).get(s, "–"))] if n_trials is not None else [])
             for key, _, dec in cols:
-                a = mine.get(s, {}).get(key)
-                b = theirs.get(s, {}).get(key)
-                mark = f" {_RANK_MARK}" if (world, s, key) in flagged else ""
+                a, b = mine.get(s, {}).get(key), theirs.get(s, {}).get(key)
+                mark = " †" if (world, s, key) in flagged else ""
                 span = _span((intervals or {}).get(world, {}).get(s, {}).get(key), dec)
                 row.append(f"{_num(a, dec)}{span} / {_num(b)}{mark}")
             row += [_num(values.get(world, {}).get(s), 1) for _, values in extra]
@@ -188,22 +183,21 @@ def _table4_section(ours: Mapping[str, Any], paper: Mapping[str, Any]) -> list[s
         "### Table 4: significance levels 100 (1 − p), two-tailed Student's t (ours / paper)",
         "",
         f"Significant at the paper's 99 % level when the level is ≥ {_SIG_LEVEL}. "
-        f"{_SIG_MARK} marks a cell where our verdict (significant or not) differs from the "
+        "‡ marks a cell where our verdict (significant or not) differs from the "
         "paper's. Levels carry no sign: see the mean differences in the robustness table.",
         "",
     ]
+    header = ["Comparison"] + [f"{_METRIC_NAME[m]} ours / paper" for m in stats.METRICS]
+    pairs = [f"{a} vs {b}" for a, b in protocol.COMPARISONS]
     for world in _worlds(ours, paper):
         mine, theirs = ours.get(world, {}), paper.get(world, {})
-        pairs = [f"{a} vs {b}" for a, b in protocol.COMPARISONS]
-        pairs = [p for p in pairs if p in mine or p in theirs]
         body = []
-        for pair in pairs:
+        for pair in (p for p in pairs if p in mine or p in theirs):
             row = [pair]
             for m in stats.METRICS:
                 a, b = mine.get(pair, {}).get(m), theirs.get(pair, {}).get(m)
-                row.append(f"{_num(a)} / {_num(b)}" + (f" {_SIG_MARK}" if _differs(a, b) else ""))
+                row.append(f"{_num(a)} / {_num(b)}" + (" ‡" if _differs(a, b) else ""))
             body.append(row)
-        header = ["Comparison"] + [f"{_METRIC_NAME[m]} ours / paper" for m in stats.METRICS]
         lines += [f"**{world}**", ""] + _table(header, body)
     return lines
 
@@ -249,9 +243,7 @@ def _ordering_section(diffs3: list, diffs5: list, ours4: Mapping, paper4: Mappin
 
 def _hypotheses_section(ours: Mapping[str, Any], paper: Mapping[str, Any]) -> list[str]:
     def verdict(h: Mapping[str, Any] | None) -> str:
-        if h is None:
-            return "–"
-        return "supported" if h.get("supported") else "not supported"
+        return "–" if h is None else "supported" if h.get("supported") else "not supported"
 
     names = list(dict.fromkeys([*ours, *paper]))
     body = [
@@ -439,13 +431,13 @@ def _baseline_section(baseline: Mapping[str, Any] | None) -> list[str]:
     ]
     t3, ci3 = baseline["table3"], baseline["table3_ci"]
     t5, ci5 = baseline["table5"], baseline["table5_ci"]
+    header = ["System", *(head for _, head, _ in _T3_COLS), "failed (%)", "p (f) against it"]
     for world in t3:
-        header = ["System", "c", "τ (s)", "f", "failed (%)", "p (f) against it"]
         body = []
         for s, row in t3[world].items():
-            cells = [s]
-            for key, dec in (("c", 1), ("tau", 0), ("f", 0)):
-                cells.append(_num(row[key], dec) + _span(ci3[world][s][key], dec))
+            cells = [s] + [
+                _num(row[key], dec) + _span(ci3[world][s][key], dec) for key, _, dec in _T3_COLS
+            ]
             cells.append(_num(t5[world][s]["total"], 1) + _span(ci5[world][s]["total"], 1))
             tests = [
                 f"{pair.split(' vs ')[1]}: {_p(test['welch_p'])}"
@@ -543,7 +535,7 @@ def _trajectory_figure(
     cols = min(4, len(systems))
     rows = math.ceil(len(systems) / cols)
     fig = new_figure((3.6 * cols, 3.6 * rows))
-    axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
+    axes = fig.subplots(rows, cols, squeeze=False).ravel()
     for ax, s in zip(axes, systems, strict=False):
         if drawer is not None:
             # The boxes and goal where this trial had them (random per trial in some worlds).
@@ -563,10 +555,11 @@ def _trajectory_figure(
     save_figure(fig, path, dpi=110)
 
 
-def _ltl_figure(ltl: Mapping[str, Any], path: Path) -> bool:
+def _ltl_figure(ltl: Mapping[str, Any], out: Path) -> str | None:
+    """Draw ``out/figures/ltl_fitness.png`` and return its name (None: no generations)."""
     gens = sorted(ltl.get("generations", []), key=lambda g: g["generation"])
     if not gens:
-        return False
+        return None
     fig = new_figure((7.0, 4.5))
     ax = fig.subplots()
     g = [row["generation"] for row in gens]
@@ -581,8 +574,9 @@ def _ltl_figure(ltl: Mapping[str, Any], path: Path) -> bool:
     ax.set_title("LTL: best (solid) and mean (dashed) f per population")
     ax.grid(alpha=0.3)
     ax.legend(fontsize="small")
-    save_figure(fig, path, dpi=110)
-    return True
+    name = "figures/ltl_fitness.png"
+    save_figure(fig, out / name, dpi=110)
+    return name
 
 
 def write_report(
@@ -634,16 +628,12 @@ def write_report(
             placements = (example_placements or {}).get(world)
             _trajectory_figure(world, trajectories, world_drawer, out / name, placements)
             figures.append((f"{world}: example trajectories", name))
-    ltl_fig = "figures/ltl_fitness.png"
-    if not (ltl_summary and _ltl_figure(ltl_summary, out / ltl_fig)):
-        ltl_fig = None
+    ltl_fig = _ltl_figure(ltl_summary, out) if ltl_summary else None
 
     n_trials = {w: {s: len(t) for s, t in r.items()} for w, r in results_by_world.items()}
     diffs3 = ordering_differences(tables["table3"], p3, stats.METRICS)
     diffs5 = ordering_differences(tables["table5"], p5, stats.FAILURE_COLUMNS)
 
-    if claims_ledger is None:
-        claims_ledger = claims.claims(results_by_world)
     extra = [
         (head, tables[key])
         for head, key in (("trapped (s), ours", "trapped_s"), ("locked (s), ours", "locked_s"))
@@ -651,7 +641,9 @@ def write_report(
     ]
 
     lines = ["# jaxais results beside Whitbrook, Aickelin & Garibaldi (2008)", ""]
-    lines += _claims_section(claims_ledger)
+    lines += _claims_section(
+        claims.claims(results_by_world) if claims_ledger is None else claims_ledger
+    )
     lines += [
         f"Paper: {paper.get('source', 'see jaxais/data/paper_tables.json')}",
         "",

@@ -299,11 +299,10 @@ def _versions(out: Path, done: Iterable[int]) -> dict[str, Any]:
 
 def _run_seed(folder: Run, s: int, settings: dict, run: Runner, logs: bool, note, stop) -> float:
     """Seed ``s``'s LTL (unless done) and STL. Returns the STL's wall time."""
-    out = folder.out
-    ltl, stl = _paths(out, s)
+    ltl, stl = _paths(folder.out, s)
 
     def log(stage: str) -> Path | None:
-        return out / "logs" / f"seed_{s}.{stage}.log" if logs else None
+        return folder.out / "logs" / f"seed_{s}.{stage}.log" if logs else None
 
     def failed(stage: str, script: str, code: int) -> SeedRunError:
         where = f"see {log(stage.lower())}" if logs else "see its messages above"

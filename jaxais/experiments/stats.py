@@ -62,6 +62,7 @@ FAILURE_COLUMNS: tuple[str, ...] = ("c", "tau", "total")
 """Table 5 keys: failures by collision cap, by time cap, overall."""
 
 _RECORD_KEY = {"c": "collisions_capped", "tau": "tau", "f": "fitness"}
+_FAILED_KEY = {"c": "failed_collisions", "tau": "failed_time", "total": "failed"}
 _MEANS = ("idiotypic_difference_rate", "trapped_s", "locked_s")
 """Record fields whose per-system means the tables hold."""
 
@@ -116,16 +117,11 @@ def metric_values(trials: Sequence[Mapping[str, Any]], metric: str) -> np.ndarra
 
 def failure_counts(trials: Sequence[Mapping[str, Any]]) -> dict[str, int]:
     """Trials failed ``{"c": by collisions, "tau": by time, "total": by either}``."""
-    return {
-        "c": sum(bool(t["failed_collisions"]) for t in trials),
-        "tau": sum(bool(t["failed_time"]) for t in trials),
-        "total": sum(bool(t["failed"]) for t in trials),
-    }
+    return {k: sum(bool(t[key]) for t in trials) for k, key in _FAILED_KEY.items()}
 
 
 def _two_groups(a: Sequence[float], b: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
-    x = np.asarray(a, dtype=np.float64).ravel()
-    y = np.asarray(b, dtype=np.float64).ravel()
+    x, y = (np.asarray(g, dtype=np.float64).ravel() for g in (a, b))
     if x.size == 0 or y.size == 0:
         raise ValueError("both groups need at least one observation")
     return x, y
@@ -134,9 +130,7 @@ def _two_groups(a: Sequence[float], b: Sequence[float]) -> tuple[np.ndarray, np.
 def _t_result(diff: float, se2: float, df: float) -> tuple[float, float]:
     """t = diff / sqrt(se2) and its two-tailed p on ``df`` degrees of freedom, degenerate-safe."""
     if se2 <= 0.0:
-        if diff == 0.0:
-            return 0.0, 1.0
-        return math.copysign(math.inf, diff), 0.0
+        return (0.0, 1.0) if diff == 0.0 else (math.copysign(math.inf, diff), 0.0)
     t = diff / math.sqrt(se2)
     return t, float(2.0 * sps.t.sf(abs(t), df))
 
@@ -163,8 +157,7 @@ def welch_t(a: Sequence[float], b: Sequence[float]) -> tuple[float, float]:
     x, y = _two_groups(a, b)
     if x.size < 2 or y.size < 2:
         return 0.0, 1.0
-    va = float(x.var(ddof=1)) / x.size
-    vb = float(y.var(ddof=1)) / y.size
+    va, vb = (float(g.var(ddof=1)) / g.size for g in (x, y))
     se2 = va + vb
     df = se2**2 / (va**2 / (x.size - 1) + vb**2 / (y.size - 1)) if se2 > 0 else 1.0
     return _t_result(float(x.mean() - y.mean()), se2, df)
@@ -221,11 +214,11 @@ def bootstrap_mean_ci(
     # One column at a time: a [B, n] gather each, not [B, n, k].
     means = np.stack([col[idx].mean(axis=1) for col in columns.T], axis=-1)  # [B, k]
     tail = (1.0 - level) / 2.0
-    lo, hi = np.quantile(means, [tail, 1.0 - tail], axis=0)
     # Every resample's mean lies in [min, max]; clipping only removes rounding (a constant
     # sample's summed means can miss x by an ulp), so zero variance gives exactly [x, x].
-    lo = np.clip(lo, columns.min(axis=0), columns.max(axis=0))
-    hi = np.clip(hi, columns.min(axis=0), columns.max(axis=0))
+    lo, hi = np.clip(
+        np.quantile(means, [tail, 1.0 - tail], axis=0), columns.min(axis=0), columns.max(axis=0)
+    )
     if x.ndim == 1:
         return lo[0], hi[0]
     return lo, hi
@@ -307,19 +300,16 @@ def table5_ci(
     """Wilson intervals of every Table 5 rate, in %: ``{world: {system: {column: [lo, hi]}}}``."""
 
     def row(w: str, s: str, trials: Sequence[Mapping[str, Any]]) -> dict[str, list[float]]:
-        counts = failure_counts(trials)
         return {
-            k: [100.0 * v for v in proportion_ci(counts[k], len(trials), level)]
-            for k in FAILURE_COLUMNS
+            k: [100.0 * b for b in proportion_ci(v, len(trials), level)]
+            for k, v in failure_counts(trials).items()
         }
 
     return _per_system(results_by_world, row)
 
 
 def _compare_metric(a: np.ndarray, b: np.ndarray) -> dict[str, float | int]:
-    t, p = student_t(a, b)
-    wt, wp = welch_t(a, b)
-    u, up = mann_whitney_u(a, b)
+    (t, p), (wt, wp), (u, up) = student_t(a, b), welch_t(a, b), mann_whitney_u(a, b)
     return {
         "n_a": int(a.size),
         "n_b": int(b.size),
@@ -341,16 +331,16 @@ def comparisons(results_by_world: ResultsByWorld) -> dict[str, dict[str, dict[st
     """Every Table 4 pair with results under Student's, Welch's and Mann-Whitney tests and
     Cohen's d: ``{world: {"A vs B": {metric: {"n_a", "mean_diff" (A - B), "student_p",
     "level", "welch_t", "mwu_u", "cohens_d", ...}}}}``."""
-    out: dict[str, dict[str, dict[str, dict]]] = {}
-    for world, results in results_by_world.items():
-        out[world] = {
+    return {
+        world: {
             f"{a} vs {b}": {
                 m: _compare_metric(metric_values(results[a], m), metric_values(results[b], m))
                 for m in METRICS
             }
             for a, b in comparison_pairs(world, _ordered_systems(results))
         }
-    return out
+        for world, results in results_by_world.items()
+    }
 
 
 def table4(results_by_world: ResultsByWorld) -> dict[str, dict[str, dict[str, int]]]:

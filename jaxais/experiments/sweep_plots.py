@@ -24,8 +24,7 @@ CONTOUR = 0.20
 
 
 def _panels(doc: dict[str, Any]) -> list[tuple[str, str]]:
-    present = lambda m: any(p.get(m) is not None for p in doc["points"])
-    return [(m, title) for m, title in PANELS if present(m)]
+    return [(m, title) for m, title in PANELS if any(p.get(m) is not None for p in doc["points"])]
 
 
 def _ci(rows: list[dict[str, Any] | None]) -> np.ndarray:

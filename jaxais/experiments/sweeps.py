@@ -111,9 +111,9 @@ def grid_points(axes: Sequence[tuple[str, np.ndarray]]) -> list[dict[str, Any]]:
 
 def point_systems(base: System, points: Sequence[dict[str, Any]]) -> System:
     """``base`` once per point with its values, stacked [P]; ValueError on a value out of range."""
+    ours = {name: np.asarray(v).item() for name, v in vars(base.readings).items()}
     for point in points:  # checked here: with_params would clip a value out of its range
         base.network.replace(**{k: v for k, v in point.items() if k in BOUNDS}).validate()
-        ours = {name: np.asarray(v).item() for name, v in vars(base.readings).items()}
         readings = {k: v for k, v in point.items() if PARAMETERS[k][0] == "readings"}
         make_readings(**(ours | readings))  # the readings' own checks: hold >= 1 ...
     systems = [with_params(base, point) for point in points]
@@ -220,11 +220,10 @@ def run_sweep(
     wall = time.perf_counter() - start
     runs = n_trials * len(points)
     base_values = system_params(base, [name for name, _ in axes])
-    base_values = {k: np.asarray(v).item() for k, v in base_values.items()}
     return {
         "format": FORMATS["sweep"],  # docs/formats.md
         "axes": {name: values.tolist() for name, values in axes},
-        "base_values": base_values,
+        "base_values": {k: np.asarray(v).item() for k, v in base_values.items()},
         "points": out_points,
         "runs": runs,
         "robot_iterations": iterations,

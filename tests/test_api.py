@@ -296,3 +296,15 @@ def test_readme_restores_an_evolve_checkpoint_with_orbax(tmp_path):
     for name, value in state_to_tree(namespace["ga_state"]).items():
         np.testing.assert_array_equal(value, want[name], err_msg=name)
         np.testing.assert_array_equal(namespace["state"][name], want[name], err_msg=name)
+
+
+def test_readme_gymnax_snippet_runs_as_written():
+    """The README's gymnax face, five lines run as they are: a step of jaxais's gymnax env."""
+    blocks = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), re.S)
+    (code,) = [b for b in blocks if 'env = envs.make("world1")' in b]
+    assert len([line for line in code.splitlines() if line.strip()]) == 5
+    namespace: dict = {}
+    exec(code, namespace)
+    assert namespace["obs"].shape == (11,) and np.isfinite(float(namespace["reward"]))
+    assert not bool(namespace["terminated"]) and not bool(namespace["truncated"])
+    assert type(namespace["env"]).__mro__[1].__module__.startswith("gymnax.")

@@ -97,6 +97,9 @@ def test_registry_accepts_brax_backend_argument():
     env = brax_envs.get_environment("jaxais_world1", backend="mjx", max_steps_in_episode=100)
     assert isinstance(env, BraxEnv) and env.env.default_params.max_steps_in_episode == 100
     assert env.backend == "jaxais"
+    # evosax's BraxProblem builds its env so (checked by hand to train unmodified: too slow here).
+    wrapped = brax_envs.create("jaxais_world1", episode_length=8, auto_reset=True, backend="spring")
+    assert isinstance(wrapped.unwrapped, BraxEnv) and wrapped.observation_size == 11
 
 
 def test_import_error_names_the_extra(monkeypatch):

@@ -187,8 +187,9 @@ def test_terminated_after_three_goal_steps(env):
 
 def test_truncated_at_max_steps(env):
     params = env.default_params.replace(max_steps_in_episode=5)
-    size = genv.EpuckEnv._step._cache_size()
     _, state = env.reset(jax.random.key(13), params)
+    env.step(jax.random.key(299), state, jnp.zeros(2), env.default_params)  # compiled here
+    size = genv.EpuckEnv._step._cache_size()
     flags = []
     for t in range(5):
         _, new, _, term, trunc, _ = env.step(jax.random.key(300 + t), state, jnp.zeros(2), params)

@@ -24,6 +24,7 @@ from jaxais.baselines import TrainConfig
 from jaxais.baselines.neural import (
     NEURAL,
     MLPParams,
+    _chunks,
     centered_ranks,
     es_gradient,
     features,
@@ -198,6 +199,15 @@ def test_training_is_deterministic_and_finite():
     # The search mean moved: adam's first step has size about the learning rate per weight.
     start = init_mlp(jax.random.fold_in(jax.random.key(0), 0), TINY.hidden)
     assert not np.allclose(np.asarray(a.params.w1), np.asarray(start.w1))
+
+
+def test_training_loops_cover_every_generation_in_twos_and_a_last_three():
+    """No compiled loop of one generation (it rounds differently) unless the run has one."""
+    assert _chunks(1) == [(0, 1)] and _chunks(3) == [(0, 3)]
+    for n in range(2, 41):
+        chunks = _chunks(n)
+        assert [a for a, _ in chunks] == [0, *(b for _, b in chunks[:-1])] and chunks[-1][1] == n
+        assert all(b - a == 2 for a, b in chunks[:-1]) and chunks[-1][1] - chunks[-1][0] in (2, 3)
 
 
 def test_config_rejects_bad_values():

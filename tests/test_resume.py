@@ -206,7 +206,7 @@ def test_ablate_killed_after_a_batch_and_resumed_gives_the_same_ablation(tmp_pat
 
 @pytest.mark.slow
 def test_train_baseline_killed_and_resumed_trains_the_same_weights(tmp_path, cache):
-    args = ("--world", "real", "--generations", 3, "--pairs", 4, "--episodes", 2, "--steps", 60,
+    args = ("--world", "real", "--generations", 4, "--pairs", 4, "--episodes", 2, "--steps", 60,
             "--hidden", 8, "--no-eval")  # fmt: skip
     ref, out = tmp_path / "ref", tmp_path / "out"
     finish(start_script("train_baseline.py", *args, "--out", ref, **cache))
@@ -230,6 +230,17 @@ def test_train_baseline_killed_and_resumed_trains_the_same_weights(tmp_path, cac
         assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
         assert proc.stderr.startswith("train_baseline.py: error: ") and message in proc.stderr
     assert not (tmp_path / "none").exists()
+    # Training stops between two compiled generations, not at its end: SIGTERM after the first
+    # generation's line ends a run of 100,000 generations in one line, with no weights written.
+    long = tmp_path / "long"
+    proc = start_script("train_baseline.py", *args[:2], "--generations", 100_000, *args[4:],
+                        "--log-every", 1, "--out", long, **cache)  # fmt: skip
+    first = proc.stderr.readline()
+    proc.send_signal(signal.SIGTERM)
+    _, err = finish(proc, EXIT[signal.SIGTERM])
+    assert " gen    1/100000: " in first, first
+    assert err.splitlines()[-1] == "train_baseline.py: error: terminated", err[-2000:]
+    assert _manifest(long)["status"] == "partial" and not (long / "params.npz").exists()
 
 
 LEDGER = """

@@ -224,11 +224,24 @@ class TrainResult(NamedTuple):
     metrics: dict[str, jnp.ndarray]
 
 
+def _chunks(generations: int) -> list[tuple[int, int]]:
+    """[first, last) generations of each compiled loop: two at a time, three in the last when
+    there is an odd number. A loop of one generation would compile as straight-line code, whose
+    rounding differs from the loop's; a loop of two or more gives the whole run's bits."""
+    if generations < 2:
+        return [(0, generations)]
+    ends = list(range(2, generations + 1, 2))
+    ends[-1] = generations
+    return list(zip([0, *ends[:-1]], ends, strict=True))
+
+
 def make_train(
     config: TrainConfig, progress: Callable[[int, dict[str, Any]], None] | None = None
 ) -> Callable[[jax.Array], TrainResult]:
-    """The whole training run as one jitted ``train(key) -> TrainResult``, reproducible from
-    its key; ``progress(generation, metrics)`` is called from inside it each generation."""
+    """The training run ``train(key) -> TrainResult``, reproducible from its key: compiled loops
+    of two generations (:func:`_chunks`), so that Ctrl-C or SIGTERM takes effect between them (one
+    loop over the whole run would hold the signal until its end, minutes later);
+    ``progress(generation, metrics)`` is called from inside each generation."""
     env = envs.make(config.world, auto_reset=False, collision_penalty=config.collision_penalty)
     env_params = env.default_params
     _, unravel = ravel_pytree(init_mlp(jax.random.key(0), config.hidden))
@@ -276,12 +289,24 @@ def make_train(
         return state, metrics
 
     @jax.jit
-    def train(key: jax.Array) -> TrainResult:
+    def start(key: jax.Array) -> tuple[ESState, jax.Array]:
+        """The search's first state and every generation's key [generations]."""
         k_init, k_gens = jax.random.fold_in(key, 0), jax.random.fold_in(key, 1)
         flat, _ = ravel_pytree(init_mlp(k_init, config.hidden))
-        xs = (jnp.arange(config.generations), jax.random.split(k_gens, config.generations))
-        state, metrics = jax.lax.scan(generation, es.init(flat), xs)
-        return TrainResult(params=unravel(state.mean), metrics=metrics)
+        return es.init(flat), jax.random.split(k_gens, config.generations)
+
+    @jax.jit
+    def run(state: ESState, gens: jax.Array, keys: jax.Array) -> tuple[ESState, dict]:
+        return jax.lax.scan(generation, state, (gens, keys))
+
+    def train(key: jax.Array) -> TrainResult:
+        state, keys = start(key)
+        history = []
+        for first, last in _chunks(config.generations):
+            state, metrics = run(state, jnp.arange(first, last), keys[first:last])
+            history.append(jax.block_until_ready(metrics))  # a signal is seen between loops
+        metrics = jax.tree.map(lambda *m: jnp.concatenate(m), *history)
+        return TrainResult(params=jax.jit(unravel)(state.mean), metrics=metrics)
 
     return train
 

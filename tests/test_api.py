@@ -298,6 +298,7 @@ def test_readme_restores_an_evolve_checkpoint_with_orbax(tmp_path):
         np.testing.assert_array_equal(namespace["state"][name], want[name], err_msg=name)
 
 
+@pytest.mark.slow
 def test_readme_gymnax_snippet_runs_as_written():
     """The README's gymnax face, five lines run as they are: a step of jaxais's gymnax env."""
     blocks = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), re.S)

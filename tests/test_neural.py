@@ -288,6 +288,20 @@ def test_damaged_weights_are_one_line_naming_the_file(tmp_path, how, words):
     assert "pickle" not in msg
 
 
+def test_evaluating_damaged_weights_writes_nothing(tmp_path):
+    """``train_baseline.py --eval-only --weights DIR``: damaged weights are refused before the
+    run's folder is made, so the same --out works once they are mended."""
+    from jaxais.experiments.baseline import baseline
+    from jaxais.io import UserError
+
+    (tmp_path / "w").mkdir()
+    save_params(tmp_path / "w", init_mlp(jax.random.key(3), 2), {"seed": 3})
+    _damage_params(tmp_path / "w", "truncated")
+    with pytest.raises(UserError, match="params.npz: not a trained neural controller's weights"):
+        baseline(tmp_path / "out", train=False, weights=tmp_path / "w")
+    assert not (tmp_path / "out").exists()
+
+
 def test_collect_refuses_damaged_evaluations_naming_the_file(tmp_path):
     from jaxais.experiments.baseline import collect_baselines
     from jaxais.io import UserError

@@ -38,8 +38,15 @@ def _output_dir(out: str | Path, into_checkpoints: bool, make: bool = True) -> P
 
 
 def _check_weights(weights: str | Path | None) -> None:
-    if weights is not None and not (Path(weights) / "params.npz").is_file():
+    """Weights to evaluate, read now: missing or damaged ones are refused before the run's
+    folder is made."""
+    if weights is None:
+        return
+    if not (Path(weights) / "params.npz").is_file():
         raise ValueError(f"{weights}: no params.npz to evaluate (train first)")
+    from jaxais.baselines.neural import load_params
+
+    load_params(weights)
 
 
 def _versions() -> dict[str, str]:

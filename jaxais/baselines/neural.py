@@ -306,7 +306,7 @@ def make_train(
             state, metrics = run(state, jnp.arange(first, last), keys[first:last])
             history.append(jax.block_until_ready(metrics))  # a signal is seen between loops
         metrics = jax.tree.map(lambda *m: jnp.concatenate(m), *history)
-        return TrainResult(params=jax.jit(unravel)(state.mean), metrics=metrics)
+        return TrainResult(params=unravel(state.mean), metrics=metrics)
 
     return train
 

@@ -83,6 +83,13 @@ def _bounds(centre: jnp.ndarray, half: jnp.ndarray) -> jnp.ndarray:
     return jnp.concatenate([centre - half, centre + half], axis=-1)
 
 
+def _append(kind: tuple, rows: jnp.ndarray, material: int, height) -> tuple:
+    """One kind of surface's (geometry, material, height, valid) with ``rows`` [N, ...] added."""
+    n = rows.shape[0]
+    extra = (rows, jnp.full(n, material), jnp.full(n, height), jnp.ones(n, bool))
+    return tuple(jnp.concatenate(pair) for pair in zip(kind, extra, strict=True))
+
+
 def build_scene(state: State, world: World, params: SimParams, exclude: int = -1) -> Scene:
     """The scene seen by robot ``exclude`` (0 the robot, 1.. wanderers; -1 none): robots are
     circles of material wall, the goal a box or circle of material goal."""
@@ -91,25 +98,17 @@ def build_scene(state: State, world: World, params: SimParams, exclude: int = -1
         robots = jnp.concatenate([robots[:exclude], robots[exclude + 1 :]], axis=0)
     n_r = robots.shape[0]
     robot_circ = jnp.concatenate([robots, jnp.full((n_r, 1), params.body_radius)], axis=1)
-    robot_valid = jnp.ones(n_r, bool)
     box = _bounds(state.boxes, world.box_half)
-    box_mat, box_h, box_valid = world.box_material, world.box_height, world.box_valid
-    circ = jnp.concatenate([world.pillar, robot_circ], axis=0)
-    circ_mat = jnp.concatenate([world.pillar_material, jnp.full(n_r, WALL)])
-    circ_h = jnp.concatenate([world.pillar_height, jnp.full(n_r, ROBOT_HEIGHT)])
-    circ_valid = jnp.concatenate([world.pillar_valid, robot_valid])
-    one = jnp.ones(1, bool)
+    boxes = (box, world.box_material, world.box_height, world.box_valid)
+    circs = (world.pillar, world.pillar_material, world.pillar_height, world.pillar_valid)
+    circs = _append(circs, robot_circ, WALL, ROBOT_HEIGHT)
     if world.goal_shape == "box":
-        box = jnp.concatenate([box, _bounds(state.goal, world.goal_half)[None]], axis=0)
-        box_mat = jnp.concatenate([box_mat, jnp.full(1, GOAL)])
-        box_h = jnp.concatenate([box_h, world.goal_height[None]])
-        box_valid = jnp.concatenate([box_valid, one])
+        boxes = _append(boxes, _bounds(state.goal, world.goal_half)[None], GOAL, world.goal_height)
     else:
         ball = jnp.concatenate([state.goal, world.goal_half[:1]])[None]
-        circ = jnp.concatenate([circ, ball], axis=0)
-        circ_mat = jnp.concatenate([circ_mat, jnp.full(1, GOAL)])
-        circ_h = jnp.concatenate([circ_h, world.goal_height[None]])
-        circ_valid = jnp.concatenate([circ_valid, one])
+        circs = _append(circs, ball, GOAL, world.goal_height)
+    box, box_mat, box_h, box_valid = boxes
+    circ, circ_mat, circ_h, circ_valid = circs
     return Scene(
         seg=world.seg,
         seg_material=world.seg_material,
@@ -349,13 +348,12 @@ def observe(key: jax.Array, state: State, world: World, params: SimParams) -> Ob
     return sense(state, sample_step_noise(key, world), world, params)
 
 
-def _uniform_in(key, region, n):
-    u = jax.random.uniform(key, (n, 2))
-    return region[:2] + u * (region[2:] - region[:2])
-
-
-def _first_clear(cands: jnp.ndarray, clear: jnp.ndarray) -> jnp.ndarray:
-    """The first candidate that is clear (the first one if none is)."""
+def _place(key: jax.Array, region: jnp.ndarray, radius, scene: Scene) -> jnp.ndarray:
+    """The first of ``PLACEMENT_TRIES`` points drawn in ``region`` where a disc of ``radius``
+    clears ``scene`` (the first point if none does)."""
+    u = jax.random.uniform(key, (PLACEMENT_TRIES, 2))
+    cands = region[:2] + u * (region[2:] - region[:2])
+    clear = jax.vmap(lambda c: min_gap(c, radius, scene) >= 0)(cands)
     return cands[jnp.argmax(clear)]
 
 
@@ -375,30 +373,23 @@ def reset(key: jax.Array, world: World, params: SimParams) -> State:
         t=jnp.zeros((), jnp.int32),
     )
     # Parked objects sit far outside the arena, so scenes built while placing ignore them.
-    n = PLACEMENT_TRIES
 
     def place_box(b, state):
-        cands = _uniform_in(jax.random.fold_in(k_box, b), world.box_region[b], n)
         # A box is tested as its circumscribed disc: conservative and cheap.
         r = jnp.linalg.norm(world.box_half[b]) + PLACEMENT_CLEARANCE
         scene = build_scene(state, world, params)
-        clear = jax.vmap(lambda c: min_gap(c, r, scene) >= 0)(cands)
-        return state.replace(boxes=state.boxes.at[b].set(_first_clear(cands, clear)))
+        xy = _place(jax.random.fold_in(k_box, b), world.box_region[b], r, scene)
+        return state.replace(boxes=state.boxes.at[b].set(xy))
 
     # A loop rather than unrolled code: one copy of the placement test in the compiled program.
     state = jax.lax.fori_loop(0, n_b, place_box, state)
     scene = build_scene(state, world, params)
-    cands = _uniform_in(k_goal, world.goal_region, n)
     r = jnp.linalg.norm(world.goal_half) if world.goal_shape == "box" else world.goal_half[0]
-    clear = jax.vmap(lambda c: min_gap(c, r + PLACEMENT_CLEARANCE, scene) >= 0)(cands)
-    state = state.replace(goal=_first_clear(cands, clear))
+    state = state.replace(goal=_place(k_goal, world.goal_region, r + PLACEMENT_CLEARANCE, scene))
 
     def place_robot(key, region, state, exclude):
         scene = build_scene(state, world, params, exclude=exclude)
-        cands = _uniform_in(key, region, n)
-        r = params.body_radius + PLACEMENT_CLEARANCE
-        clear = jax.vmap(lambda c: min_gap(c, r, scene) >= 0)(cands)
-        return _first_clear(cands, clear)
+        return _place(key, region, params.body_radius + PLACEMENT_CLEARANCE, scene)
 
     heading = jax.random.uniform(
         k_head, (), minval=world.start_heading[0], maxval=world.start_heading[1]

@@ -392,8 +392,6 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
         wander_regions.append(rd.region(wd, "region", f"wanderers[{k}]", arena, body_radius))
 
     noise_t = rd.get(doc, "noise", "", "table", {})
-    noise = {}
-    probabilities = ("camera_miss_prob", "camera_shift_prob")
     if "pixel_flip_prob" in noise_t:
         raise _fail(
             src,
@@ -401,10 +399,9 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
             "per-pixel flips invent targets; use camera_miss_prob and camera_shift_prob",
         )
     rd.known(noise_t, "noise")
-    for key in ("ir_relative_std", *probabilities, "wheel_relative_std"):
-        noise[key] = rd.get(noise_t, key, "noise", "number", 0.0)
+    noise = {key: rd.get(noise_t, key, "noise", "number", 0.0) for key in _KEYS["noise"]}
     for key, value in noise.items():
-        hi = 1.0 if key in probabilities else 10.0
+        hi = 1.0 if key in ("camera_miss_prob", "camera_shift_prob") else 10.0
         if not 0.0 <= value <= hi:
             raise _fail(src, f"noise.{key}", f"must lie in [0, {hi:g}], got {value}")
 

@@ -83,18 +83,6 @@ def _debug() -> bool:
     return os.environ.get(DEBUG_ENV, "") not in ("", "0")
 
 
-def _signal_handler(prog: str) -> Callable[[int, Any], None]:
-    """A handler that runs :data:`jaxais.io.ON_SIGNAL`, removes the temp files in flight and ends
-    the process at once with the signal's line: nothing unwinds, so no interrupt lands half-way
-    in an import, a ``__del__`` or a C extension as a traceback or a crash."""
-
-    def handler(signum: int, frame: Any) -> None:
-        status, message = _STATUS[signum]
-        io.abandon(_error_line(prog, message), status)
-
-    return handler
-
-
 class main_wrapper(contextlib.ContextDecorator):  # noqa: N801 (used like a function)
     """Decorator or context manager: ``ValueError`` (``UserError``, ``WorldError``), ``OSError`` and
     ``extra`` types give one line and status 2; SIGINT/SIGTERM (main thread; one ignored at start,
@@ -110,12 +98,18 @@ class main_wrapper(contextlib.ContextDecorator):  # noqa: N801 (used like a func
         previous = {}
         distributed.ON_LOST[0] = lambda message: io.abandon(_error_line(self.prog, message), 2)
         if not _debug() and threading.current_thread() is threading.main_thread():
-            handler = _signal_handler(self.prog)
             for signum in _STATUS:
                 if signal.getsignal(signum) is not signal.SIG_IGN:
-                    previous[signum] = signal.signal(signum, handler)
+                    previous[signum] = signal.signal(signum, self._on_signal)
         self._previous.append(previous)
         return self
+
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        """End the process at once with the signal's line (:func:`jaxais.io.abandon`): nothing
+        unwinds, so no interrupt lands half-way in an import, a ``__del__`` or a C extension as a
+        traceback or a crash."""
+        status, message = _STATUS[signum]
+        io.abandon(_error_line(self.prog, message), status)
 
     def __exit__(self, exc_type, exc, tb) -> bool:
         for signum, handler in self._previous.pop().items():

@@ -25,7 +25,7 @@ import numpy as np
 
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.immune.antibodies import N_ATTRIBUTES, Antibodies, from_uniforms, take
-from jaxais.immune.antigens import is_collision, is_obstacle_or_collision
+from jaxais.immune.antigens import severity
 from jaxais.immune.behaviours import MAX_WHEEL_SPEED, wheel_speeds
 from jaxais.immune.network import (
     NetworkParams,
@@ -117,10 +117,8 @@ def _scored(shape: tuple[int, ...], index: tuple[jnp.ndarray, ...]) -> jnp.ndarr
 
 
 def _level(m: jnp.ndarray) -> jnp.ndarray:
-    """0 target unseen, 1 target seen, 2 obstacle, 3 collision."""
-    return jnp.where(
-        is_obstacle_or_collision(m), 2 + is_collision(m).astype(jnp.int32), jnp.minimum(m, 1)
-    )
+    """0 target unseen, 1 target seen, 2 obstacle, 3 collision: SPEC 6's lev, seen above unseen."""
+    return severity(m) + jnp.minimum(m, 1)
 
 
 def interrupts(m: jnp.ndarray, held: jnp.ndarray) -> jnp.ndarray:
@@ -392,7 +390,7 @@ class BraitenbergParams:
 
 def braitenberg_params(speed: float = 500.0, avoid: float = 1.0, steer: float = 0.5):
     """:class:`BraitenbergParams` as float32 (defaults [ours], from its behaviour tests)."""
-    f = lambda x: jnp.float32(x)
+    f = jnp.float32
     return BraitenbergParams(speed=f(speed), avoid=f(avoid), steer=f(steer))
 
 

@@ -55,8 +55,7 @@ def atomic_write(path: str | os.PathLike[str], write_fn: Callable[[Path], Any]) 
     matplotlib reads the format from it), which then replaces ``path`` (0666 less the umask);
     if it raises, ``path`` is untouched. Returns ``Path(path)``."""
     dest = Path(path)
-    directory = dest.parent if str(dest.parent) else Path(".")
-    fd, tmp_name = tempfile.mkstemp(dir=directory, prefix=f".{dest.name}.", suffix=dest.suffix)
+    fd, tmp_name = tempfile.mkstemp(dir=dest.parent, prefix=f".{dest.name}.", suffix=dest.suffix)
     os.close(fd)
     tmp = Path(tmp_name)
     IN_FLIGHT.add(tmp)
@@ -105,7 +104,7 @@ def read_json_object(path: str | os.PathLike[str]) -> dict[str, Any]:
 def check_writable_dir(path: str | os.PathLike[str]) -> Path:
     """``path`` ("": the current directory) as a Path, or a UserError unless it is an existing
     directory this process can create files in."""
-    d = Path(path) if str(path) else Path(".")
+    d = Path(path)  # Path("") is Path(".")
     if not d.exists():
         raise UserError(f"{d}: directory does not exist")
     if not d.is_dir():

@@ -17,22 +17,14 @@ _NEVER_RETRIEVED = ("Future exception was never retrieved", "Task exception was 
 _READ_ERRORS = ('"zarr" driver', "OCDBT database")  # tensorstore's words for a checkpoint read
 
 
-def _is_late_callback(unraisable: Any) -> bool:
-    """Whether an unraisable exception is the callback of a read whose loop has closed."""
-    return unraisable.exc_type is RuntimeError and str(unraisable.exc_value) == _LOOP_CLOSED
-
-
 class _UnreadReadErrors(logging.Filter):
     """Drops asyncio's reports of checkpoint-read errors that nobody retrieved."""
 
     def filter(self, record: logging.LogRecord) -> bool:
         error = record.exc_info[1] if record.exc_info else None
         unread = str(record.msg).startswith(_NEVER_RETRIEVED)
-        return not (unread and isinstance(error, ValueError) and _mentions_a_read(error))
-
-
-def _mentions_a_read(error: BaseException) -> bool:
-    return any(words in str(error) for words in _READ_ERRORS)
+        of_a_read = isinstance(error, ValueError) and any(w in str(error) for w in _READ_ERRORS)
+        return not (unread and of_a_read)
 
 
 def forget_abandoned_reads() -> None:
@@ -42,7 +34,9 @@ def forget_abandoned_reads() -> None:
         previous = sys.unraisablehook
 
         def hook(unraisable: Any) -> None:
-            if not _is_late_callback(unraisable):
+            # The callback of a read whose loop has closed is dropped.
+            late = unraisable.exc_type is RuntimeError and str(unraisable.exc_value) == _LOOP_CLOSED
+            if not late:
                 previous(unraisable)
 
         hook._drops_abandoned_reads = True  # type: ignore[attr-defined]

@@ -132,7 +132,6 @@ def with_params(system: System, params: Mapping[str, Any]) -> System:
     """``system`` with ``params`` (:data:`PARAMETERS` name -> value), jit-safe: each value takes
     its leaf's dtype (the same program) and the network is clipped into its valid ranges (an
     optimiser never runs a negative k1)."""
-
     _unknown(params)
     parts = {"network": {}, "readings": {}}
     for name, value in params.items():

@@ -90,7 +90,7 @@ def _keys(key: jax.Array, streams: jax.Array, trials: jax.Array) -> tuple[jax.Ar
     return fold_each(k_worlds, trials), jax.vmap(jax.random.fold_in)(run_streams, trials)
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclass(frozen=True)
 class TrialsConfig:
     """What :func:`make_trials` compiles in (static). ``label`` picks the random stream, so
     ``make_trials(TrialsConfig(label="SIE"))(key(seed), system)`` gives
@@ -100,7 +100,7 @@ class TrialsConfig:
     n_trials: int = 30
     label: str = "SIE"
     controller: Controller = STL
-    episode: EpisodeConfig = dataclasses.field(default_factory=lambda: STL_CONFIG)
+    episode: EpisodeConfig = STL_CONFIG
 
     def __post_init__(self):
         _check(self.world, str | Path, "TrialsConfig.world", "a world's name or TOML path")
@@ -195,7 +195,6 @@ def make_trials(config: TrialsConfig):
         _check(sim_params, envs.SimParams, "sim_params", "an envs.SimParams")
         # The world is an argument, not folded constants: XLA would round some products
         # differently, and a chaotic run's path would then differ from run_trials'.
-
         return run_in(world, key, params, sim_params)
 
     return run
@@ -268,7 +267,6 @@ def trial_records(res: Mapping[str, np.ndarray]) -> list[dict[str, Any]]:
     """One dict per trial of outcome arrays [n] (:func:`~jaxais.loop.outcome`'s, the stats'):
     tau, collisions (raw), collisions_capped, fitness, failed, failed_collisions, failed_time,
     failed_by, trapped_s, locked_s, iterations, then the stats (NaN -> None)."""
-
     records = []
     for i in range(len(res["tau"])):
         by_c, by_t = bool(res["failed_collisions"][i]), bool(res["failed_time"][i])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import pkgutil
 import subprocess
 import sys
 from pathlib import Path
@@ -109,3 +110,58 @@ def test_scripts_are_thin_and_no_library_module_imports_the_cli():
     for folder in ("jaxais", "envs"):
         users = {f for f, names in _jaxais_imports(folder).items() if "jaxais.cli" in names}
         assert users == set(), users
+
+
+_IMPORTS_ONLY_DECLARED = """
+import importlib, importlib.metadata as md, pkgutil, re, sys
+from packaging.requirements import Requirement
+
+extras, modules = set(sys.argv[1].split(",")) - {""}, sys.argv[2].split(",")
+before = set(sys.modules)
+for name in modules:
+    importlib.import_module(name)
+dists = md.packages_distributions()
+loaded = {m.split(".")[0] for m in set(sys.modules) - before} - set(sys.stdlib_module_names)
+needed = {m: dists[m] for m in loaded if not m.startswith("_") and m in dists and m != "jaxais"}
+
+def norm(name):
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+closure, todo = set(), [("jaxais", extras)]
+while todo:
+    name, wanted = todo.pop()
+    for text in md.requires(name) or []:
+        req = Requirement(text)
+        envs = [{"extra": e} for e in wanted or {""}]
+        if (req.marker is None or any(req.marker.evaluate(e) for e in envs)) and (
+            norm(req.name) not in closure
+        ):
+            closure.add(norm(req.name))
+            todo.append((req.name, req.extras))
+missing = {m: d for m, d in needed.items() if not {norm(x) for x in d} & closure}
+print(sorted(missing.items()))
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("extras", "modules"),
+    [
+        ("", ["gymnax", "jax", "matplotlib", "numpy", "optax", "orbax.checkpoint", "scipy.stats"]),
+        ("brax", ["jaxais.envs.brax"]),
+    ],
+)
+def test_a_plain_install_imports_only_what_it_declares(extras, modules):
+    """Every distribution the library loads is a requirement of jaxais (or of a requirement, its
+    extras included): the test extra brings packages a plain ``pip install .`` lacks (gymnax 1.0
+    imports six without requiring it), so the suite would not notice one missing otherwise."""
+    library = [f"jaxais.{m.name}" for m in pkgutil.walk_packages(jaxais.__path__, "")]
+    library = [m for m in library if m.split(".")[1] not in ("envs", "scripts")]
+    library += ["jaxais.envs", "jaxais.envs.gymnax", "jaxais.experiments.bench", "tqdm"]
+    names = ",".join(modules + library if not extras else modules)
+    proc = subprocess.run(
+        [sys.executable, "-c", _IMPORTS_ONLY_DECLARED, extras, names],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert proc.stdout.splitlines()[-1] == "[]", proc.stdout  # brax prints before it

@@ -72,6 +72,31 @@ def test_the_engines_trial_caps_are_the_protocols():
     assert STL_CONFIG.collision_cap == protocol.COLLISION_CAP
 
 
+def test_the_shared_argument_checks():
+    """The experiments' --worlds, --seed and cap checks: defaults filled in, one-line errors."""
+    assert protocol.check_worlds(None) == list(protocol.WORLDS)
+    assert protocol.check_worlds("world2,,real") == ["world2", "real"]
+    assert protocol.check_caps(None, None) == (4000.0, 100)
+    assert [type(c) for c in protocol.check_caps(10, 5.0)] == [float, int]
+    protocol.check_seed(2**32 - 1)
+    bad = [
+        (lambda: protocol.check_worlds("world1,mars"), r"--worlds: unknown world\(s\) \['mars'\]"),
+        (lambda: protocol.check_worlds(""), "--worlds: unknown world"),
+        (
+            lambda: protocol.check_worlds(["real", "real"]),
+            "--worlds names a world twice: real,real",
+        ),
+        (lambda: protocol.check_seed(-1), r"--seed must be in \[0, 2\*\*32\), got -1"),
+        (lambda: protocol.check_seed(2**32, "--eval-seed"), "--eval-seed must be in"),
+        (lambda: protocol.check_caps(1e6 + 1, None), r"--tau-cap must be in \(0, 1e6\]"),
+        (lambda: protocol.check_caps(0, None), "--tau-cap must be in"),
+        (lambda: protocol.check_caps(None, 0), "--collision-cap >= 1"),
+    ]
+    for call, message in bad:
+        with pytest.raises(ValueError, match=message):
+            call()
+
+
 def test_the_protocol_and_the_scripts_flags_leave_jax_unloaded():
     # The scripts check their flags against the protocol before JAX starts (and before they set
     # the device count).

@@ -214,7 +214,8 @@ def test_library_calls_check_their_arguments_before_jax_starts(tmp_path: Path):
         ("trials", ("SIE",), {"random_set": "R2"}, "--random-set applies to UIE and URL only"),
         ("reproduce", (out,), {"worlds": ["mars"]}, "--worlds: unknown world(s) ['mars']"),
         ("reproduce", (out,), {"trials": 1}, "--trials must be >= 2"),
-        ("reproduce", (out,), {"tau_cap": 0}, "--tau-cap must be > 0"),
+        ("reproduce", (out,), {"tau_cap": 0}, "--tau-cap must be in (0, 1e6]"),
+        ("trials", ("HDC",), {"tau_cap": 2e6}, "--tau-cap must be in (0, 1e6]"),
         ("reproduce", (out,), {"evolve": True, "seeds": "s"}, "exclude each other"),
         # Silently run before: a world twice, an LTL generation cap with no LTL run.
         ("reproduce", (out,), {"worlds": "real,real"}, "--worlds names a world twice: real,real"),

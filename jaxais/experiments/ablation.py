@@ -522,20 +522,11 @@ def ablate(
     from jaxais.experiments.plotting import save_figure
     from jaxais.experiments.records import load_ltl_seed, versions
 
-    worlds = list(worlds)
-    unknown = sorted(set(worlds) - set(protocol.WORLDS))
-    if unknown or not worlds:
-        raise ValueError(
-            f"--worlds: unknown world(s) {unknown} (choose from {', '.join(protocol.WORLDS)})"
-        )
-    if len(set(worlds)) != len(worlds):
-        raise ValueError(f"--worlds: a world is named twice in {','.join(worlds)!r}")
-    if not 0 <= seed < 2**32:
-        raise ValueError(f"--seed must be in [0, 2**32), got {seed}")
+    worlds = protocol.check_worlds(worlds)
+    protocol.check_seed(seed)
     if trials is not None and trials < 2:
         raise ValueError(f"--trials must be >= 2 (t-tests need two per group), got {trials}")
-    if not 0 < tau_cap <= 1e6 or collision_cap < 1:
-        raise ValueError("--tau-cap must be in (0, 1e6] and --collision-cap >= 1")
+    tau_cap, collision_cap = protocol.check_caps(tau_cap, collision_cap)
     try:
         chosen = select(variants)
     except ValueError as err:

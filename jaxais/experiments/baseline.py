@@ -69,8 +69,7 @@ def train_baseline(
 ) -> dict[str, Any]:
     """Train the MLP by OpenES, a stderr line every ``log_every`` generations; write params.npz,
     config.json (returned) and training_curve.png into ``out``. Bad arguments: ValueError."""
-    if not 0 <= seed < 2**32:
-        raise ValueError(f"--seed must be in [0, 2**32), got {seed}")
+    protocol.check_seed(seed)
     if log_every < 1:
         raise ValueError(f"--log-every must be >= 1, got {log_every}")
     config = TrainConfig() if config is None else config
@@ -162,8 +161,7 @@ def evaluate_baseline(
     """Run the controller in ``weights`` (None: shipped), SIE (``seeds``) and HDC in the paper's
     worlds, trials and episode; write evaluation.json (returned: trials, summaries, NN-vs-SIE/HDC
     tests of f) and evaluation.md into ``out``."""
-    if not 0 <= seed < 2**32:
-        raise ValueError(f"--eval-seed must be in [0, 2**32), got {seed}")
+    protocol.check_seed(seed, "--eval-seed")
     _check_weights(weights)
     out = _output_dir(out, into_checkpoints)
     from tqdm import tqdm

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxais import envs
-from jaxais.experiments import plotting
+from jaxais.experiments import plotting, protocol
 
 # Demo controller constants (speed units; IR readings are 0..4095, ~120 at 5 cm from the rim).
 CRUISE = 500.0  # forward speed with nothing nearby
@@ -89,8 +89,7 @@ def render(
     for name, value in (("steps", steps), ("robots", robots), ("every", every)):
         if value <= 0:
             raise ValueError(f"--{name} must be a positive integer, got {value}")
-    if not 0 <= seed < 2**32:  # larger seeds are silently truncated by jax.random.key
-        raise ValueError(f"--seed must be in [0, 2**32), got {seed}")
+    protocol.check_seed(seed)
     if not fps > 0:
         raise ValueError(f"--fps must be positive, got {fps}")
     if gif is not None:

@@ -44,12 +44,10 @@ def check_trials(
     the script's flags); returns the world, the trial count and the two caps, defaults filled in."""
     world = protocol.WORLDS[0] if world is None else world
     n = protocol.SIMULATED_TRIALS if trials is None else trials
-    tau_cap = float(protocol.TAU_CAP if tau_cap is None else tau_cap)  # 10 and 10.0: one record
-    collision_cap = int(protocol.COLLISION_CAP if collision_cap is None else collision_cap)
     if system not in SYSTEMS:
         raise ValueError(f"unknown system {system!r} (one of {', '.join(SYSTEMS)})")
-    if not 0 <= seed < 2**32:
-        raise ValueError(f"--seed must be in [0, 2**32), got {seed}")
+    protocol.check_seed(seed)
+    tau_cap, collision_cap = protocol.check_caps(tau_cap, collision_cap)
     if n < 1:
         raise ValueError(f"--trials must be >= 1, got {n}")
     if random_set and system not in ("UIE", "URL"):

@@ -6,12 +6,16 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Sequence
 from importlib import resources
 
 from jaxais.labels import LABELS, parse_label
 
 __all__ = [
     "add_cap_arguments",
+    "check_caps",
+    "check_seed",
+    "check_worlds",
     "load_paper_tables",
     "ALPHA",
     "COLLISION_CAP",
@@ -100,6 +104,35 @@ def add_cap_arguments(parser: argparse.ArgumentParser) -> None:
         default=COLLISION_CAP,
         help=f"collision cap [paper: {COLLISION_CAP}]",
     )
+
+
+def check_seed(seed: int, flag: str = "--seed") -> None:
+    """Refuse a PRNG seed outside [0, 2**32) in one line (``jax.random.key`` truncates it)."""
+    if not 0 <= seed < 2**32:
+        raise ValueError(f"{flag} must be in [0, 2**32), got {seed}")
+
+
+def check_caps(tau_cap: float | None, collision_cap: int | None) -> tuple[float, int]:
+    """The two caps, the paper's where None, checked in one line naming the flags; τ's as a float
+    (10 and 10.0 give one record). Iteration counters are int32, hence τ's 1e6 s."""
+    tau_cap = float(TAU_CAP if tau_cap is None else tau_cap)
+    collision_cap = int(COLLISION_CAP if collision_cap is None else collision_cap)
+    if not 0 < tau_cap <= 1e6 or collision_cap < 1:
+        raise ValueError("--tau-cap must be in (0, 1e6] and --collision-cap >= 1")
+    return tau_cap, collision_cap
+
+
+def check_worlds(worlds: str | Sequence[str] | None) -> list[str]:
+    """``--worlds`` (comma-separated or a sequence; None: all the paper's) as a list of the
+    paper's worlds, each named once (one-line ValueError otherwise)."""
+    names = WORLDS if worlds is None else worlds
+    names = [w for w in names.split(",") if w] if isinstance(names, str) else list(names)
+    unknown = sorted(set(names) - set(WORLDS))
+    if unknown or not names:
+        raise ValueError(f"--worlds: unknown world(s) {unknown} (choose from {', '.join(WORLDS)})")
+    if len(set(names)) < len(names):
+        raise ValueError(f"--worlds names a world twice: {','.join(names)}")
+    return names
 
 
 def load_paper_tables() -> dict:

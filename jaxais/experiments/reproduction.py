@@ -61,26 +61,14 @@ def check_reproduce(
 ) -> tuple[Path, list[str], float, int]:  # fmt: skip
     """:func:`reproduce`'s arguments checked without JAX (one-line ValueErrors naming the
     flags) -> (out, worlds, tau_cap, collision_cap), defaults filled in."""
-    names = protocol.WORLDS if worlds is None else worlds
-    names = [w for w in names.split(",") if w] if isinstance(names, str) else list(names)
-    tau_cap = float(protocol.TAU_CAP if tau_cap is None else tau_cap)  # 10 and 10.0: one record
-    collision_cap = int(protocol.COLLISION_CAP if collision_cap is None else collision_cap)
-    unknown = sorted(set(names) - set(protocol.WORLDS))
-    if unknown or not names:
-        raise ValueError(
-            f"--worlds: unknown world(s) {unknown} (choose from {', '.join(protocol.WORLDS)})"
-        )
-    if len(set(names)) < len(names):
-        raise ValueError(f"--worlds names a world twice: {','.join(names)}")
-    if not 0 <= seed < 2**32:
-        raise ValueError(f"--seed must be in [0, 2**32), got {seed}")
+    names = protocol.check_worlds(worlds)
+    protocol.check_seed(seed)
     if trials is not None and trials < 2:
         raise ValueError(f"--trials must be >= 2 (t-tests need two per group), got {trials}")
     if trials is not None:  # a world's systems, SIE at hold=1 and the baseline: one pool
         runs = max(len(protocol.systems_for_world(w)) for w in names) + 2
         check_memory(trials, runs * RUN_BYTES, "--trials")
-    if tau_cap <= 0 or collision_cap < 1:
-        raise ValueError("--tau-cap must be > 0 and --collision-cap >= 1")
+    tau_cap, collision_cap = protocol.check_caps(tau_cap, collision_cap)
     if generations is not None and not evolve:
         raise ValueError("--generations caps the LTL run of --evolve: give both, or neither")
     if generations is not None and generations < 1:

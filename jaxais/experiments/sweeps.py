@@ -368,8 +368,8 @@ def sweep(
     if world is None:  # "" is a world the loader refuses, not the default
         world = protocol.REAL_WORLD if noise is not None else protocol.WORLDS[0]
     trials = protocol.trials_for_world(world) if trials is None else trials
-    if not 0 <= seed < 2**32:
-        raise ValueError(f"--seed must be in [0, 2**32), got {seed}")
+    protocol.check_seed(seed)
+    tau_cap, collision_cap = protocol.check_caps(tau_cap, collision_cap)
     if trials < 1:
         raise ValueError(f"--trials must be >= 1, got {trials}")
     if slots < 1:
@@ -413,10 +413,7 @@ def sweep(
     pool = points if grid is not None else len(names)  # runs per trial index in one pool
     check_memory(trials, pool * RUN_BYTES, "--trials")
     loaded = envs.load_world(world)
-    config = EpisodeConfig(
-        tau_cap=protocol.TAU_CAP if tau_cap is None else tau_cap,
-        collision_cap=protocol.COLLISION_CAP if collision_cap is None else collision_cap,
-    )
+    config = EpisodeConfig(tau_cap=tau_cap, collision_cap=collision_cap)
     network = NetworkParams()
     systems, seed_info = build_systems(names, seeds, network)
     params = envs.default_params()

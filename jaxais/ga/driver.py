@@ -253,9 +253,8 @@ def run(
 
     sim_params = envs.default_params() if sim_params is None else sim_params
     state = key_or_state if isinstance(key_or_state, GAState) else core.init(key_or_state, config)
-    total, done = config.generations, int(state.generation)
-    with tqdm(total=total, initial=done, desc=progress, unit="gen", file=sys.stderr,
-              disable=progress is None) as bar:  # fmt: skip
+    with tqdm(total=config.generations, initial=int(state.generation), desc=progress, unit="gen",
+              file=sys.stderr, disable=progress is None) as bar:  # fmt: skip
         while stopped_by(state, config) is None:
             state, evaluation = step(state, config, world, sim_params)
             if callback is not None:

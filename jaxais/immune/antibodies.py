@@ -30,7 +30,7 @@ TYPE_NAMES = (
     "track markers",
 )
 N_TYPES = 6
-WANDER_SINGLE, WANDER_BOTH, FORWARD_TURN, STATIC_TURN, REVERSE_TURN, TRACK_MARKERS = range(6)
+WANDER_SINGLE, WANDER_BOTH, FORWARD_TURN, STATIC_TURN, REVERSE_TURN, TRACK_MARKERS = range(N_TYPES)
 
 ATTRIBUTE_NAMES = ("S", "F", "A", "D", "Rf", "Ra")  # columns of the limits and attribute_matrix
 N_ATTRIBUTES = 6
@@ -71,7 +71,7 @@ _LO = np.nan_to_num(LIMITS_MIN, nan=0.0)
 _HI = np.nan_to_num(LIMITS_MAX, nan=0.0)
 _RANGE = _HI - _LO
 _N_USED = USES.sum(axis=1).astype(np.float32)
-_IS_D = np.arange(6) == _D
+_IS_D = np.arange(N_ATTRIBUTES) == _D
 
 
 @pytree_dataclass

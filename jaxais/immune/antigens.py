@@ -39,8 +39,7 @@ ANTIGEN_NAMES = (
     "collision left",
 )
 
-SIDE_RIGHT, SIDE_REAR, SIDE_LEFT = 0, 1, 2
-# [8] side of each IR sensor ps0..ps7 [ours, e-puck bearings].
+# [8] side of each IR sensor ps0..ps7, 0 right, 1 rear, 2 left [ours, e-puck bearings].
 SENSOR_SIDE = np.array([0, 0, 0, 1, 1, 2, 2, 2], dtype=np.int32)
 
 
@@ -51,9 +50,8 @@ def antigen(ir: jnp.ndarray, blue_pixels: jnp.ndarray) -> jnp.ndarray:
     vm = jnp.max(ir, axis=-1)
     side = jnp.asarray(SENSOR_SIDE)[jnp.argmax(ir, axis=-1)]
     # level 0 clear, 1 obstacle, 2 collision; antigen = 2 + 3 (level - 1) + side for level >= 1.
-    level = (vm >= OBSTACLE_THRESHOLD).astype(jnp.int32) + (vm >= COLLISION_THRESHOLD).astype(
-        jnp.int32
-    )
+    obstacle, collision = vm >= OBSTACLE_THRESHOLD, vm >= COLLISION_THRESHOLD
+    level = obstacle.astype(jnp.int32) + collision.astype(jnp.int32)
     clear = (jnp.asarray(blue_pixels) > 0).astype(jnp.int32)
     return jnp.where(level == 0, clear, 3 * level - 1 + side).astype(jnp.int32)
 

@@ -54,10 +54,9 @@ def readings(
     alpha_on_self: bool = ALPHA_ON_SELF,
 ) -> Readings:
     """A validated :class:`Readings` (defaults: ours; ValueError names a bad value)."""
-    if isinstance(hold, bool) or not isinstance(hold, int) or hold < 1:
-        raise ValueError(f"hold must be an int >= 1 (iterations), got {hold!r}")
-    if isinstance(encounter_gap, bool) or not isinstance(encounter_gap, int) or encounter_gap < 1:
-        raise ValueError(f"encounter_gap must be an int >= 1 (iterations), got {encounter_gap!r}")
+    for name, value in (("hold", hold), ("encounter_gap", encounter_gap)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ValueError(f"{name} must be an int >= 1 (iterations), got {value!r}")
     if not 0.0 <= sigma0_floor <= 1.0:
         raise ValueError(f"sigma0_floor must lie in [0, 1], got {sigma0_floor!r}")
     for name, flag in (("count_encounters", count_encounters), ("alpha_on_self", alpha_on_self)):

@@ -57,16 +57,19 @@ class EpisodeConfig:
     record: bool = False
 
     def __post_init__(self):
+        for name, value in vars(self).items():  # NumPy scalars (a grid's) as Python's: JSON-ready
+            if isinstance(value, np.generic):
+                object.__setattr__(self, name, value.item())
         if self.collision_rule not in ("episode", "entry"):
             raise ValueError(
                 f"collision_rule must be 'episode' or 'entry', got {self.collision_rule!r}"
             )
         for name in ("collision_cap", "finish_pixels", "finish_streak", "chunk", "segment"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | np.integer):
+            if isinstance(value, bool) or not isinstance(value, int):
                 raise ArgumentTypeError(f"EpisodeConfig.{name} must be an integer, got {value!r}")
         for name in ("stop_at_collision_cap", "record"):
-            check_type(getattr(self, name), bool | np.bool_, f"EpisodeConfig.{name}", "a bool")
+            check_type(getattr(self, name), bool, f"EpisodeConfig.{name}", "a bool")
         names = ("tau_cap", "collision_cap", "finish_streak", "trap_radius", "trap_window")
         for name in (*names, "chunk", "segment"):
             value = getattr(self, name)

@@ -7,6 +7,7 @@ Everything but the CMA-ES example runs before any simulation is compiled.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import runpy
@@ -33,6 +34,7 @@ from jaxais import (
     system_params,
     with_params,
 )
+from jaxais.baselines import TrainConfig
 from jaxais.experiments import sweeps
 from jaxais.experiments.records import FORMATS, results_document
 from jaxais.immune.network import BOUNDS
@@ -138,6 +140,25 @@ BAD = {
     "with_params unknown name": (lambda: with_params(sie(), {"kk": 1.0}), "unknown parameter"),
     "system_params static name": (lambda: system_params(sie(), ["rho"]), "unknown parameter"),
 }
+
+
+def test_configs_take_numpy_scalars_as_python_numbers():
+    # np.int64 passed EpisodeConfig's integer check, then failed "must be a positive number";
+    # TrainConfig refused it as no positive integer.
+    numpy = EpisodeConfig(tau_cap=np.float32(10.0), collision_cap=np.int64(5), record=np.True_)
+    assert numpy == EpisodeConfig(tau_cap=10.0, collision_cap=5, record=True)
+    assert [type(v) for v in (numpy.tau_cap, numpy.collision_cap, numpy.record)] == [
+        float,
+        int,
+        bool,
+    ]
+    with pytest.raises(ValueError, match="tau_cap must be a positive number, got -1.0"):
+        EpisodeConfig(tau_cap=np.float32(-1.0))
+    with pytest.raises(ValueError, match="collision_cap must be an integer, got 2.5"):
+        EpisodeConfig(collision_cap=np.float64(2.5))
+    train = TrainConfig(generations=np.int64(3), sigma=np.float32(0.5), hidden=np.int32(4))
+    assert train == TrainConfig(generations=3, sigma=0.5, hidden=4)
+    json.dumps(dataclasses.asdict(train))  # config.json
 
 
 @pytest.mark.parametrize("case", list(BAD))

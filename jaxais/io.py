@@ -13,6 +13,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 
 class UserError(ValueError):
     """A mistake by the user: one line and exit status 2 from a script (:mod:`jaxais.cli`)."""
@@ -48,6 +50,14 @@ def abandon(line: str, status: int) -> None:
     with contextlib.suppress(OSError):
         os.write(2, line.encode())
     os._exit(status)
+
+
+def python_scalars(config: Any) -> None:
+    """Store a frozen dataclass's NumPy scalar fields (a grid's values) as the Python numbers
+    they are, for its type checks and for JSON."""
+    for name, value in vars(config).items():
+        if isinstance(value, np.generic):
+            object.__setattr__(config, name, value.item())
 
 
 def atomic_write(path: str | os.PathLike[str], write_fn: Callable[[Path], Any]) -> Path:

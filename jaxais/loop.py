@@ -19,7 +19,7 @@ from jaxais import envs
 from jaxais.controllers import Controller, Percept
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.immune.antigens import OBSTACLE_THRESHOLD, antigen, is_collision
-from jaxais.io import ArgumentTypeError, check_type
+from jaxais.io import ArgumentTypeError, check_type, python_scalars
 
 RUNNING, FINISHED, FAILED_COLLISIONS, FAILED_TIME = 0, 1, 2, 3  # Run.status
 
@@ -57,9 +57,7 @@ class EpisodeConfig:
     record: bool = False
 
     def __post_init__(self):
-        for name, value in vars(self).items():  # NumPy scalars (a grid's) as Python's: JSON-ready
-            if isinstance(value, np.generic):
-                object.__setattr__(self, name, value.item())
+        python_scalars(self)
         if self.collision_rule not in ("episode", "entry"):
             raise ValueError(
                 f"collision_rule must be 'episode' or 'entry', got {self.collision_rule!r}"

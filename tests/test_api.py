@@ -147,11 +147,8 @@ def test_configs_take_numpy_scalars_as_python_numbers():
     # TrainConfig refused it as no positive integer.
     numpy = EpisodeConfig(tau_cap=np.float32(10.0), collision_cap=np.int64(5), record=np.True_)
     assert numpy == EpisodeConfig(tau_cap=10.0, collision_cap=5, record=True)
-    assert [type(v) for v in (numpy.tau_cap, numpy.collision_cap, numpy.record)] == [
-        float,
-        int,
-        bool,
-    ]
+    types = [type(v) for v in (numpy.tau_cap, numpy.collision_cap, numpy.record)]
+    assert types == [float, int, bool]
     with pytest.raises(ValueError, match="tau_cap must be a positive number, got -1.0"):
         EpisodeConfig(tau_cap=np.float32(-1.0))
     with pytest.raises(ValueError, match="collision_cap must be an integer, got 2.5"):

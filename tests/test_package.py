@@ -59,19 +59,35 @@ def test_reading_worlds_constants_and_the_seed_compiles_only_named_programs():
     assert "jit(_seeded_paratopes)" in compiled  # the listener saw the compiles that do happen
 
 
-def _jaxais_imports(folder: str) -> dict[str, set[str]]:
-    """file -> the jaxais modules it imports (absolute names), for every .py under ``folder``."""
+def _imports(folder: str, optional: bool = True) -> dict[str, set[str]]:
+    """file -> the modules it imports (absolute names; ``from m import n`` gives ``m.n`` too, as
+    ``n`` may be a module), for every .py under ``folder``; ``optional=False`` leaves out those
+    under ``except ImportError``."""
     root = Path(__file__).resolve().parent.parent
     found = {}
     for path in sorted((root / folder).rglob("*.py")):
-        names = set()
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        tree, names = ast.parse(path.read_text(), str(path)), set()
+        skip = {
+            id(n)
+            for t in ast.walk(tree)
+            if not optional and isinstance(t, ast.Try)
+            and any("ImportError" in ast.unparse(h) for h in t.handlers)
+            for n in ast.walk(t)
+        }  # fmt: skip
+        for node in (n for n in ast.walk(tree) if id(n) not in skip):
             if isinstance(node, ast.Import):
                 names |= {a.name for a in node.names}
             elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
                 names |= {node.module, *(f"{node.module}.{a.name}" for a in node.names)}
-        found[str(path.relative_to(root))] = {n for n in names if n.startswith("jaxais")}
+        found[str(path.relative_to(root))] = names
     return found
+
+
+def _jaxais_imports(folder: str) -> dict[str, set[str]]:
+    """file -> the jaxais modules it imports (absolute names), for every .py under ``folder``."""
+    return {
+        f: {n for n in names if n.startswith("jaxais")} for f, names in _imports(folder).items()
+    }
 
 
 @pytest.mark.parametrize(
@@ -149,24 +165,8 @@ print(sorted(missing.items()))
 def _third_party_imports(brax: bool) -> list[str]:
     """The third-party modules the library imports anywhere (in functions too), but those under
     ``except ImportError`` (optional: pandas); envs/brax.py's only when ``brax``."""
-    root, names = Path(__file__).resolve().parent.parent, set()
-    for path in [*(root / "jaxais").rglob("*.py"), *(root / "envs").glob("*.py")]:
-        if (path.name == "brax.py") != brax:
-            continue
-        tree = ast.parse(path.read_text())
-        optional = {
-            id(n)
-            for t in ast.walk(tree)
-            if isinstance(t, ast.Try) and any("ImportError" in ast.unparse(h) for h in t.handlers)
-            for n in ast.walk(t)
-        }
-        for node in ast.walk(tree):
-            if id(node) in optional:
-                continue
-            if isinstance(node, ast.Import):
-                names |= {a.name for a in node.names}
-            elif isinstance(node, ast.ImportFrom) and node.level == 0:  # a name may be a module
-                names |= {node.module, *(f"{node.module}.{a.name}" for a in node.names)}
+    files = _imports("jaxais", optional=False) | _imports("envs", optional=False)
+    names = set().union(*(n for f, n in files.items() if (f == "envs/brax.py") == brax))
     return sorted(n for n in names if n.split(".")[0] not in (*sys.stdlib_module_names, "jaxais"))
 
 

@@ -6,7 +6,7 @@ import dataclasses
 import math
 from pathlib import Path
 
-import numpy as np
+from jaxais.io import python_scalars
 
 BUILTIN_WORLDS = ("ga_maze", "world1", "world2", "real")  # envs.BUILTIN_WORLDS, without JAX
 NN_LABEL = "NN"  # the trained controller's label in records; it names its trials' random stream
@@ -37,9 +37,7 @@ class TrainConfig:
     collision_penalty: float = 1.0
 
     def __post_init__(self):
-        for name, value in vars(self).items():  # NumPy scalars (a grid's) as Python's: JSON-ready
-            if isinstance(value, np.generic):
-                object.__setattr__(self, name, value.item())
+        python_scalars(self)
         if self.world not in BUILTIN_WORLDS and not Path(self.world).is_file():
             raise ValueError(f"world: no built-in world or file {self.world!r}")
         for name in ("generations", "pairs", "episodes", "steps", "hidden"):

@@ -3,6 +3,7 @@
     python scripts/reproduce.py --out results/
     python scripts/reproduce.py --out results/ --trials 1000          # tight intervals
     python scripts/reproduce.py --out results/ --evolve               # fresh LTL seed first
+    python scripts/reproduce.py --out results/ --contender my.py:braitenberg  # a contender
 
 Runs :func:`jaxais.experiments.reproduce` (the paper's protocol, SPEC 9), sharded over every
 process's devices with the jax.distributed flags (as in scripts/sweep.py; process 0 writes).
@@ -42,8 +43,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                     help="trained neural controller beside SIE and HDC (default: the shipped "
                     "checkpoints/neural; scripts/train_baseline.py makes one)")
     nn.add_argument("--no-baseline", action="store_true", help="run the paper's systems only")
+    p.add_argument("--contender", action="append", default=None, metavar="SPEC",
+                   help="a controller beyond the paper's, run beside its systems in every "
+                   "world: [LABEL=]FILE.py:NAME or [LABEL=]package.module:NAME, NAME a "
+                   "(Controller, params) tuple or a function returning one (repeatable; "
+                   "docs/extending.md)")
     p.add_argument("--worlds", default=",".join(protocol.WORLDS),
-                   help="comma-separated subset of worlds")
+                   help="comma-separated subset of worlds, or world files PATH.toml (run with "
+                   "the simulated worlds' protocol)")
     protocol.add_cap_arguments(p)
     distributed.add_arguments(p)
     p.add_argument("--generations", type=int, default=None,
@@ -57,7 +64,7 @@ def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     kw = dict(trials=args.trials, seed=args.seed, seeds=args.seeds, evolve=args.evolve,
               generations=args.generations, worlds=args.worlds, tau_cap=args.tau_cap,
-              collision_cap=args.collision_cap)  # fmt: skip
+              collision_cap=args.collision_cap, contenders=args.contender)  # fmt: skip
     check_reproduce(args.out, **kw)  # a bad flag answers before JAX loads
     distributed.check(args)
     if args.evolve and args.coordinator:

@@ -2,6 +2,7 @@
 
     python scripts/trials.py --system SIE --world world1 --trials 30 --seed 0 --out results.json
     python scripts/trials.py --system UIE --random-set R2 --world world2 --out u.json --plot u.png
+    python scripts/trials.py --contender my_controller.py:braitenberg --out b.json
 
 Runs :func:`jaxais.experiments.trials` in a pool of slots, each refilled when its trial ends
 (the bar counts trials ended); with --plot as one batch keeping every trajectory (the bar counts
@@ -26,7 +27,12 @@ from jaxais.labels import RANDOM_SETS, SYSTEMS
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = ArgumentParser(prog="trials.py", description=__doc__.split("\n\n")[0])
     # fmt: off
-    p.add_argument("--system", required=True, choices=SYSTEMS)
+    who = p.add_mutually_exclusive_group(required=True)
+    who.add_argument("--system", choices=SYSTEMS, help="one of the paper's systems")
+    who.add_argument("--contender", metavar="SPEC",
+                     help="a controller beyond the paper's: [LABEL=]FILE.py:NAME or "
+                     "[LABEL=]package.module:NAME, NAME a (Controller, params) tuple or a "
+                     "function returning one (docs/extending.md)")
     p.add_argument("--world", default=protocol.WORLDS[0],
                    help=f"{', '.join(protocol.WORLDS)} or a .toml path")
     p.add_argument("--trials", type=int, default=protocol.SIMULATED_TRIALS,
@@ -51,7 +57,8 @@ def main(argv: list[str] | None = None) -> None:
     kw = dict(world=args.world, trials=args.trials, seed=args.seed, random_set=args.random_set,
               seeds=args.seeds, tau_cap=args.tau_cap, collision_cap=args.collision_cap,
               plot=args.plot)  # fmt: skip
-    check_trials(args.system, args.out, **kw)  # a bad flag answers before JAX loads
+    system = args.system or args.contender
+    check_trials(system, args.out, **kw)  # a bad flag answers before JAX loads
     distributed.check(args)
     from jaxais import _speed  # its importlib.metadata: after the signal handlers are ours
 
@@ -59,7 +66,7 @@ def main(argv: list[str] | None = None) -> None:
     distributed.initialize(args)  # before JAX computes anything
     command = "trials.py " + " ".join(sys.argv[1:] if argv is None else argv)
     start = time.perf_counter()
-    doc = trials(args.system, args.out, command=command, **kw)
+    doc = trials(system, args.out, command=command, **kw)
     if doc is None:  # not the writing process
         return
     s, rate = doc["summary"], doc["summary"]["idiotypic_difference_rate"]

@@ -9,8 +9,10 @@ from collections.abc import Mapping
 from typing import Any
 
 from jaxais.experiments import protocol
+from jaxais.experiments.contenders import check_label, check_specs
 from jaxais.io import RUN_BYTES, atomic_write_json, check_memory, check_output_file
-from jaxais.labels import RANDOM_SETS, SYSTEMS, label
+from jaxais.labels import RANDOM_SETS, SYSTEMS
+from jaxais.labels import label as label_of
 
 __all__ = ["check_trials", "command_line", "trials"]
 
@@ -27,8 +29,14 @@ def command_line(prog: str, flags: Mapping[str, Any]) -> str:
     return " ".join(words)
 
 
+def _is_contender(system: Any) -> bool:
+    """Is ``system`` a contender (a spec, a (controller, params) tuple, a Contender), not one
+    of the paper's systems?"""
+    return not isinstance(system, str) or ":" in system
+
+
 def check_trials(
-    system: str,
+    system: Any,
     out: str | os.PathLike[str] | None = None,
     *,
     world: str | os.PathLike[str] | None = None,
@@ -39,13 +47,28 @@ def check_trials(
     tau_cap: float | None = None,
     collision_cap: int | None = None,
     plot: str | os.PathLike[str] | None = None,
+    label: str | None = None,
 ) -> tuple[str | os.PathLike[str], int, float, int]:
     """Check :func:`trials`'s arguments without loading JAX (one-line ``ValueError``\\ s naming
-    the script's flags); returns the world, the trial count and the two caps, defaults filled in."""
+    the script's flags; a contender's spec by form, label and file); returns the world, the trial
+    count and the two caps, defaults filled in."""
     world = protocol.WORLDS[0] if world is None else world
     n = protocol.SIMULATED_TRIALS if trials is None else trials
-    if system not in SYSTEMS:
-        raise ValueError(f"unknown system {system!r} (one of {', '.join(SYSTEMS)})")
+    if _is_contender(system):
+        if isinstance(system, str):
+            check_specs([system])
+        if label is not None:
+            check_label(label, "label")
+        if random_set or seeds:
+            raise ValueError("--random-set and --seeds apply to the paper's systems, not to a "
+                             "contender")  # fmt: skip
+    elif system not in SYSTEMS:
+        raise ValueError(
+            f"unknown system {system!r} (one of {', '.join(SYSTEMS)}, or a contender: "
+            "FILE.py:NAME or (controller, params))"
+        )
+    elif label is not None:
+        raise ValueError("label names a contender; a paper system keeps its label")
     protocol.check_seed(seed)
     tau_cap, collision_cap = protocol.check_caps(tau_cap, collision_cap)
     if n < 1:
@@ -66,7 +89,7 @@ def check_trials(
 
 
 def trials(
-    system: str,
+    system: Any,
     out: str | os.PathLike[str] | None = None,
     *,
     world: str | os.PathLike[str] | None = None,
@@ -79,46 +102,64 @@ def trials(
     plot: str | os.PathLike[str] | None = None,
     progress: bool = True,
     command: str | None = None,
+    label: str | None = None,
 ) -> dict[str, Any] | None:
     """Run ``trials`` STL trials of ``system`` in ``world`` (a name or ``.toml``) and return the
     results document (``config``, one record per trial, ``summary``), written to ``out`` if given;
     None on processes other than 0 of a multi-process run.
 
-    ``plot`` also draws every trajectory to a PNG (the trials then run as one batch); ``command``
-    is recorded (default: the ``trials.py`` line these arguments stand for). Defaults are the
-    paper's.
+    ``system`` is a paper system (``"SIE"``; UIE and URL with ``random_set``) or a contender
+    (:mod:`jaxais.experiments.contenders`): a spec ``[LABEL=]FILE.py:NAME``, a ``(controller,
+    params)`` tuple or a ``Contender``; ``label`` names a tuple's trials (default
+    ``contender``). ``plot`` also draws every trajectory to a PNG (the trials then run as one
+    batch); ``command`` is recorded (default: the ``trials.py`` line these arguments stand for).
+    Defaults are the paper's.
     """
+    contender = _is_contender(system)
     if command is None:
-        flags = {"--system": system, "--world": world, "--trials": trials, "--seed": seed or None,
+        spec = system if isinstance(system, str) else None
+        flags = {"--system": None if contender else system, "--contender": spec if contender
+                 else None, "--world": world, "--trials": trials, "--seed": seed or None,
                  "--random-set": random_set, "--seeds": seeds, "--tau-cap": tau_cap,
                  "--collision-cap": collision_cap, "--out": out, "--plot": plot}  # fmt: skip
         command = command_line("trials.py", flags)
     world, n, tau_cap, collision_cap = check_trials(
         system, out, world=world, trials=trials, seed=seed, random_set=random_set, seeds=seeds,
-        tau_cap=tau_cap, collision_cap=collision_cap, plot=plot)  # fmt: skip
+        tau_cap=tau_cap, collision_cap=collision_cap, plot=plot, label=label)  # fmt: skip
     # Imported after the arguments are checked: a bad one answers at once, without loading JAX.
     import jax
     from tqdm import tqdm
 
     from jaxais import envs
+    from jaxais.experiments.contenders import resolve
     from jaxais.experiments.records import build_systems, results_document, run_config
     from jaxais.immune.network import NetworkParams
     from jaxais.loop import EpisodeConfig
     from jaxais.trials import run_trials
 
     lead = jax.process_index() == 0  # every process runs its share; process 0 writes
-    name = label(system, random_set or "R1")
     loaded = envs.load_world(world)
     config = EpisodeConfig(tau_cap=tau_cap, collision_cap=collision_cap, record=bool(plot))
     network = NetworkParams()
-    systems, seed_info = build_systems([name], seeds, network)
     params = envs.default_params()
+    if contender:  # read before any run: a bad spec fails first
+        if label is not None or isinstance(system, tuple | list):
+            (c,) = resolve({label or "contender": system})
+        else:  # a spec or a Contender: its own label
+            (c,) = resolve([system])
+        name, systems, controller, seed_info = c.label, {c.label: c.params}, c.controller, None
+    else:
+        name, controller = label_of(system, random_set or "R1"), None
+        systems, seed_info = build_systems([name], seeds, network)
     total, unit = (config.max_iterations(params.dt), "it") if plot else (n, "run")
     with tqdm(total=total, desc=f"{name} in {loaded.name}", unit=unit, file=sys.stderr,
               disable=not (lead and progress)) as bar:  # fmt: skip
-        results = run_trials(loaded, systems, n, seed, config, params, bar)
+        results = run_trials(loaded, systems, n, seed, config, params, bar, controller=controller)
         bar.update(bar.total - bar.n)
     cfg = run_config(loaded, str(world), config, network, params, seed_info)
+    if contender:  # the network's parts do not apply; how the contender was given does
+        cfg = {k: v for k, v in cfg.items() if k not in ("network", "readings", "ltl_seed")}
+        cfg["contender"] = c.source
     cfg["command"] = command
     doc = results_document(name, loaded.name, seed, results[name], cfg)
     if not lead:

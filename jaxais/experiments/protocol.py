@@ -8,6 +8,7 @@ import argparse
 import json
 from collections.abc import Sequence
 from importlib import resources
+from pathlib import Path
 
 from jaxais.labels import LABELS, parse_label
 
@@ -16,6 +17,7 @@ __all__ = [
     "check_caps",
     "check_seed",
     "check_worlds",
+    "is_world_file",
     "load_paper_tables",
     "ALPHA",
     "COLLISION_CAP",
@@ -123,16 +125,26 @@ def check_caps(tau_cap: float | None, collision_cap: int | None) -> tuple[float,
 
 
 def check_worlds(worlds: str | Sequence[str] | None) -> list[str]:
-    """``--worlds`` (comma-separated or a sequence; None: all the paper's) as a list of the
-    paper's worlds, each named once (one-line ValueError otherwise)."""
+    """``--worlds`` (comma-separated or a sequence; None: all the paper's) as a list: the
+    paper's worlds by name, or world files (``PATH.toml``, run with the simulated worlds'
+    protocol), each named once (one-line ValueError otherwise)."""
     names = WORLDS if worlds is None else worlds
     names = [w for w in names.split(",") if w] if isinstance(names, str) else list(names)
-    unknown = sorted(set(names) - set(WORLDS))
+    names = [str(w) for w in names]
+    unknown = sorted(w for w in names if w not in WORLDS and not is_world_file(w))
     if unknown or not names:
-        raise ValueError(f"--worlds: unknown world(s) {unknown} (choose from {', '.join(WORLDS)})")
+        raise ValueError(
+            f"--worlds: unknown world(s) {unknown} (choose from {', '.join(WORLDS)}, or give a "
+            "world file PATH.toml)"
+        )
     if len(set(names)) < len(names):
         raise ValueError(f"--worlds names a world twice: {','.join(names)}")
     return names
+
+
+def is_world_file(name: str) -> bool:
+    """Is ``name`` a world file's path (``.toml``, existing), not a world's name?"""
+    return name.endswith(".toml") and Path(name).is_file()
 
 
 def load_paper_tables() -> dict:

@@ -411,27 +411,41 @@ def _unseeded_section(
     ]
 
 
-def _baseline_section(baseline: Mapping[str, Any] | None) -> list[str]:
-    """Systems beyond the paper beside some of its systems (:func:`stats.baseline_tables`)."""
-    if not baseline:
+def _source(source: Mapping[str, Any]) -> str:
+    """How a contender was given, for its line in the report."""
+    if source.get("spec"):
+        sha = f" (sha256 {source['sha256'][:12]})" if source.get("sha256") else ""
+        return f"`{source['spec']}`{sha}"
+    if source.get("weights"):
+        return f"weights {source['weights']}"
+    return "an object given from Python (not regenerable from the command line)"
+
+
+def _contenders_section(tables: Mapping[str, Any] | None) -> list[str]:
+    """Contenders beyond the paper beside some of its systems (:func:`stats.contender_tables`)."""
+    if not tables:
         return []
-    names = list(baseline["against"])
+    names = list(tables["against"])
     against = " and ".join([", ".join(names[:-1]), names[-1]] if len(names) > 1 else names)
-    trained = (baseline.get("weights") or {}).get("config") or {}
-    where = f" in {trained['world']}" if "world" in trained else ""
     lines = [
-        "## Beyond the paper: a modern baseline",
+        "## Beyond the paper",
         "",
-        "A small neural controller (an MLP from the IR and camera features to the wheel speeds, "
-        f"trained by an evolution strategy{where}; `scripts/train_baseline.py`, "
-        f"`docs/baseline.md`), run under the same protocol, seed and worlds as {against}. "
+        f"Controllers beyond the paper's, each run in a pool of its own under the same protocol, "
+        f"seed, worlds and reset streams as {against} (their records do not depend on it). "
         f"Brackets: {_LEVEL} intervals (bootstrap for the means, Wilson for the failure rate); "
-        "p: two-sided Welch t-test of f.",
+        f"the last columns are Table 4's significance levels 100 (1 − p), two-tailed Student's "
+        f"t, against {against} (significant at the paper's 99 % level when ≥ {_SIG_LEVEL}).",
         "",
     ]
-    t3, ci3 = baseline["table3"], baseline["table3_ci"]
-    t5, ci5 = baseline["table5"], baseline["table5_ci"]
-    header = ["System", *(head for _, head, _ in _T3_COLS), "failed (%)", "p (f) against it"]
+    for label, source in tables.get("contenders", {}).items():
+        about = f": {source['about']}" if source.get("about") else ""
+        lines.append(f"- **{label}**{about} Given as {_source(source)}.")
+    lines.append("")
+    t3, ci3 = tables["table3"], tables["table3_ci"]
+    t5, ci5 = tables["table5"], tables["table5_ci"]
+    levels = tables["table4"]
+    header = ["System", *(head for _, head, _ in _T3_COLS), "failed (%)"]
+    header += [f"vs {o}: {_METRIC_NAME[m]}" for o in names for m in stats.METRICS]
     for world in t3:
         body = []
         for s, row in t3[world].items():
@@ -439,12 +453,9 @@ def _baseline_section(baseline: Mapping[str, Any] | None) -> list[str]:
                 _num(row[key], dec) + _span(ci3[world][s][key], dec) for key, _, dec in _T3_COLS
             ]
             cells.append(_num(t5[world][s]["total"], 1) + _span(ci5[world][s]["total"], 1))
-            tests = [
-                f"{pair.split(' vs ')[1]}: {_p(test['welch_p'])}"
-                for pair, test in baseline["tests"].get(world, {}).items()
-                if pair.startswith(f"{s} vs ")
-            ]
-            cells.append("; ".join(tests) or "–")
+            for other in names:
+                level = levels.get(world, {}).get(f"{s} vs {other}")
+                cells += [_num(level[m]) if level else "–" for m in stats.METRICS]
             body.append(cells)
         lines += [f"**{world}**", ""] + _table(header, body)
     return lines
@@ -591,10 +602,11 @@ def write_report(
     world_drawer: WorldDrawer | None = None,
     claims_ledger: Sequence[Mapping[str, Any]] | None = None,
     example_placements: Mapping[str, Mapping[str, Any]] | None = None,
-    baseline: Mapping[str, Any] | None = None,
+    contenders: Mapping[str, Any] | None = None,
+    contender_results: stats.ResultsByWorld | None = None,
 ) -> Path:
     """Write ``out_dir/report.md`` (claims ledger, H1-H4, tables beside the paper's, robustness,
-    difference rates, baseline, LTL, figures, configuration) and ``out_dir/figures/``.
+    difference rates, contenders, LTL, figures, configuration) and ``out_dir/figures/``.
 
     Args:
         tables: :func:`stats.build_tables` of ``results_by_world`` (``{world: {system:
@@ -606,7 +618,9 @@ def write_report(
         example_trajectories: ``{world: {system: xy [T, 2]}}``, drawn over ``world_drawer``'s
             world with ``example_placements`` (``{world: {system: placement}}``).
         claims_ledger: :func:`claims.claims` of ``results_by_world`` (computed when None).
-        baseline: :func:`stats.baseline_tables`, a section of its own.
+        contenders: :func:`stats.contender_tables` with ``"contenders"`` (label -> source), a
+            section of its own; ``contender_results`` (``{world: {label: [record]}}``) join the
+            box figures.
 
     Returns:
         The path of ``report.md``.
@@ -620,7 +634,8 @@ def write_report(
     figures: list[tuple[str, str]] = []
     for world in _worlds(results_by_world):
         name = f"figures/box_{world}.png"
-        _box_figure(world, results_by_world[world], p3.get(world, {}), caps, out / name)
+        drawn = results_by_world[world] | (contender_results or {}).get(world, {})
+        _box_figure(world, drawn, p3.get(world, {}), caps, out / name)
         figures.append((f"{world}: c, τ and f per system", name))
     for world, trajectories in (example_trajectories or {}).items():
         if trajectories:
@@ -679,7 +694,7 @@ def write_report(
     lines += _calibration_section(tables.get("calibration"))
     lines += _lockup_section(tables)
     lines += _unseeded_section(results_by_world, tables)
-    lines += _baseline_section(baseline)
+    lines += _contenders_section(contenders)
     lines += _ltl_section(ltl_summary, ltl_fig)
     lines += ["## Figures", ""]
     for caption, name in figures:

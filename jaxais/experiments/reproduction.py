@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from jaxais.experiments import protocol
+from jaxais.experiments.contenders import Contender, check_specs, neural, resolve
 from jaxais.experiments.one_system import command_line
 from jaxais.io import RUN_BYTES, Run, atomic_write, atomic_write_json, check_memory, open_run
 
@@ -57,11 +58,14 @@ def check_reproduce(
     out: str | os.PathLike[str], *, trials: int | None = None, seed: int = 0,
     seeds: str | os.PathLike[str] | None = None, evolve: bool = False,
     generations: int | None = None, worlds: str | Sequence[str] | None = None,
-    tau_cap: float | None = None, collision_cap: int | None = None,
+    tau_cap: float | None = None, collision_cap: int | None = None, contenders: Any = None,
 ) -> tuple[Path, list[str], float, int]:  # fmt: skip
     """:func:`reproduce`'s arguments checked without JAX (one-line ValueErrors naming the
-    flags) -> (out, worlds, tau_cap, collision_cap), defaults filled in."""
+    flags; ``contenders``' specs by form, label and file) -> (out, worlds, tau_cap,
+    collision_cap), defaults filled in."""
     names = protocol.check_worlds(worlds)
+    if isinstance(contenders, str | list | tuple) and all(isinstance(c, str) for c in contenders):
+        check_specs(contenders)
     protocol.check_seed(seed)
     if trials is not None and trials < 2:
         raise ValueError(f"--trials must be >= 2 (t-tests need two per group), got {trials}")
@@ -84,13 +88,18 @@ def reproduce(
     generations: int | None = None, baseline: str | os.PathLike[str] | bool = True,
     worlds: str | Sequence[str] | None = None, tau_cap: float | None = None,
     collision_cap: int | None = None, progress: bool = True, command: str | None = None,
-    resume: bool = False,
+    resume: bool = False, contenders: Any = None,
 ) -> dict[str, Any] | None:  # fmt: skip
     """Run the paper's experiments into ``out`` (the flags of scripts/reproduce.py).
 
     Args:
         evolve: run the LTL first (:func:`run_ltl`, into ``out/ltl``) and use its seed.
-        baseline: the neural controller beside SIE and HDC: True (shipped), a folder, False.
+        baseline: the neural controller, the contender ``NN``: True (the shipped weights), a
+            folder of weights, or False.
+        contenders: controllers beyond the paper, each run in every world in a pool of its own
+            beside the paper's systems (:mod:`jaxais.experiments.contenders`): a dict label ->
+            ``(controller, params)`` or spec ``FILE.py:NAME``, or a list of specs.
+        worlds: the paper's worlds by name, or world files (``PATH.toml``), comma-separated.
         command: recorded in run.json (default: the reproduce.py line these arguments mean).
         resume: finish the partial run in ``out``, giving the uninterrupted run's results.
 
@@ -108,31 +117,38 @@ def reproduce(
                  "--worlds": worlds if isinstance(worlds, str | None) else ",".join(worlds),
                  "--tau-cap": tau_cap, "--collision-cap": collision_cap,
                  "--generations": generations}  # fmt: skip
-        command = command_line("reproduce.py", flags)
+        command = command_line("reproduce.py", flags) + _contender_flags(contenders)
     out, names, tau_cap, collision_cap = check_reproduce(
         out, trials=trials, seed=seed, seeds=seeds, evolve=evolve, generations=generations,
-        worlds=worlds, tau_cap=tau_cap, collision_cap=collision_cap)  # fmt: skip
+        worlds=worlds, tau_cap=tau_cap, collision_cap=collision_cap,
+        contenders=contenders)  # fmt: skip
     import jax
 
     # Process 0 of a multi-process run writes (and checks the folder); the others read it.
     lead = not jax.distributed.is_initialized() or jax.process_index() == 0
-    from jaxais.baselines.neural import load_params
+    from jaxais import envs
     from jaxais.experiments.records import load_ltl_seed
 
-    # Read first: a missing or corrupt seed (or baseline) fails before anything is written.
+    # Read first: a missing or corrupt seed, world file, baseline or contender fails before
+    # anything is written.
     loaded = None if evolve else load_ltl_seed(seeds)
-    nn = None
+    worlds_by_key = _load_worlds(names, envs)
+    given = resolve(contenders)
+    entrants = given
     if baseline is not False:
         try:
-            nn_params, nn_info = load_params(None if baseline is True else baseline)
+            nn = neural(None if baseline is True else baseline)
         except ValueError as err:
             raise ValueError(f"--baseline: {err}") from None
-        # What made the weights (train_baseline.py's config.json holds the rest).
-        nn = nn_params, {"config": nn_info.get("config"), "seed": nn_info.get("seed")}
+        if nn.label in {c.label for c in given}:
+            raise ValueError(f"--contender: label {nn.label!r} is the neural baseline's")
+        entrants = [nn, *given]
     config = {"trials": trials, "seed": seed, "seeds": None if seeds is None else str(seeds),
               "evolve": evolve, "generations": generations, "baseline": baseline if isinstance(
               baseline, bool) else str(baseline), "worlds": names, "tau_cap": tau_cap,
               "collision_cap": collision_cap}  # fmt: skip
+    if given:  # recorded only when given: earlier runs' manifests stay valid
+        config["contenders"] = {c.label: c.source for c in given}
     run = open_run(out, "reproduce", config, resume=resume, write=lead)
 
     started = time.perf_counter()
@@ -151,23 +167,47 @@ def reproduce(
         timings["ltl_s"] = run.units["ltl"]["ltl_s"]
         seeds = ltl / "seed"
         loaded = load_ltl_seed(seeds)
-    return _run(run, names, trials, seed, seeds, loaded, nn, tau_cap, collision_cap,
-                progress=progress, command=command, started=started, timings=timings,
-                lead=lead)  # fmt: skip
+    return _run(run, worlds_by_key, trials, seed, seeds, loaded, entrants, tau_cap,
+                collision_cap, progress=progress, command=command, started=started,
+                timings=timings, lead=lead)  # fmt: skip
 
 
-def _run(run: Run, worlds: list[str], n_trials: int | None, seed: int,
-         seeds: str | os.PathLike[str] | None, loaded: tuple, nn: tuple | None, tau_cap: float,
-         collision_cap: int, *, progress: bool, command: str, started: float,
+def _load_worlds(names: list[str], envs: Any) -> dict[str, tuple[str, Any]]:
+    """key -> (what ``--worlds`` named, the World): the paper's worlds by name, a world file by
+    its world's name, which must be new (one-line error otherwise)."""
+    out = {}
+    for name in names:
+        world = envs.load_world(name)
+        key = name if name in protocol.WORLDS else world.name
+        if key in out or (name not in protocol.WORLDS and key in protocol.WORLDS):
+            raise ValueError(
+                f"--worlds: {name} names its world {key!r}, as another world of the run is "
+                "named: give the file's world another name"
+            )
+        out[key] = (name, world)
+    return out
+
+
+def _contender_flags(contenders: Any) -> str:
+    """The ``--contender`` flags of specs given from Python, for the recorded command."""
+    specs = [contenders] if isinstance(contenders, str) else contenders
+    if isinstance(specs, list | tuple) and all(isinstance(c, str) for c in specs):
+        return "".join(f" --contender {c}" for c in specs)
+    if isinstance(specs, dict) and all(isinstance(c, str) for c in specs.values()):
+        return "".join(f" --contender {k}={c}" for k, c in specs.items())
+    return ""
+
+
+def _run(run: Run, worlds: dict[str, tuple[str, Any]], n_trials: int | None, seed: int,
+         seeds: str | os.PathLike[str] | None, loaded: tuple, entrants: list[Contender],
+         tau_cap: float, collision_cap: int, *, progress: bool, command: str, started: float,
          timings: dict[str, float], lead: bool) -> dict[str, Any] | None:  # fmt: skip
-    """:func:`reproduce` once checked and read (``nn``: weights and their info, or None): every
-    world not finished in ``run``, then the tables, claims and report."""
+    """:func:`reproduce` once checked and read (``worlds``: key -> (source, World); the
+    contenders): every world not finished in ``run``, then the tables, claims and report."""
     import numpy as np
     from tqdm import tqdm
 
     from jaxais import envs
-    from jaxais.baselines.config import NN_LABEL
-    from jaxais.baselines.neural import NEURAL
     from jaxais.experiments import claims, report, stats
     from jaxais.experiments.plotting import draw_world
     from jaxais.experiments.records import (
@@ -184,29 +224,26 @@ def _run(run: Run, worlds: list[str], n_trials: int | None, seed: int,
 
     out = run.out
     seeds_dir = Path(seeds) if seeds else default_seed_dir()
-    nn_params, nn_info = nn or (None, None)
 
     network = NetworkParams()
     params = envs.default_params()
     config = EpisodeConfig(tau_cap=tau_cap, collision_cap=collision_cap)
     # The first trial of each system runs again recorded (same keys: same run), to be drawn.
     example = EpisodeConfig(tau_cap=tau_cap, collision_cap=collision_cap, record=True)
-    results_by_world, baseline_by_world, trajectories, placements, configs = {}, {}, {}, {}, {}
+    results_by_world, contenders_by_world, trajectories, placements, configs = {}, {}, {}, {}, {}
     calibration_by_world = {}
     (out / "trials").mkdir(exist_ok=True)
-    for name in worlds:
-        world = envs.load_world(name)
+    for name, (source, world) in worlds.items():
         labels = list(protocol.systems_for_world(name))
         n = n_trials if n_trials is not None else protocol.trials_for_world(name)
         systems, seed_info = build_systems(labels, seeds_dir, network, loaded)
-        cfg = run_config(world, name, config, network, params, seed_info)
+        cfg = run_config(world, source, config, network, params, seed_info)
         configs[name] = cfg
         hold1_cfg = {**cfg, "readings": {**cfg["readings"], "hold": 1}}
-        # The run's config without the network's parts, with what made the weights.
-        nn_cfg = {k: v for k, v in cfg.items() if k not in ("network", "readings", "ltl_seed")}
-        nn_cfg["baseline"] = nn_info
+        # A contender's config: the run's without the network's parts, with how it was given.
+        bare = {k: v for k, v in cfg.items() if k not in ("network", "readings", "ltl_seed")}
         files = {label: (label, cfg) for label in labels} | {"SIE_hold1": (CALIBRATED, hold1_cfg)}
-        files |= {NN_LABEL: (NN_LABEL, nn_cfg)} if nn is not None else {}
+        files |= {c.label: (c.label, bare | {"contender": c.source}) for c in entrants}
         if name in run.units:  # a finished world: its trials and examples from its files
             if not lead:
                 continue
@@ -222,15 +259,15 @@ def _run(run: Run, worlds: list[str], n_trials: int | None, seed: int,
             sie = systems["SIE"]
             hold1 = {CALIBRATED: sie.replace(readings=sie.readings.replace(hold=np.int32(1)))}
             world_t = {}
-            k = len(labels) + 1 + (nn is not None)
+            k = len(labels) + 1 + len(entrants)
             with tqdm(total=n * k, desc=f"{name}: {k} systems x {n} trials", unit="run",
                       file=sys.stderr, disable=not (lead and progress)) as bar:  # fmt: skip
                 sets = run_trials(world, systems | hold1, n, seed, config, params, bar, world_t)
                 sets["SIE_hold1"] = sets.pop(CALIBRATED)
-                if nn is not None:
+                for c in entrants:  # each in a pool of its own: the paper's records cannot move
                     sets |= run_trials(
-                        world, {NN_LABEL: nn_params}, n, seed, config, params, bar, world_t,
-                        controller=NEURAL,
+                        world, {c.label: c.params}, n, seed, config, params, bar, world_t,
+                        controller=c.controller,
                     )  # fmt: skip
             first = run_trials(world, systems, 1, seed, example, params, None, world_t)
             trajectories[name] = {k: v.trajectories[0][:, :2] for k, v in first.items()}
@@ -254,8 +291,8 @@ def _run(run: Run, worlds: list[str], n_trials: int | None, seed: int,
             timings[key] = timings.get(key, 0.0) + value
         results_by_world[name] = {k: records[k] for k in labels}
         calibration_by_world[name] = {"SIE": records["SIE_hold1"]}
-        if nn is not None:
-            baseline_by_world[name] = {NN_LABEL: records[NN_LABEL]}
+        if entrants:
+            contenders_by_world[name] = {c.label: records[c.label] for c in entrants}
 
     if not lead:
         return None
@@ -265,9 +302,9 @@ def _run(run: Run, worlds: list[str], n_trials: int | None, seed: int,
     tables["calibration"] = stats.calibration(
         results_by_world, calibration_by_world, {"k1": network.k1, "k2": network.k2}
     )
-    if baseline_by_world:
-        tables["baseline"] = stats.baseline_tables(results_by_world, baseline_by_world)
-        tables["baseline"]["weights"] = nn_info
+    if contenders_by_world:
+        tables["contenders"] = stats.contender_tables(results_by_world, contenders_by_world)
+        tables["contenders"]["contenders"] = {c.label: c.source for c in entrants}
     atomic_write_json(out / "tables.json", tables)
     ledger = claims.claims(results_by_world, cis=cis)
     timings["statistics_s"] = time.perf_counter() - t
@@ -283,8 +320,10 @@ def _run(run: Run, worlds: list[str], n_trials: int | None, seed: int,
         "versions": versions(),
         "timings_s": timings,
     }
+    if entrants:
+        run_doc["contenders"] = {c.label: c.source for c in entrants}
     atomic_write_json(out / "run.json", run_doc)
-    drawn = {name: envs.load_world(name) for name in worlds}
+    drawn = {name: world for name, (_, world) in worlds.items()}
     report_path = report.write_report(
         out,
         tables,
@@ -297,7 +336,8 @@ def _run(run: Run, worlds: list[str], n_trials: int | None, seed: int,
         lambda ax, world_name, placement=None: draw_world(ax, drawn[world_name], placement),
         claims_ledger=ledger,
         example_placements=placements,
-        baseline=tables.get("baseline"),
+        contenders=tables.get("contenders"),
+        contender_results=contenders_by_world,
     )
     run.complete()
     return {"tables": tables, "claims": claims_doc, "run": run_doc, "report": report_path}

@@ -30,13 +30,13 @@ __all__ = [
     "METRICS",
     "Results",
     "ResultsByWorld",
-    "baseline_tables",
     "bootstrap_mean_ci",
     "build_tables",
     "ci_below",
     "cohens_d",
     "comparison_pairs",
     "comparisons",
+    "contender_tables",
     "failure_counts",
     "hypotheses",
     "in_order",
@@ -580,41 +580,37 @@ def jsonable(obj: Any) -> Any:
     return obj
 
 
-def baseline_tables(
+def contender_tables(
     results_by_world: ResultsByWorld,
-    baseline_by_world: ResultsByWorld,
+    contenders_by_world: ResultsByWorld,
     against: Sequence[str] = ("SIE", "HDC"),
-    alpha: float = protocol.ALPHA,
 ) -> dict[str, Any]:
-    """Systems beyond the paper (``baseline_by_world``, e.g. the neural baseline) beside those of
-    ``against``: Tables 3 and 5 with intervals and two-sided Welch / Mann-Whitney tests of f,
-    ``{"against", "table3", "table3_ci", "table5", "table5_ci", "tests": {world: {"NN vs SIE":
-    {"welch_t", "welch_p", "mann_whitney_u", "mann_whitney_p", "significant"}}}}``."""
+    """Contenders (``contenders_by_world``: ``{world: {label: [record]}}``, systems beyond the
+    paper) beside the paper's systems ``against``: Tables 3 and 5 with intervals, and each
+    contender's comparisons with those systems as Table 4's (two-tailed Student's t, its level
+    100 (1 - p), with Welch's, Mann-Whitney's and Cohen's d beside it):
+    ``{"against", "table3", "table3_ci", "table5", "table5_ci", "table4": {world: {"X vs SIE":
+    {metric: level}}}, "tests": {world: {"X vs SIE": {metric: {...}}}}}``."""
     merged = {
         world: {s: results_by_world[world][s] for s in against if s in results_by_world[world]}
         | dict(extra)
-        for world, extra in baseline_by_world.items()
+        for world, extra in contenders_by_world.items()
     }
-
-    def test(mine: Sequence[Mapping[str, Any]], other: Sequence[Mapping[str, Any]]) -> dict:
-        a, b = metric_values(mine, "f"), metric_values(other, "f")
-        (t, p), (u, p_u) = welch_t(a, b), mann_whitney_u(a, b)
-        return {
-            "welch_t": t,
-            "welch_p": p,
-            "mann_whitney_u": u,
-            "mann_whitney_p": p_u,
-            "significant": bool(p < alpha),
-        }
-
     tests = {
         world: {
-            f"{name} vs {other}": test(mine, merged[world][other])
+            f"{name} vs {other}": {
+                m: _compare_metric(metric_values(mine, m), metric_values(merged[world][other], m))
+                for m in METRICS
+            }
             for name, mine in extra.items()
             for other in against
             if other in merged[world]
         }
-        for world, extra in baseline_by_world.items()
+        for world, extra in contenders_by_world.items()
+    }
+    levels = {
+        world: {pair: {m: row[m]["level"] for m in METRICS} for pair, row in by_pair.items()}
+        for world, by_pair in tests.items()
     }
     return jsonable(
         {
@@ -623,6 +619,7 @@ def baseline_tables(
             "table3_ci": table3_ci(merged),
             "table5": table5(merged),
             "table5_ci": table5_ci(merged),
+            "table4": levels,
             "tests": tests,
         }
     )

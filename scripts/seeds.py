@@ -2,6 +2,7 @@
 
     python scripts/seeds.py --out DIR                          # LTL seeds 0-9, paper's trials
     python scripts/seeds.py --out DIR --seeds 4 --first 10 --trials 10 --jobs 2
+    python scripts/seeds.py --out DIR --contender my_controller.py:braitenberg
 
 Runs :func:`jaxais.experiments.seeds.ltl_ledger`: for each seed s, scripts/evolve.py --out
 DIR/ltl/seed_s --seed s (the LTL, its defaults), then scripts/reproduce.py --seeds
@@ -32,6 +33,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--trials", type=int, default=None, help="trials per system and world (default: paper's)"
     )
     p.add_argument("--jobs", type=int, default=1, help="seeds run side by side (default 1)")
+    p.add_argument("--contender", action="append", default=None, metavar="SPEC",
+                   help="a controller beyond the paper's, run beside its systems on every seed: "
+                   "[LABEL=]FILE.py:NAME or [LABEL=]package.module:NAME (repeatable; "
+                   "docs/extending.md)")  # fmt: skip
     return p.parse_args(argv)
 
 
@@ -51,6 +56,7 @@ def main(argv: list[str] | None = None) -> None:
         range(args.first, args.first + args.seeds),
         trials=args.trials,
         jobs=args.jobs,
+        contenders=args.contender or (),
         command=portable_command("seeds.py " + " ".join(words)),
         resume=args.resume,
     )

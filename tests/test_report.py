@@ -231,27 +231,29 @@ def test_write_report_without_intervals(tmp_path, paper):
     assert "| SIE | 2 | 0.0 / 2 | 110 / 659 " in text
 
 
-def test_write_report_sets_a_baseline_beside_sie_and_hdc(tmp_path, paper):
+def test_write_report_sets_contenders_beside_sie_and_hdc(tmp_path, paper):
     results = {"world2": {"SIE": [trial(100), trial(120)], "HDC": [trial(300), trial(340)]}}
     nn = {"world2": {"NN": [trial(200), trial(4000, 2)]}}  # f 100, 2008; one failed by time
-    baseline = stats.baseline_tables(results, nn)
+    tables = stats.contender_tables(results, nn)
+    tables["contenders"] = {"NN": {"spec": "mine.py:nn", "sha256": "ab" * 32, "about": "An MLP."}}
     text = report.write_report(
-        tmp_path, stats.build_tables(results), results, paper, None, {}, None, baseline=baseline
-    ).read_text()
-    section = text[text.index("## Beyond the paper: a modern baseline") :]
-    p_sie = baseline["tests"]["world2"]["NN vs SIE"]["welch_p"]
-    p_hdc = baseline["tests"]["world2"]["NN vs HDC"]["welch_p"]
-    lo, hi = baseline["table3_ci"]["world2"]["NN"]["f"]
+        tmp_path, stats.build_tables(results), results, paper, None, {}, None,
+        contenders=tables, contender_results=nn,
+    ).read_text()  # fmt: skip
+    section = text[text.index("## Beyond the paper") :]
+    t4 = tables["table4"]["world2"]
+    levels = [t4[f"NN vs {other}"][m] for other in ("SIE", "HDC") for m in stats.METRICS]
+    lo, hi = tables["table3_ci"]["world2"]["NN"]["f"]
     assert (lo, hi) == (100.0, 2008.0)  # two trials: the bootstrap's means lie between them
+    ci5 = tables["table5_ci"]["world2"]["NN"]["total"]
     assert (
         f"| NN | 1.0 [0.0, 2.0] | 2100 [200, 4000] | 1054 [100, 2008] | 50.0 "
-        f"[{baseline['table5_ci']['world2']['NN']['total'][0]:.1f}, "
-        f"{baseline['table5_ci']['world2']['NN']['total'][1]:.1f}] | "
-        f"SIE: {p_sie:.2g}; HDC: {p_hdc:.2g} |"
+        f"[{ci5[0]:.1f}, {ci5[1]:.1f}] | " + " | ".join(map(str, levels)) + " |"
     ) in section
     assert "| SIE | 0.0 [0.0, 0.0] | 110 [100, 120] | 55 [50, 60] | 0.0 [0.0, " in section
-    assert "same protocol, seed and worlds as SIE and HDC." in section
-    # Without a baseline there is no such section.
+    assert "- **NN**: An MLP. Given as `mine.py:nn` (sha256 abababababab)." in section
+    assert "same protocol, seed, worlds and reset streams as SIE and HDC" in section
+    # Without contenders there is no such section.
     plain = report.write_report(
         tmp_path, stats.build_tables(results), results, paper, None, {}, None
     ).read_text()

@@ -239,6 +239,42 @@ def test_ledger_runs_each_seed_once_and_writes_the_ledger(tmp_path):
     assert again.calls == []
 
 
+def test_ledger_runs_contenders_on_every_seed_and_refuses_a_changed_file(tmp_path):
+    """``contenders``: each seed's reproduce.py gets the specs; the manifest records each file's
+    sha256, so a resume with an edited file is refused in one line; a contender's f and its
+    level against SIE land in the ledger."""
+    mine = tmp_path / "mine.py"
+    mine.write_text("X = 1\n")
+    spec = f"BR={mine}:braitenberg"
+
+    class WithContender(FakeScripts):
+        def __call__(self, cmd, log):
+            code = super().__call__(cmd, log)
+            if cmd[2] == "jaxais.scripts.reproduce":
+                out = Path(cmd[cmd.index("--out") + 1])
+                tables = json.loads((out / "tables.json").read_text())
+                tables["contenders"] = {
+                    "contenders": {"BR": {"spec": spec}},
+                    "table3": {w: {"BR": {"f": 123.0}} for w in WORLDS},
+                    "table4": {w: {"BR vs SIE": {"f": 99}} for w in WORLDS},
+                }
+                (out / "tables.json").write_text(json.dumps(tables))
+            return code
+
+    run = WithContender()
+    doc = ledger(tmp_path / "l", run, seeds=[0], contenders=[spec])
+    assert run.calls[1][2][-2:] == ["--contender", spec]
+    assert doc["seeds"]["0"]["contenders"]["BR"]["real"] == {"f": 123.0, "level_vs_SIE": 99}
+    assert "| 0 | 123 (99) | 123 (99) |" in (tmp_path / "l" / "seeds.md").read_text()
+    mine.write_text("X = 2\n")
+    with pytest.raises(ValueError, match="--contenders: the run in"):
+        ledger(tmp_path / "l", run, seeds=[0], contenders=[spec], resume=True)
+    with pytest.raises(ValueError, match="no such file"):
+        ledger(tmp_path / "m", run, seeds=[0], contenders=[f"{tmp_path}/none.py:x"])
+    with pytest.raises(ValueError, match="label 'SIE' is the paper's"):
+        ledger(tmp_path / "m", run, seeds=[0], contenders=[f"SIE={mine}:x"])
+
+
 def test_versions_before_any_seed_is_done(tmp_path):
     versions = S._versions(tmp_path, [])
     assert versions["jax"] and versions["jaxais"] and versions["backend"] is None

@@ -430,27 +430,31 @@ def test_table5_ci():
     assert ci["world1"]["SIE"]["total"][0] == 0.0
 
 
-def test_baseline_tables_set_other_systems_beside_the_papers():
+def test_contender_tables_set_contenders_beside_the_papers_systems():
     res = small_results()
     nn = [trial(100.0), trial(4000.0, 3), trial(300.0, 120)]  # f 50, 2012, 550
-    got = stats.baseline_tables(res, {"world1": {"NN": nn}}, against=("SIE", "HDC", "SRL"))
+    got = stats.contender_tables(res, {"world1": {"NN": nn}}, against=("SIE", "HDC", "SRL"))
     assert list(got["table3"]["world1"]) == ["SIE", "HDC", "NN"]  # SRL has no trials here
     assert got["table3"]["world1"]["NN"] == pytest.approx({"c": 103 / 3, "tau": 4400 / 3,
                                                            "f": 2612 / 3})  # fmt: skip
-    # The paper's systems' rows and intervals are their Table 3's, untouched by the baseline.
+    # The paper's systems' rows and intervals are their Table 3's, untouched by the contender.
     assert got["table3_ci"]["world1"]["SIE"] == stats.table3_ci(res)["world1"]["SIE"]
     assert got["table5"]["world1"]["NN"] == pytest.approx({"c": 100 / 3, "tau": 100 / 3,
                                                            "total": 200 / 3})  # fmt: skip
     assert got["table5_ci"]["world1"]["NN"]["total"] == pytest.approx(
         [100 * b for b in stats.proportion_ci(2, 3)]
     )
+    # Table 4's test: two-tailed Student's t, its level 100 (1 - p); Welch's beside it.
     test = got["tests"]["world1"]["NN vs HDC"]
     f_hdc = [r["fitness"] for r in res["world1"]["HDC"]]
-    ref = sps.ttest_ind([50.0, 2012.0, 550.0], f_hdc, equal_var=False)
-    assert test["welch_t"] == pytest.approx(ref.statistic)
-    assert test["welch_p"] == pytest.approx(ref.pvalue)
-    assert test["significant"] == (ref.pvalue < protocol.ALPHA)
+    ref = sps.ttest_ind([50.0, 2012.0, 550.0], f_hdc, equal_var=True)
+    welch = sps.ttest_ind([50.0, 2012.0, 550.0], f_hdc, equal_var=False)
+    assert test["f"]["student_t"] == pytest.approx(ref.statistic)
+    assert test["f"]["student_p"] == pytest.approx(ref.pvalue)
+    assert test["f"]["welch_p"] == pytest.approx(welch.pvalue)
+    assert got["table4"]["world1"]["NN vs HDC"]["f"] == round(100 * (1 - ref.pvalue))
     assert set(got["tests"]["world1"]) == {"NN vs SIE", "NN vs HDC"}
+    assert set(got["table4"]["world1"]["NN vs SIE"]) == set(stats.METRICS)
     json.dumps(got, allow_nan=False)
 
 

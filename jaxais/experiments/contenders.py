@@ -28,7 +28,15 @@ from typing import Any
 from jaxais.io import ArgumentTypeError, UserError
 from jaxais.labels import LABELS, SYSTEMS
 
-__all__ = ["Contender", "check_label", "check_specs", "neural", "resolve", "load_spec"]
+__all__ = [
+    "Contender",
+    "check_label",
+    "check_specs",
+    "load_spec",
+    "neural",
+    "resolve",
+    "spec_file",
+]
 
 NEURAL_LABEL = "NN"  # the neural baseline's label: it names its trials' random stream
 _RESERVED = {*LABELS, *SYSTEMS, "SIE_hold1"}  # the paper's labels and the calibration file's
@@ -90,6 +98,12 @@ def check_specs(specs: Any) -> list[tuple[str, str]]:
     if len(set(labels)) < len(labels):
         raise UserError(f"--contender: label given twice in {', '.join(labels)}")
     return out
+
+
+def spec_file(spec: str) -> Path | None:
+    """The file a ``FILE.py:NAME`` spec names (None for a module's spec)."""
+    _, target, _ = _split(spec)
+    return Path(target) if target.endswith(".py") else None
 
 
 def _sha256(path: Path) -> str:

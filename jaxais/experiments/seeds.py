@@ -12,6 +12,7 @@ bits). Nothing here imports JAX: the subprocesses have the device.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import operator
 import shutil
@@ -36,7 +37,8 @@ FORMAT = "jaxais-seeds/1"
 MAX_SEED = 2**31 - 1  # evolve.py's largest --seed
 SYSTEMS = ("SIE", "SRL")  # the seeded systems whose failures and lock-ups the ledger shows
 # reproduce.py flags the ledger sets itself (not allowed in ``extra_args``).
-RESERVED = ("--out", "--seeds", "--seed", "--no-baseline", "--baseline", "--evolve", "--trials")
+RESERVED = ("--out", "--seeds", "--seed", "--no-baseline", "--baseline", "--evolve", "--trials",
+            "--contender")  # fmt: skip
 
 Runner = Callable[[list[str], Path | None], int]  # (command, log file or None) -> exit status
 
@@ -90,6 +92,17 @@ def _seed_row(docs: Mapping[str, Any]) -> dict[str, Any]:
         "locked_s": {w: {k: _get(tables, "locked_s", w, k) for k in SYSTEMS} for w in worlds},
         "trapped_s": {w: _get(tables, "trapped_s", w, "SIE") for w in worlds},
         "difference_rate": {w: _get(tables, "idiotypic_difference_rate", w, "SIE") for w in worlds},
+        # Each contender's mean f and Table 4's level of its f against SIE's, per world.
+        "contenders": {
+            label: {
+                w: {
+                    "f": _get(tables, "contenders", "table3", w, label, "f"),
+                    "level_vs_SIE": _get(tables, "contenders", "table4", w, f"{label} vs SIE", "f"),
+                }
+                for w in worlds
+            }
+            for label in _get(tables, "contenders", "contenders") or {}
+        },
         "ltl": {
             "generations": ltl_seed.get("generations", ltl_summary.get("generations_run")),
             "stopped_by": ltl_summary.get("stopped_by"),
@@ -199,6 +212,20 @@ def markdown(summary: Mapping[str, Any]) -> str:
         cells += [_pair(r, "locked_s", w) for w in worlds]
         cells += [_fmt(r["difference_rate"].get(w), 1, 100.0) for w in worlds]
         lines.append("| " + " | ".join(cells) + " |")
+    labels = list(dict.fromkeys(c for r in rows.values() for c in r.get("contenders", {})))
+    if labels:
+        lines += ["", "## Contenders", ""]
+        lines += ["Mean f, and Table 4's significance level of its difference from SIE's (99: "
+                  "significant at the paper's level).", ""]  # fmt: skip
+        head = ["seed", *(f"{c} f (level) {w}" for c in labels for w in worlds)]
+        lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for s, r in rows.items():
+            cells = [s]
+            for c in labels:
+                for w in worlds:
+                    cell = _get(r, "contenders", c, w) or {}
+                    cells.append(f"{_fmt(cell.get('f'))} ({_fmt(cell.get('level_vs_SIE'))})")
+            lines.append("| " + " | ".join(cells) + " |")
     lines += ["", "## Claims, by the fraction of seeds they hold on", ""]
     lines += ["| claim | held on | text |", "|---|---:|---|"]
     ranked = sorted(summary["claims"].items(), key=lambda kv: -kv[1]["fraction"])  # stable
@@ -297,6 +324,19 @@ def _versions(out: Path, done: Iterable[int]) -> dict[str, Any]:
     return versions
 
 
+def _contender_records(specs: Sequence[str]) -> list[dict[str, str | None]]:
+    """Each ``--contender`` spec checked (form, label, file) with its file's sha256 (None for a
+    module's spec)."""
+    from jaxais.experiments.contenders import check_specs, spec_file
+
+    records = []
+    for _, spec in check_specs(list(specs)):
+        path = spec_file(spec)
+        digest = None if path is None else hashlib.sha256(path.read_bytes()).hexdigest()
+        records.append({"spec": spec, "sha256": digest})
+    return records
+
+
 def _run_seed(folder: Run, s: int, settings: dict, run: Runner, logs: bool, note, stop) -> float:
     """Seed ``s``'s LTL (unless done) and STL. Returns the STL's wall time."""
     ltl, stl = _paths(folder.out, s)
@@ -326,6 +366,8 @@ def _run_seed(folder: Run, s: int, settings: dict, run: Runner, logs: bool, note
            "--out", str(stl), "--seed", str(s), "--no-baseline"]  # fmt: skip
     if settings["trials"] is not None:
         cmd += ["--trials", str(settings["trials"])]
+    for c in settings.get("contenders", ()):
+        cmd += ["--contender", c["spec"]]
     cmd += ["--resume"] * resume
     note(f"seed {s}: STL {'resumed' if resume else 'started'} ({stl})")
     t = time.perf_counter()
@@ -345,6 +387,7 @@ def ltl_ledger(
     extra_args: Sequence[str] = (),
     progress: bool = True,
     *,
+    contenders: Sequence[str] = (),
     command: str | None = None,
     runner: Runner | None = None,
     resume: bool = False,
@@ -356,6 +399,8 @@ def ltl_ledger(
         trials: reproduce.py's ``--trials`` (default: the paper's counts).
         jobs: seeds run side by side; above 1 subprocesses log to ``OUT/logs/seed_s.{ltl,stl}.log``.
         extra_args: further reproduce.py flags (``--worlds``, ``--tau-cap``, ...).
+        contenders: reproduce.py's ``--contender`` specs (``[LABEL=]FILE.py:NAME``), run on
+            every seed; each file's sha256 is recorded, so a resume refuses a changed file.
         runner: runs one subprocess (tests inject one); default: a child process of this one.
 
     Raises:
@@ -379,6 +424,8 @@ def ltl_ledger(
     if any(a.split("=")[0] in RESERVED for a in extra):
         raise ValueError(f"extra_args may not set {', '.join(RESERVED)} (the ledger sets them)")
     settings = {"trials": trials, "extra_args": extra}
+    if contenders:  # recorded only when given: earlier ledgers' manifests stay valid
+        settings["contenders"] = _contender_records(contenders)
     if command is None:
         command = f"ltl_ledger({str(out)!r}, seeds={seeds}, trials={trials}, extra_args={extra})"
     folder = open_run(out, "seeds", {"seeds": seeds, **settings}, resume=resume)

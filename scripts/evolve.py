@@ -2,6 +2,7 @@
 
 python scripts/evolve.py --out DIR [--resume] [--diversity]  # DIR/seed, summary.json, ...
 python scripts/evolve.py --check-seed DIR/seed  # measure an existing seed, evolve nothing
+Your own selection, crossover, mutation: evolution.evolve(operators=...), examples/tournament_ga.py
 """
 
 import argparse

@@ -2,10 +2,10 @@
 
     python scripts/reproduce.py --out results/
     python scripts/reproduce.py --out results/ --trials 1000          # tight intervals
-    python scripts/reproduce.py --out results/ --evolve               # fresh LTL seed first
-    python scripts/reproduce.py --out results/ --contender my.py:braitenberg  # a contender
+    python scripts/reproduce.py --out results/ --evolve --contender mine.py:braitenberg
 
-Runs :func:`jaxais.experiments.reproduce` (the paper's protocol, SPEC 9), sharded over every
+Runs :func:`jaxais.experiments.reproduce` (the paper's protocol, SPEC 9; --evolve: a fresh LTL
+seed first; --contender: your controller beside the paper's systems), sharded over every
 process's devices with the jax.distributed flags (as in scripts/sweep.py; process 0 writes).
 Writes DIR/tables.json, DIR/claims.json, DIR/report.md (figures in DIR/figures/), every trial in
 DIR/trials/ and DIR/run.json (the config, seeds and timings needed to regenerate it all);
@@ -19,7 +19,7 @@ import sys
 
 from jaxais import distributed
 from jaxais.cli import ArgumentParser, UserError, main_wrapper, run_script
-from jaxais.experiments import protocol
+from jaxais.experiments import contenders, protocol
 from jaxais.experiments.reproduction import LTLRunError, check_reproduce, headline, reproduce
 
 
@@ -39,18 +39,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                      "use its seed")
     p.add_argument("--seed", type=int, default=0, help="PRNG seed of the trials (and of --evolve)")
     nn = p.add_mutually_exclusive_group()
-    nn.add_argument("--baseline", default=None,
-                    help="trained neural controller beside SIE and HDC (default: the shipped "
-                    "checkpoints/neural; scripts/train_baseline.py makes one)")
+    nn.add_argument("--baseline", default=None, help="the neural contender NN's weights "
+                    "(default: the shipped checkpoints/neural; scripts/train_baseline.py)")
     nn.add_argument("--no-baseline", action="store_true", help="run the paper's systems only")
-    p.add_argument("--contender", action="append", default=None, metavar="SPEC",
-                   help="a controller beyond the paper's, run beside its systems in every "
-                   "world: [LABEL=]FILE.py:NAME or [LABEL=]package.module:NAME, NAME a "
-                   "(Controller, params) tuple or a function returning one (repeatable; "
-                   "docs/extending.md)")
-    p.add_argument("--worlds", default=",".join(protocol.WORLDS),
-                   help="comma-separated subset of worlds, or world files PATH.toml (run with "
-                   "the simulated worlds' protocol)")
+    contenders.add_argument(p)  # run beside the paper's systems in every world
+    p.add_argument("--worlds", default=",".join(protocol.WORLDS), help="comma-separated "
+                   "worlds: the paper's, or world files PATH.toml (the simulated protocol)")
     protocol.add_cap_arguments(p)
     distributed.add_arguments(p)
     p.add_argument("--generations", type=int, default=None,

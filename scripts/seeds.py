@@ -20,6 +20,7 @@ import sys
 from pathlib import Path
 
 from jaxais.cli import ArgumentParser, UserError, main_wrapper, run_script
+from jaxais.experiments import contenders
 from jaxais.experiments.seeds import MAX_SEED, SeedRunError, headline, ltl_ledger
 
 
@@ -33,10 +34,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--trials", type=int, default=None, help="trials per system and world (default: paper's)"
     )
     p.add_argument("--jobs", type=int, default=1, help="seeds run side by side (default 1)")
-    p.add_argument("--contender", action="append", default=None, metavar="SPEC",
-                   help="a controller beyond the paper's, run beside its systems on every seed: "
-                   "[LABEL=]FILE.py:NAME or [LABEL=]package.module:NAME (repeatable; "
-                   "docs/extending.md)")  # fmt: skip
+    contenders.add_argument(p)  # run beside the paper's systems on every seed
     return p.parse_args(argv)
 
 

@@ -19,7 +19,7 @@ import time
 
 from jaxais import distributed
 from jaxais.cli import ArgumentParser, main_wrapper, run_script
-from jaxais.experiments import protocol
+from jaxais.experiments import contenders, protocol
 from jaxais.experiments.one_system import check_trials, trials
 from jaxais.labels import RANDOM_SETS, SYSTEMS
 
@@ -29,10 +29,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     # fmt: off
     who = p.add_mutually_exclusive_group(required=True)
     who.add_argument("--system", choices=SYSTEMS, help="one of the paper's systems")
-    who.add_argument("--contender", metavar="SPEC",
-                     help="a controller beyond the paper's: [LABEL=]FILE.py:NAME or "
-                     "[LABEL=]package.module:NAME, NAME a (Controller, params) tuple or a "
-                     "function returning one (docs/extending.md)")
+    contenders.add_argument(p, repeatable=False, group=who)
     p.add_argument("--world", default=protocol.WORLDS[0],
                    help=f"{', '.join(protocol.WORLDS)} or a .toml path")
     p.add_argument("--trials", type=int, default=protocol.SIMULATED_TRIALS,
@@ -57,7 +54,7 @@ def main(argv: list[str] | None = None) -> None:
     kw = dict(world=args.world, trials=args.trials, seed=args.seed, random_set=args.random_set,
               seeds=args.seeds, tau_cap=args.tau_cap, collision_cap=args.collision_cap,
               plot=args.plot)  # fmt: skip
-    system = args.system or args.contender
+    system = args.system or contenders.check_specs([args.contender])[0][1]  # a spec: its form
     check_trials(system, args.out, **kw)  # a bad flag answers before JAX loads
     distributed.check(args)
     from jaxais import _speed  # its importlib.metadata: after the signal handlers are ours

@@ -76,6 +76,15 @@ def assert_user_error(proc: subprocess.CompletedProcess, prog: str, *words: str)
         assert w in lines[0], (w, lines[0])
 
 
+CONTENDER = "BV=examples/braitenberg.py:braitenberg"  # a controller written outside the library
+
+
+def _reproduce_args(seeds: Path) -> tuple:
+    """reproduce.py's tiny run, with a contender (the last two words) beside the baseline."""
+    return ("reproduce.py", "--trials", 2, "--tau-cap", 10, "--worlds", "world1",
+            "--seeds", seeds, "--contender", CONTENDER)  # fmt: skip
+
+
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     base = tmp_path_factory.mktemp("scripts")
@@ -91,10 +100,13 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     one_device = out / "one_device"
     one_device.mkdir()
     one_args = (*trials_args[:-4], "--out", one_device / "results.json")
-    rep_dir = base / "reproduce"
-    rep = start_script(
-        "reproduce.py", "--trials", 2, "--tau-cap", 10, "--worlds", "world1",
-        "--seeds", seeds, "--out", rep_dir,
+    rep_dir, plain_dir = base / "reproduce", base / "plain"
+    rep = start_script(*_reproduce_args(seeds), "--out", rep_dir)
+    # The paper's systems alone: their records must not move with contenders beside them.
+    plain = start_script(*_reproduce_args(seeds)[:-2], "--no-baseline", "--out", plain_dir)
+    contender = start_script(
+        "trials.py", "--contender", CONTENDER, "--trials", 2, "--tau-cap", 10,
+        "--out", out / "contender.json",
     )  # fmt: skip
     single = start_script("trials.py", *one_args, JAXAIS_CACHE_DIR="off", **ONE_DEVICE)
     first = _finish(start_script("trials.py", *trials_args, **cache, **TWO_DEVICES))
@@ -106,6 +118,9 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
         "cached": sorted(p.name.split("-")[0] for p in (base / "jax_cache").iterdir()),
         "reproduce": _finish(rep),
         "reproduce_dir": rep_dir,
+        "plain": _finish(plain),
+        "plain_dir": plain_dir,
+        "contender": _finish(contender),
         "seeds": seeds,
     }
 
@@ -263,7 +278,8 @@ def test_reproduce_end_to_end(runs):
     for name in figures:
         assert name in report  # every figure is shown in the report
     trial_files = sorted(p.name for p in (out / "trials").iterdir())
-    want = [f"world1_{label}.json" for label in (*LABELS, "NN")] + ["world1_SIE_hold1.json"]
+    want = [f"world1_{label}.json" for label in (*LABELS, "NN", "BV")]
+    want += ["world1_SIE_hold1.json"]
     want += ["world1_examples.npz"]  # the drawn trials: the world's unit, kept for --resume
     assert trial_files == sorted(want)
     # SIE with a selection every iteration: the calibration point, beside the paper's 20 %.
@@ -274,12 +290,21 @@ def test_reproduce_end_to_end(runs):
     assert (cal["k1"], cal["k2"], cal["paper_percent"]) == (0.85, 1.1, 20)
     assert set(cal["worlds"]["world1"]) == {"default", "hold=1"}
     assert "### The calibration point" in report and "### Lock-ups" in report
-    # The shipped neural baseline ran beside SIE and HDC, under the same protocol.
+    # The shipped neural baseline (the contender NN) and a contender from a user's file ran
+    # beside SIE and HDC, under the same protocol.
     nn = json.loads((out / "trials" / "world1_NN.json").read_text())
     assert len(nn["trials"]) == 2 and nn["config"]["episode"]["tau_cap"] == 10.0
-    assert nn["config"]["baseline"]["config"]["hidden"] > 0
-    assert list(tables["baseline"]["table3"]["world1"]) == ["SIE", "HDC", "NN"]
-    assert "## Beyond the paper: a modern baseline" in report
+    assert nn["config"]["contender"]["made_by"]["config"]["hidden"] > 0
+    bv = json.loads((out / "trials" / "world1_BV.json").read_text())
+    assert bv["label"] == "BV" and len(bv["trials"]) == 2
+    source = bv["config"]["contender"]
+    assert source["spec"] == CONTENDER and len(source["sha256"]) == 64
+    assert list(tables["contenders"]["table3"]["world1"]) == ["SIE", "HDC", "NN", "BV"]
+    assert set(tables["contenders"]["table4"]["world1"]) == {
+        f"{c} vs {o}" for c in ("NN", "BV") for o in ("SIE", "HDC")
+    }
+    assert "## Beyond the paper" in report and "- **BV**: A Braitenberg-style vehicle" in report
+    assert json.loads((out / "run.json").read_text())["contenders"]["BV"] == source
     for label in LABELS:
         doc = json.loads((out / "trials" / f"world1_{label}.json").read_text())
         assert doc["label"] == label and len(doc["trials"]) == 2
@@ -294,6 +319,66 @@ def test_reproduce_end_to_end(runs):
     for doc in [out / "run.json", *(out / "trials").glob("*.json")]:
         assert str(runs["seeds"].parent) not in doc.read_text(), doc.name
     assert "Report:" in proc.stdout
+
+
+@pytest.mark.slow
+def test_contenders_leave_the_papers_records_bit_for_bit(runs):
+    """The paper's systems' trials, tables and claims are the same, byte for byte, with the
+    neural baseline and a user's contender beside them and without."""
+    _ok(runs["plain"])
+    with_, without = runs["reproduce_dir"], runs["plain_dir"]
+    for label in (*LABELS, "SIE_hold1"):
+        a, b = (
+            json.loads((d / "trials" / f"world1_{label}.json").read_text())
+            for d in (with_, without)
+        )
+        assert a["trials"] == b["trials"] and a["summary"] == b["summary"], label
+    for name in ("claims.json",):
+        assert (with_ / name).read_text() == (without / name).read_text()
+    tables = [json.loads((d / "tables.json").read_text()) for d in (with_, without)]
+    assert "contenders" not in tables[1]
+    del tables[0]["contenders"]
+    assert tables[0] == tables[1]
+
+
+@pytest.mark.slow
+def test_trials_script_runs_a_contender(runs):
+    _ok(runs["contender"])
+    doc = json.loads((runs["trials_dir"] / "contender.json").read_text())
+    assert (doc["label"], doc["system"], doc["random_set"]) == ("BV", "BV", None)
+    assert len(doc["trials"]) == 2 and "network" not in doc["config"]
+    assert doc["config"]["contender"]["spec"] == CONTENDER
+    assert doc["config"]["command"].startswith("trials.py --contender " + CONTENDER)
+    assert "BV in world1: 2 trials" in runs["contender"].stdout
+
+
+def test_contender_mistakes_are_one_line_before_any_trial(tmp_path: Path):
+    """A missing file or name, a NAME of the wrong shape, a paper's label: exit status 2, one
+    line, nothing written."""
+    bad = tmp_path / "bad.py"
+    bad.write_text("X = 3\ndef broken():\n    raise RuntimeError('no')\nimport nonexistent_mod\n")
+    shape = tmp_path / "shape.py"
+    shape.write_text("X = (1, 2)\n")
+    out = tmp_path / "r.json"
+    cases = [
+        (f"{tmp_path}/none.py:x", ["no such file", "none.py"]),
+        ("examples/braitenberg.py:nope", ["defines no 'nope'"]),
+        (f"{shape}:X", ["NAME must be a (Controller, params) tuple", "got tuple"]),
+        (f"{bad}:X", ["cannot load", "ModuleNotFoundError", "nonexistent_mod"]),
+        ("SIE=examples/braitenberg.py:braitenberg", ["label 'SIE' is the paper's"]),
+        ("braitenberg", ["write [LABEL=]FILE.py:NAME"]),
+        ("no_such_module_x:thing", ["cannot load no_such_module_x"]),
+    ]
+    for spec, words in cases:
+        proc = call_main("trials.py", "--contender", spec, "--trials", 2, "--out", out)
+        assert_user_error(proc, "trials.py", *words)
+    rep = call_main("reproduce.py", "--worlds", "world1", "--contender", f"{shape}:X",
+                    "--out", tmp_path / "rep")  # fmt: skip
+    assert_user_error(rep, "reproduce.py", "NAME must be a (Controller, params) tuple")
+    twice = call_main("reproduce.py", "--contender", "NN=examples/braitenberg.py:braitenberg",
+                      "--worlds", "world1", "--out", tmp_path / "rep")  # fmt: skip
+    assert_user_error(twice, "reproduce.py", "label 'NN' is the neural baseline's")
+    assert not out.exists() and not (tmp_path / "rep").exists()
 
 
 def test_reproduce_user_errors(tmp_path: Path):
@@ -326,7 +411,7 @@ def test_reproduce_killed_and_resumed_gives_the_uninterrupted_run(runs, tmp_path
     from test_resume import kill_after
 
     ref, out = runs["reproduce_dir"], tmp_path / "rep"
-    args = ("--trials", 2, "--tau-cap", 10, "--worlds", "world1", "--seeds", runs["seeds"])
+    args = _reproduce_args(runs["seeds"])[1:]
     kill_after(start_script("reproduce.py", *args, "--out", out), out, 0, signal.SIGKILL)
     kill_after(
         start_script("reproduce.py", *args, "--out", out, "--resume"), out, 1, signal.SIGTERM

@@ -30,6 +30,7 @@ from jaxais.labels import LABELS, SYSTEMS
 
 __all__ = [
     "Contender",
+    "add_argument",
     "check_label",
     "check_specs",
     "load_spec",
@@ -52,6 +53,21 @@ class Contender:
     controller: Any
     params: Any
     source: dict[str, Any] = field(default_factory=dict)
+
+
+def add_argument(parser: Any, repeatable: bool = True, group: Any = None) -> None:
+    """Add ``--contender SPEC`` to a script's flags (``group``: a mutually exclusive group)."""
+    help = (
+        "a controller beyond the paper's: [LABEL=]FILE.py:NAME or [LABEL=]package.module:NAME, "
+        "NAME a (Controller, params) tuple or a function returning one (docs/extending.md)"
+    )
+    (group or parser).add_argument(
+        "--contender",
+        action="append" if repeatable else "store",
+        default=None,
+        metavar="SPEC",
+        help=help + ("; repeatable" if repeatable else ""),
+    )
 
 
 def check_label(label: Any, flag: str = "--contender") -> str:
@@ -190,7 +206,7 @@ def neural(directory: str | os.PathLike[str] | None = None) -> Contender:
     where = "shipped (checkpoints/neural)" if directory is None else str(directory)
     trained = made_by["config"] or {}
     about = (
-        "a small neural controller (an MLP from the IR and camera features to the wheel "
+        "A small neural controller (an MLP from the IR and camera features to the wheel "
         "speeds), trained by an evolution strategy"
         + (f" in {trained['world']}" if "world" in trained else "")
         + " (`scripts/train_baseline.py`, `docs/baseline.md`)."

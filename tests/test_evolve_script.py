@@ -23,6 +23,7 @@ from test_ga import TINY
 
 from jaxais import ga
 from jaxais.checkpointing import GACheckpointer
+from jaxais.experiments import evolution
 from jaxais.seed import load_seed
 
 SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "evolve.py"
@@ -139,6 +140,13 @@ def test_outputs(full_run: Path):
         assert p["best_starts"] >= 4 and p["best_crossings"] == 0
     first = summary["generations"][0]["populations"][0]
     assert {"best_crossings", "crossing_rate", "best_so_far"} <= first.keys()
+    # The flags' operators (jaxais.ga.operators), by name in the summary, seed and checkpoints.
+    names = {"selection": "roulette", "crossover": "uniform", "mutation": "resample(0.05)"}
+    assert summary["operators"] == meta["operators"] == names
+    info = json.loads((full_run / "checkpoints" / "run.json").read_text())
+    info.pop("format")
+    with GACheckpointer(full_run / "checkpoints", info, resume=True) as ck:
+        assert ck.restore(TINY, 2)[1]["operators"] == names
 
 
 def test_flag_defaults_are_the_ga_defaults():
@@ -250,6 +258,14 @@ def test_resume_refusals(tmp_path: Path, capsys, full_run: Path):
     assert not (tmp_path / "none").exists()
     last = expect_exit(capsys, "--out", str(full_run), "--resume", "--mutation", "0.1")
     assert "different arguments" in last and "mutation" in last
+    # The library call with other operators than the run's (examples/tournament_ga.py's).
+    config = ga.GAConfig(**{**TINY.to_dict(), "generations": 3})
+    ops = ga.default_operators(config).replace(mutation=ga.resample_mutation(0.5))
+    with pytest.raises(ValueError) as info:
+        evolution.evolve(full_run, config=config, resume=True, operators=ops)
+    assert (
+        str(info.value) == "--resume: this run used mutation 'resample(0.05)', not 'resample(0.5)'"
+    )
     last = expect_exit(capsys, "--out", str(full_run), "--resume", "--generations", "2")
     assert "generation 3" in last
     last = expect_exit(capsys, "--out", str(full_run), "--generations", "3")

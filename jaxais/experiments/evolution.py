@@ -1,6 +1,7 @@
 """The LTL experiment (``scripts/evolve.py``): evolve antibody sets into ``out``: ``checkpoints/``
-(every generation; ``resume`` continues exactly), ``seed/`` (with its crossing rates in fresh
-starts the GA never used), ``summary.json`` and ``fitness.png``. :func:`check_seed` writes nothing.
+(every generation, with the breeding operators' names; ``resume`` continues exactly, with the
+same operators), ``seed/`` (with its crossing rates in fresh starts the GA never used),
+``summary.json`` and ``fitness.png``. :func:`check_seed` writes nothing.
 """
 
 from __future__ import annotations
@@ -16,12 +17,13 @@ import numpy as np
 
 import jaxais
 from jaxais import envs
-from jaxais.checkpointing import GACheckpointer
+from jaxais.checkpointing import CheckpointError, GACheckpointer
 from jaxais.experiments.diversity import compare_diversity, diversity
 from jaxais.experiments.records import portable_path
 from jaxais.ga import driver
 from jaxais.ga.config import CROSSING_STARTS, MAX_SEED, ConfigError, GAConfig
-from jaxais.io import RUN_BYTES, atomic_write_json, check_memory
+from jaxais.ga.operators import Operators, default_operators
+from jaxais.io import RUN_BYTES, atomic_write_json, check_memory, check_type
 from jaxais.seed import Seed, load_seed, save_seed
 
 __all__ = ["check_seed", "evolve", "measure_crossing", "report"]
@@ -134,6 +136,22 @@ def measure_crossing(
     }
 
 
+def _run_info(world: str, seed: int, config: GAConfig) -> dict[str, Any]:
+    """What a resume must share with the run it continues (the generation count may grow; the
+    operators are checked against each checkpoint's record)."""
+    config_info = {k: v for k, v in config.to_dict().items() if k != "generations"}
+    return {"world": world, "seed": seed, "config": config_info}
+
+
+def _check_operators(extra: dict[str, Any], config: GAConfig, names: dict[str, str]) -> None:
+    """CheckpointError (one line) unless the checkpoint's run bred with the operators ``names``
+    (a checkpoint without the record ran ``config``'s defaults)."""
+    ran = extra.get("operators") or default_operators(config).names()
+    for role, name in names.items():
+        if ran.get(role) != name:
+            raise CheckpointError(f"--resume: this run used {role} {ran.get(role)!r}, not {name!r}")
+
+
 def evolve(
     out: str | Path,
     seed: int = 0,
@@ -143,37 +161,42 @@ def evolve(
     crossing_starts: int = CROSSING_STARTS,
     diversity_seeds: int | None = None,
     argv: list[str] | None = None,
+    operators: Operators | None = None,
 ) -> dict[str, Any]:
     """Evolve the LTL seed with PRNG seed ``seed`` into ``out``; returns the summary it writes.
 
-    ``resume`` continues ``out/checkpoints`` (same arguments; ``generations`` may grow);
-    ``diversity_seeds`` also compares P × R with 1 × PR over GA seeds ``seed``, ``seed + 1``, ...
-    (not checkpointed); ``argv`` is recorded as the command. Raises ConfigError (out of range) or
-    ValueError (nothing to resume, another run's or a corrupt checkpoint, a bad world).
+    ``resume`` continues ``out/checkpoints`` (same arguments and operators; ``generations`` may
+    grow); ``diversity_seeds`` also compares P × R with 1 × PR over GA seeds ``seed``,
+    ``seed + 1``, ... (not checkpointed); ``argv`` is recorded as the command; ``operators``:
+    the GA's selection, crossover and mutation (default: ``config``'s,
+    :func:`jaxais.ga.operators.default_operators`), their names recorded in every checkpoint
+    and the summary. Raises ConfigError (out of range) or ValueError (nothing to resume,
+    another run's or a corrupt checkpoint, other operators than the run's, a bad world).
     """
     config = GAConfig() if config is None else config
     _check(seed, crossing_starts, config)
+    if operators is not None:
+        check_type(operators, Operators, "evolve's operators", "a jaxais.ga.Operators")
+    names = (default_operators(config) if operators is None else operators).names()
     if diversity_seeds is not None and diversity_seeds < 2:
         raise ConfigError("diversity_seeds", f"must be >= 2, got {diversity_seeds}")
     if diversity_seeds is not None and config.populations < 2:
         raise ConfigError("diversity", "needs --populations >= 2")
+    if diversity_seeds is not None and names != default_operators(config).names():
+        raise ConfigError("diversity", "runs the config's default operators only")
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"{out}: exists and is not a directory")
     world_obj = envs.load_world(world)
     sim_params = envs.default_params()
-    # What a resume must share with the run it continues (the generation count may grow).
-    run_info = {
-        "world": world,
-        "seed": seed,
-        "config": {k: v for k, v in config.to_dict().items() if k != "generations"},
-    }
+    run_info = _run_info(world, seed, config)
     start = time.perf_counter()
     with _compile_clock() as clock, GACheckpointer(out / "checkpoints", run_info, resume) as ck:
         history, earlier_wall, resumed_from = [], 0.0, None
         state = jax.random.key(seed)
         if resume:
             state, extra = ck.restore(config)
+            _check_operators(extra, config, names)
             if int(state.generation) > config.generations:
                 raise ValueError(
                     f"--generations {config.generations}: the checkpoint is already at generation"
@@ -189,11 +212,13 @@ def evolve(
             wall = time.perf_counter() - t0[0]
             history.append(_generation_record(int(state.generation) - 1, evaluation, best, wall))
             total = earlier_wall + time.perf_counter() - start
-            ck.save(state, config, {"history": history, "wall_time_total_s": total})
+            ck.save(
+                state, config, {"history": history, "wall_time_total_s": total, "operators": names}
+            )
             t0[0] = time.perf_counter()
 
         desc = f"GA {config.populations}x{config.robots} in {world_obj.name}"
-        state = driver.run(state, config, world_obj, sim_params, save, progress=desc)
+        state = driver.run(state, config, world_obj, sim_params, save, desc, operators)
         ga_wall, ga_compile = time.perf_counter() - start, clock[0]
 
         comparison = None
@@ -244,6 +269,7 @@ def evolve(
         "format": "jaxais-evolve/1",
         **ident,
         "config": config.to_dict(),
+        "operators": names,
         "fitness": "f = (rho*c + tau)/2 with rho = 8; lower is better",
         "generations_run": generations_run,
         "stopped_by": driver.stopped_by(state, config),
@@ -265,6 +291,7 @@ def evolve(
         **ident,
         "generations": generations_run,
         "config": config.to_dict(),
+        "operators": names,
     }
     save_seed(out / "seed", ltl_seed, provenance, crossing=crossing)
     title = f"GA in {world_obj.name}: {config.populations} x {config.robots}, seed {seed}"

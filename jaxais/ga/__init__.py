@@ -1,13 +1,15 @@
 """The LTL genetic algorithm (SPEC 10). **LOWER fitness is better**: a robot's fitness is the
 paper's f = (ρc + τ)/2 (eq 11); selection, elitism and every "best" minimise it.
 
-``config`` (GAConfig, no JAX), ``core`` (pure and jitted, evosax's ``init`` / ``ask`` / ``tell``)
-and ``driver`` (evaluation in the maze, generations, stop rules, the seed); their names are
-importable from here. Each generation every robot (P × R sets) runs ``ga_maze`` from ``starts``
-starts with the LTL controller; ``tell`` keeps the elites and breeds the rest by roulette on
-1/(τ + ρc), crossover and mutation. [ours] One run is a noisy measure, so each population's best
-is checked from ``success_starts`` fresh starts and the checked best is the elite; the run stops
-when every best meets ``success_rate`` in two checks, at ``target_f``, or at ``generations``.
+``config`` (GAConfig, no JAX), ``core`` (pure and jitted, evosax's ``init`` / ``ask`` / ``tell``),
+``operators`` (selection, crossover and mutation: named functions passed in, SPEC 10's by
+default) and ``driver`` (evaluation in the maze, generations, stop rules, the seed); their names
+are importable from here. Each generation every robot (P × R sets) runs ``ga_maze`` from
+``starts`` starts with the LTL controller; ``tell`` keeps the elites and breeds the rest with the
+operators (default: roulette on 1/(τ + ρc), uniform or RL crossover, 5 % mutation). [ours] One
+run is a noisy measure, so each population's best is checked from ``success_starts`` fresh starts
+and the checked best is the elite; the run stops when every best meets ``success_rate`` in two
+checks, at ``target_f``, or at ``generations``.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-_SUBMODULES = ("config", "core", "driver")
+_SUBMODULES = ("config", "core", "operators", "driver")
 
 
 def __getattr__(name: str) -> Any:

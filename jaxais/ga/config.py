@@ -45,12 +45,16 @@ class GAConfig:
     start pocket; ``tau_cap`` 500 s, tracking sets cross in 35-200 s; ``starts`` 1, robustness
     coming from the checks; ``success_rate`` 0.95, at 0.9 sets crossing 75-85 % passed;
     ``crossover`` uniform, since the RL rule favours the parent that searched longer.
+
+    ``crossover`` and ``mutation`` choose the default breeding operators
+    (:func:`jaxais.ga.operators.default_operators`); operators passed in (``operators=`` of
+    :func:`jaxais.ga.driver.run` and :func:`jaxais.experiments.evolution.evolve`) replace them.
     """
 
     populations: int = _setting(5, "independent populations P [paper: 5]")
     robots: int = _setting(10, "robots (antibody sets) per population R [paper: 10]")
     generations: int = _setting(200, "generation cap [ours: 200]")
-    mutation: float = _setting(0.05, "per-gene mutation probability [paper: 0.05]")
+    mutation: float = _setting(0.05, "per-gene probability of the default mutation [paper: 0.05]")
     elitism: int = _setting(1, "elite robots per population, copied unchanged [ours: 1]")
     target_f: float | None = _setting(None, "stop when every population's best f <= this")
     tau_cap: float = _setting(500.0, "time cap of one run, simulated s [ours: 500]")
@@ -58,7 +62,7 @@ class GAConfig:
     starts: int = _setting(1, "random starts per robot and generation (f, τ, c, L: means) [1]")
     success_starts: int = _setting(10, "fresh starts checking each best, per generation [10]")
     success_rate: float | None = _setting(0.95, "stop when every best crosses this often (none)")
-    crossover: str = _setting("uniform", "antibodies from either parent, or (rl) the higher L")
+    crossover: str = _setting("uniform", "default crossover: uniform, or (rl) by the higher L_j")
 
     def __post_init__(self):
         def count(x: Any, low: int) -> bool:

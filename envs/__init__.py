@@ -2,12 +2,17 @@
 
 Its gymnax face (``envs.gymnax``: ``make``, ``EpuckEnv``, ...) loads on first use: importing
 gymnax takes seconds, which the simulator and the task loop skip.
+
+Worlds by name: the built-ins are the files ``worlds/*.toml``; ``JAXAIS_WORLDS`` (folders, as
+``PATH``) adds the user's, loaded by name too (``names``: the lookup, free of JAX).
 """
 
 import importlib
 from typing import Any
 
+from . import names as names  # bound here: JAX-free callers may have loaded it by file first
 from .geometry import Scene, cast_rays, min_gap
+from .names import world_names
 from .params import (
     CAMERA_COLUMNS,
     CAMERA_ROWS,
@@ -64,6 +69,7 @@ __all__ = [
     "sample_step_noise",
     "step",
     "step_with_noise",
+    "world_names",
     "world_path",
 ]
 

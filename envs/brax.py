@@ -143,7 +143,8 @@ def _factory(world: str, backend: str | None = None, **kwargs: Any) -> BraxEnv:
 
 
 def register(prefix: str = "jaxais_") -> tuple[str, ...]:
-    """Add every built-in world to brax's registry as ``{prefix}{world}``; returns the names."""
+    """Add every built-in world to brax's registry as ``{prefix}{world}``; returns the names (a
+    world on ``JAXAIS_WORLDS`` is made by name: ``BraxEnv("NAME")``)."""
     for world in BUILTIN_WORLDS:
         _brax_envs.register_environment(prefix + world, functools.partial(_factory, world))
     return tuple(prefix + world for world in BUILTIN_WORLDS)

@@ -329,7 +329,8 @@ def make(
 
 
 def register_gymnax() -> tuple[str, ...]:
-    """Register the built-in worlds with gymnax as ``jaxais/{world}`` (``make``'s kwargs)."""
+    """Register the built-in worlds with gymnax as ``jaxais/{world}`` (``make``'s kwargs); a
+    world on ``JAXAIS_WORLDS`` is made by name with ``make("NAME")``."""
     names = tuple(f"jaxais/{world}" for world in BUILTIN_WORLDS)
     for name, world in zip(names, BUILTIN_WORLDS, strict=True):
         if name not in gymnax.registered_envs:

@@ -2,7 +2,8 @@
 
 A world file (``worlds/world1.toml`` is a commented example) declares the arena, walls, boxes
 (fixed or drawn each run) and pillars, the goal and its region, the start region, the wandering
-e-pucks and the noise.
+e-pucks and the noise. A world by name is a file: the built-ins are ``worlds/*.toml``, the user's
+are on the ``JAXAIS_WORLDS`` search path (:mod:`.names`, which states the precedence).
 """
 
 from __future__ import annotations
@@ -11,7 +12,6 @@ import difflib
 import math
 import tomllib
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -19,10 +19,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import geometry
+from .names import BUILTIN_WORLDS as BUILTIN_WORLDS  # re-exported: envs.BUILTIN_WORLDS
+from .names import WorldError, find_world, resolve
 from .params import MATERIALS
 from .struct import device_array, pytree_dataclass, static_field
-
-BUILTIN_WORLDS = ("ga_maze", "world1", "world2", "real")
 
 MAX_SURFACES = geometry._INDEX_MASK + 1  # what the ray caster tells apart, padding included
 MAX_ARENA_SIDE = 100.0  # m [ours]: float32 positions still resolve 8 um there
@@ -41,10 +41,6 @@ _KEYS: dict[str, tuple[str, ...]] = {
     "noise": ("ir_relative_std", "camera_miss_prob", "camera_shift_prob", "wheel_relative_std"),
 }
 """The world format's keys, by table path (``""`` the top level)."""
-
-
-class WorldError(ValueError):
-    """A world file is missing, malformed or physically impossible (the message is one line)."""
 
 
 @pytree_dataclass
@@ -460,25 +456,29 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
 
 
 def world_path(name: str) -> Path:
-    """Path of a built-in world file."""
-    return Path(str(resources.files(__package__).joinpath("worlds", f"{name}.toml")))
+    """The file of the world called ``name``: a built-in (``worlds/NAME.toml``) or one on the
+    ``JAXAIS_WORLDS`` search path (WorldError, one line, when there is none)."""
+    return find_world(name)
 
 
 def load_world(name_or_path: str | Path, capacity: Capacity = Capacity()) -> World:
-    """A built-in world by name (``world1``) or a world file by path (WorldError: one line)."""
-    text = str(name_or_path)
-    if text in BUILTIN_WORLDS:
-        path = world_path(text)
-    else:
-        path = Path(text)
-        if not path.is_file():
-            raise WorldError(
-                f"{text}: no such world file (built-in worlds: {', '.join(BUILTIN_WORLDS)})"
-            )
+    """A world by name (``world1``; a built-in or one on ``JAXAIS_WORLDS``, see :mod:`.names`)
+    or a world file by path (with a folder part or the ``.toml`` suffix). WorldError (one line)
+    when there is no such world, the file is malformed, or a file found by name has another
+    ``name`` field (a world's name is its file's)."""
+    path, by_name = resolve(name_or_path)
     try:
         doc = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as err:
         raise WorldError(f"{path}: not valid TOML: {err}") from None
     except (OSError, UnicodeDecodeError) as err:
         raise WorldError(f"{path}: cannot read: {err}") from None
-    return parse_world(doc, str(path), capacity)
+    world = parse_world(doc, str(path), capacity)
+    if by_name is not None and world.name != by_name:
+        raise _fail(
+            str(path),
+            "name",
+            f"{world.name!r} differs from the file's name {by_name!r}: a world found by name "
+            f'must be named after its file (name = "{by_name}")',
+        )
+    return world

@@ -2,18 +2,26 @@
 
 from __future__ import annotations
 
+import os
+import re
+from pathlib import Path
+
 import jax
 import numpy as np
 import pytest
 import reference_sim as ref
+from _python import run_python, script_env
 
 from jaxais import envs
+from jaxais.envs import names
 from jaxais.envs.sim import PLACEMENT_CLEARANCE
+from jaxais.experiments import protocol
 
 PARAMS_NP = ref.params_to_numpy(envs.default_params())
 
-# name: (wanderers, goal shape, noisy)
-EXPECTED = {
+# The paper's worlds (the LTL's and the three test worlds), which the built-ins must include:
+# name: (wanderers, goal shape, noisy). Other files in envs/worlds/ are built-ins too.
+PAPER_WORLDS = {
     "ga_maze": (0, "box", False),
     "world1": (1, "box", False),
     "world2": (1, "box", False),
@@ -21,8 +29,9 @@ EXPECTED = {
 }
 
 
-def test_expected_builtin_worlds() -> None:
-    assert set(envs.BUILTIN_WORLDS) == set(EXPECTED)
+def test_the_papers_worlds_are_built_in() -> None:
+    assert set(PAPER_WORLDS) <= set(envs.BUILTIN_WORLDS)
+    assert set(protocol.WORLDS) <= set(PAPER_WORLDS)
 
 
 @pytest.mark.parametrize("name", envs.BUILTIN_WORLDS)
@@ -30,12 +39,13 @@ def test_builtin_world_loads(name: str) -> None:
     world = envs.load_world(name)
     assert world.name == name
     assert envs.world_path(name).is_file()
-    n_wanderers, shape, noisy = EXPECTED[name]
-    assert world.n_wanderers == n_wanderers
-    assert world.goal_shape == shape
     extra = (world.ir_noise, world.camera_miss, world.camera_shift, world.wheel_noise)
-    assert all(v > 0 for v in extra) == noisy
-    assert not noisy or extra == (0.05, 0.05, 0.1, 0.05)
+    if name in PAPER_WORLDS:
+        n_wanderers, shape, noisy = PAPER_WORLDS[name]
+        assert world.n_wanderers == n_wanderers
+        assert world.goal_shape == shape
+        assert all(v > 0 for v in extra) == noisy
+        assert not noisy or extra == (0.05, 0.05, 0.1, 0.05)
     assert int(world.seg_valid.sum()) >= 4  # the outer walls come first
     arena = np.asarray(world.arena)
     np.testing.assert_allclose(np.asarray(world.seg[:4]).reshape(4, 2, 2).min(axis=(0, 1)), 0.0)
@@ -274,6 +284,144 @@ def test_missing_file_fails_naming_it(tmp_path) -> None:
     assert str(path) in str(err.value) and "\n" not in str(err.value)
     with pytest.raises(envs.WorldError, match="world3"):
         envs.load_world("world3")
+
+
+# ------------------------------------------------------ worlds by name: worlds/ and JAXAIS_WORLDS
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _user_world(folder: Path, name: str, field: str | None = None) -> Path:
+    """world1.toml copied to ``folder/name.toml``, its name field set to ``field`` (``name``)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    text = envs.world_path("world1").read_text()
+    path = folder / f"{name}.toml"
+    path.write_text(text.replace('name = "world1"', f'name = "{field or name}"', 1))
+    return path
+
+
+def _one_line(err: pytest.ExceptionInfo) -> str:
+    message = str(err.value)
+    assert "\n" not in message, message
+    return message
+
+
+def test_builtin_worlds_are_the_files_in_the_folder(tmp_path) -> None:
+    assert names.scan(names.BUILTIN_DIR) == envs.BUILTIN_WORLDS
+    assert all(envs.world_path(n).parent == names.BUILTIN_DIR for n in envs.BUILTIN_WORLDS)
+    # A file dropped into the folder is a world (scanned here on a copy, not the package's).
+    for name in envs.BUILTIN_WORLDS:
+        _user_world(tmp_path, name)
+    _user_world(tmp_path, "aaa_extra")
+    (tmp_path / "notes.txt").write_text("not a world")
+    (tmp_path / "sub.toml").mkdir()  # a folder, not a file
+    assert names.scan(tmp_path) == tuple(sorted((*envs.BUILTIN_WORLDS, "aaa_extra")))
+
+
+def test_a_users_world_loads_by_name_through_jaxais_worlds(tmp_path, monkeypatch) -> None:
+    first, second = tmp_path / "first", tmp_path / "second"
+    path = _user_world(first, "myworld")
+    _user_world(second, "myworld", "elsewhere")  # shadowed: the first folder wins, as on PATH
+    _user_world(second, "other")
+    monkeypatch.setenv(names.ENV_VAR, os.pathsep.join(["", str(first), str(second)]))
+    assert envs.world_names() == (*envs.BUILTIN_WORLDS, "myworld", "other")
+    assert envs.world_path("myworld") == path
+    world = envs.load_world("myworld")
+    assert world.name == "myworld"
+    builtin = envs.load_world("world1")
+    np.testing.assert_array_equal(world.seg, builtin.seg)  # the same layout, by another name
+    assert envs.load_world("other").name == "other"
+    env = envs.make("myworld", max_steps_in_episode=10)
+    assert env.default_params.world.name == "myworld"
+    # A path still means a file, whatever the search path holds.
+    assert envs.load_world(second / "myworld.toml").name == "elsewhere"
+
+
+@pytest.mark.parametrize(
+    ("setup", "words"),
+    [
+        ("missing", ["JAXAIS_WORLDS", "does not exist", "create it or remove it"]),
+        ("file", ["JAXAIS_WORLDS", "is not a folder"]),
+        ("builtin", ["world1.toml", "built-in world's name", "rename the file"]),
+        ("misnamed", ["myworld.toml", "'name'", "'world1' differs", 'name = "myworld"']),
+        ("malformed", ["myworld.toml", "not valid TOML"]),
+        ("unknown", ["no built-in world or file 'nowhere'", "myworld", "JAXAIS_WORLDS="]),
+    ],
+)
+def test_bad_search_path_or_user_world_is_one_line(tmp_path, monkeypatch, setup, words) -> None:
+    folder = tmp_path / "worlds"
+    path = _user_world(folder, "myworld")
+    entry = {"missing": tmp_path / "gone", "file": path}.get(setup, folder)
+    monkeypatch.setenv(names.ENV_VAR, str(entry))
+    if setup == "builtin":
+        _user_world(folder, "world1")
+    elif setup == "misnamed":
+        _user_world(folder, "myworld", "world1")
+    elif setup == "malformed":
+        path.write_text(path.read_text().replace("width = 1.5", "width = = 1.5"))
+    name = "nowhere" if setup == "unknown" else "myworld"
+    with pytest.raises(envs.WorldError) as err:
+        envs.load_world(name)
+    message = _one_line(err)
+    assert all(w in message for w in words), message
+    if setup in ("missing", "file", "builtin"):  # never ignored, even when loading a built-in
+        with pytest.raises(envs.WorldError):
+            envs.load_world("world1")
+
+
+def test_names_and_paths_are_told_apart(tmp_path, monkeypatch) -> None:
+    assert names.is_name("corridor") and names.is_name("world1")
+    assert not any(map(names.is_name, ["corridor.toml", "./corridor", "a/b", ""]))
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv(names.ENV_VAR, raising=False)
+    _user_world(tmp_path, "here")
+    (tmp_path / "here").write_text((tmp_path / "here.toml").read_text())
+    assert envs.load_world("here.toml").name == "here"  # a path: the suffix says so
+    assert envs.load_world("./here").name == "here"
+    with pytest.raises(envs.WorldError) as err:  # a name: not on the (empty) search path
+        envs.load_world("here")
+    assert "give it as ./here" in _one_line(err)
+    with pytest.raises(envs.WorldError) as err:
+        envs.load_world("wrld1")
+    assert "did you mean 'world1'?" in _one_line(err)
+
+
+def test_the_baselines_check_world_names_without_jax(tmp_path) -> None:
+    _user_world(tmp_path, "myworld")
+    code = (
+        "import sys\n"
+        "from jaxais.baselines.config import TrainConfig\n"
+        "TrainConfig(world='myworld'); TrainConfig(world='world2')\n"
+        "try:\n"
+        "    TrainConfig(world='nowhere')\n"
+        "except ValueError as err:\n"
+        "    print(err)\n"
+        "print('jax' in sys.modules)\n"
+        "import jaxais.envs, jaxais.envs.names as names\n"
+        "print(jaxais.envs.names is names, jaxais.envs.WorldError is names.WorldError)\n"
+    )
+    out = run_python(
+        code, env=script_env() | {"JAX_PLATFORMS": "cpu", names.ENV_VAR: str(tmp_path)}
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    lines = out.stdout.splitlines()
+    assert lines[0].startswith("world: no built-in world or file 'nowhere'"), lines
+    assert lines[1:] == ["False", "True True"], lines
+
+
+@pytest.mark.slow
+def test_custom_world_example_runs_tiny() -> None:
+    out = run_python(
+        f"import runpy, sys\nsys.argv = ['custom_world.py', '--tiny']\n"
+        f"runpy.run_path({str(ROOT / 'examples' / 'custom_world.py')!r}, run_name='__main__')\n",
+        env=script_env() | {"JAX_PLATFORMS": "cpu", names.ENV_VAR: ""},
+    )
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "worlds by name: " in out.stdout and "corridor" in out.stdout, out.stdout
+    found = re.search(
+        r"^SIE in corridor: 4 trials, mean tau (\S+) s \(cap 30 s\)", out.stdout, re.M
+    )
+    assert found and 0 < float(found[1]) <= 30, out.stdout
 
 
 # ---------------------------------------------------------------------------------- bad input

@@ -3,12 +3,40 @@
 from __future__ import annotations
 
 import dataclasses
+import importlib
+import importlib.util
 import math
+import sys
 from pathlib import Path
+from types import ModuleType
 
 from jaxais.io import python_scalars
 
-BUILTIN_WORLDS = ("ga_maze", "world1", "world2", "real")  # envs.BUILTIN_WORLDS, without JAX
+_NAMES = "jaxais.envs.names"
+
+
+def world_names_module() -> ModuleType:
+    """``jaxais.envs.names`` (the world lookup: built-ins and ``JAXAIS_WORLDS``) without JAX:
+    loaded by its file, as importing it the usual way runs ``jaxais.envs``'s ``__init__``, which
+    imports JAX. Registered under its own name, so ``jaxais.envs`` imported later uses it too
+    (one ``WorldError``)."""
+    if _NAMES in sys.modules or "jaxais.envs" in sys.modules:
+        return importlib.import_module(_NAMES)
+    spec = importlib.util.find_spec("jaxais.envs")
+    file = Path(spec.origin).with_name("names.py") if spec and spec.origin else None
+    if file is None or not file.is_file():  # an install without plain files: JAX it is
+        return importlib.import_module(_NAMES)
+    spec = importlib.util.spec_from_file_location(_NAMES, file)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[_NAMES] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[_NAMES]
+        raise
+    return module
+
+
 NN_LABEL = "NN"  # the trained controller's label in records; it names its trials' random stream
 
 
@@ -18,7 +46,8 @@ class TrainConfig:
     156 M robot-steps, 5-10 min on a 2-core CPU (docs/baseline.md has the pilots).
 
     Attributes:
-        world: the training world [ours: ga_maze, the paper's LTL world].
+        world: the training world, a name (built-in or on ``JAXAIS_WORLDS``) or a file's path
+            [ours: ga_maze, the paper's LTL world].
         generations: ES updates. pairs: antithetic pairs (population 2 x pairs).
         episodes: per member and generation (shared by all). steps: per episode (32 ms each).
         sigma: perturbation scale. learning_rate: adam's. hidden: the MLP's hidden units.
@@ -38,8 +67,10 @@ class TrainConfig:
 
     def __post_init__(self):
         python_scalars(self)
-        if self.world not in BUILTIN_WORLDS and not Path(self.world).is_file():
-            raise ValueError(f"world: no built-in world or file {self.world!r}")
+        try:
+            world_names_module().resolve(self.world)
+        except ValueError as err:  # WorldError, one line
+            raise ValueError(f"world: {err}") from None
         for name in ("generations", "pairs", "episodes", "steps", "hidden"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:

@@ -8,6 +8,7 @@ stays free of JAX and a script can still set ``XLA_FLAGS`` before JAX starts)::
     results = run_trials(world, {"SIE": make_system("SIE", load_seed()[0])}, 30, seed=0)
 
 Submodules: ``envs`` (the simulator), ``immune`` (the paper's network, eqs 1-10), ``controllers``,
+``perception`` (what a controller author reads: IR proximity, centroid offset, wheel limits),
 ``loop`` (the task loop), ``runner`` (its driver), ``ga`` (LTL), ``checkpointing``, ``seed``,
 ``labels``, ``systems``, ``trials``, and ``experiments`` (the paper's protocol, records, stats,
 claims, report, ablation, plotting and drivers)."""
@@ -27,6 +28,12 @@ _EXPORTS = {
     "System": "controllers",
     "LTL": "controllers",
     "STL": "controllers",
+    "Controller": "controllers",
+    "Percept": "controllers",
+    "stl_controller": "controllers",
+    "proximity": "perception",
+    "centroid_offset": "perception",
+    "clip_wheels": "perception",
     "Seed": "seed",
     "load_seed": "seed",
     "save_seed": "seed",

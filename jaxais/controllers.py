@@ -7,7 +7,8 @@ compiled program, and a new controller plugs in without touching the loop.
 - :func:`ltl_controller`: one set acting alone, RL accumulating each antibody's L (SPEC 10).
 - :func:`stl_controller`: the STL network of SPEC 7 over five sets; a :class:`System` says what
   learns, so SIE, SRL, UIE, URL and HDC share one compiled batch.
-- :func:`braitenberg_controller`: a Braitenberg vehicle, a reactive baseline [ours].
+- :func:`braitenberg_controller`: a Braitenberg vehicle, a reactive baseline [ours], written
+  with :mod:`jaxais.perception`'s helpers as a new controller would be.
 
 On CPU each threefry draw is a loop of its own, so learn and act draw at most once per iteration
 and slice the draw (a draw's first k values are the k-value draw from the same key).
@@ -26,14 +27,16 @@ import numpy as np
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.immune.antibodies import N_ATTRIBUTES, Antibodies, from_uniforms, take
 from jaxais.immune.antigens import severity
-from jaxais.immune.behaviours import MAX_WHEEL_SPEED, wheel_speeds
+from jaxais.immune.behaviours import wheel_speeds
 from jaxais.immune.network import (
+    Interaction,
     NetworkParams,
     idiotopes,
     idiotypic_select,
     initial_clones,
     rescale_paratopes,
     select_alpha,
+    stimulation_suppression,
 )
 from jaxais.immune.readings import DEFAULT, Readings
 from jaxais.immune.reinforcement import (
@@ -44,6 +47,7 @@ from jaxais.immune.reinforcement import (
     rl_score,
     update_penalty,
 )
+from jaxais.perception import RIGHT, SENSOR_SIDE, centroid_offset, clip_wheels, proximity
 
 # ----------------------------------------------------------------------------- the protocol
 
@@ -249,17 +253,32 @@ class STLState:
     chosen: jnp.ndarray
 
 
-@functools.cache  # one instance per variant: compiled programs are cached by controller
 def stl_controller(
-    replacement: bool = True, idiotypic: bool = True, learning: bool = True
+    replacement: bool = True,
+    idiotypic: bool = True,
+    learning: bool = True,
+    interaction: Interaction = stimulation_suppression,
 ) -> Controller:
     """The STL network: per iteration RL on the antibody that acted last, eq (4), penalties,
     replacement, the idiotope every period, and at a bout's end selection (stage 1, or 1-3).
 
     Replacement [ours]: at most one per iteration, the first weak one in (set, antigen) order.
     A part left out (``False``) gives the same trials for a batch that never uses it, from a
-    smaller program (:func:`stl_for`).
+    smaller program (:func:`stl_for`). ``interaction``: eqs (7)-(8) of the idiotypic systems'
+    selection (:data:`~jaxais.immune.network.Interaction`), the paper's by default; a variant
+    with its systems is a contender, ``(stl_controller(interaction=f), make_system("SIE", ...))``
+    (``examples/network_variant.py``).
     """
+    # One instance per variant however it is asked for (compiled programs are cached by
+    # controller): stl_controller() is STL.
+    return _stl_controller(bool(replacement), bool(idiotypic), bool(learning), interaction)
+
+
+@functools.cache
+def _stl_controller(
+    replacement: bool, idiotypic: bool, learning: bool, interaction: Interaction
+) -> Controller:
+    """:func:`stl_controller`, built once per distinct variant."""
 
     def init(key, system: System):
         P = jnp.asarray(system.paratopes, jnp.float32)
@@ -328,7 +347,14 @@ def stl_controller(
         select, bout = _next_bout(s.bout, pc, u[:2], system.readings.hold)
         if idiotypic:
             alpha, beta, N = idiotypic_select(
-                u[2:], s.P, s.I, s.N, pc.m, system.network, system.readings.alpha_on_self
+                u[2:],
+                s.P,
+                s.I,
+                s.N,
+                pc.m,
+                system.network,
+                system.readings.alpha_on_self,
+                interaction,
             )
             idio = system.idiotypic
             chosen = jnp.where(idio, beta, alpha)
@@ -398,21 +424,19 @@ def braitenberg_controller() -> Controller:
     """A reactive vehicle (no state, learning or randomness): the nearer side's proximity slows
     it and turns it away; with nothing near, it turns toward the blue centroid."""
     weights = np.array([1.0, 0.7, 0.3, 0.0, 0.0, 0.3, 0.7, 1.0], np.float32)  # ps0..ps7
-    right_side = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0], np.float32)
+    right_side = (SENSOR_SIDE == RIGHT).astype(np.float32)  # ps0-ps2
 
     def act(key, state, pc: Percept, params: BraitenbergParams):
         del key
-        # IR readings as proximity in [0, 1]: 0 beyond about 6 cm, 1 from about 1.5 cm.
-        p = jnp.clip((pc.ir - 100.0) / 500.0, 0.0, 1.0) * weights
+        p = proximity(pc.ir) * weights  # front sensors weigh most
         right, left = jnp.max(p * right_side), jnp.max(p * (1.0 - right_side))
         near = jnp.maximum(left, right)
         away = jnp.where(left >= right, 1.0, -1.0)  # + turns right (left wheel faster)
-        seen = pc.blue_pixels > 0
-        toward = jnp.where(seen, (pc.centroid - 7.0) / 7.0, 0.0)  # + the blue is to the right
+        toward = centroid_offset(pc.centroid, pc.blue_pixels)  # + the blue is to the right
         turn = params.avoid * near * away + (1.0 - near) * params.steer * toward
         forward = params.speed * (1.0 - near)
         wheels = jnp.stack([forward + params.speed * turn, forward - params.speed * turn])
-        return state, jnp.clip(wheels, -MAX_WHEEL_SPEED, MAX_WHEEL_SPEED)
+        return state, clip_wheels(wheels)
 
     return Controller(init=no_state, learn=no_learning, act=act)
 

@@ -1,10 +1,16 @@
 """The five STL systems (SPEC 8) as :class:`~jaxais.controllers.System` data: SIE and SRL from
 the LTL seed, UIE and URL from random set R1 or R2 (with replacement), the idiotypic ones SIE
-and UIE; HDC hand-designed, without learning. Names from :mod:`jaxais.labels` (re-exported)."""
+and UIE; HDC hand-designed, without learning. Names from :mod:`jaxais.labels` (re-exported).
+
+A System's parameters by name (:data:`PARAMETERS`, :data:`USED_BY`, :data:`FIXED`) are read
+from the declarations of :class:`NetworkParams`' and :class:`Readings`' fields
+(:func:`jaxais.immune.network.param`): a new one is a field, never an entry here.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import functools
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +20,7 @@ import numpy as np
 from jaxais.controllers import System
 from jaxais.envs.struct import device_array
 from jaxais.immune.antibodies import Antibodies, from_dicts, sample_antibodies
-from jaxais.immune.network import NetworkParams, relative_fitness, seed_paratopes
+from jaxais.immune.network import NetworkParams, Param, declared, relative_fitness, seed_paratopes
 from jaxais.immune.readings import DEFAULT, Readings
 from jaxais.io import check_type as _check
 from jaxais.labels import LABELS, RANDOM_SETS, SYSTEMS, label, parse_label  # noqa: F401 (re-export)
@@ -22,6 +28,28 @@ from jaxais.seed import Seed, load_seed
 
 UNSEEDED_P = (0.25, 0.75)  # [paper] the unseeded systems' initial paratopes' range
 N_SETS = 5
+
+FLAGS: dict[str, dict[str, bool]] = {
+    name: {
+        "seeded": name in ("SIE", "SRL"),  # from the LTL seed, eqs (1)-(2)
+        "learning": name != "HDC",  # RL, eq (4) and penalties
+        "idiotypic": name in ("SIE", "UIE"),  # selection stages 2-3, eqs (5)-(10)
+        "replacement": name in ("UIE", "URL"),  # weak antibodies replaced
+    }
+    for name in SYSTEMS
+}
+"""What each system has [paper, SPEC 8]: :func:`make_system` builds from it, and a parameter's
+users (:data:`USED_BY`) follow from it."""
+
+MECHANISMS: dict[str, Callable[[Mapping[str, bool]], bool]] = {
+    "every": lambda flags: True,  # bouts and penalty counts: a penalty ends HDC's bout too
+    "seeding": lambda flags: flags["seeded"],
+    "learning": lambda flags: flags["learning"],
+    "idiotypic": lambda flags: flags["idiotypic"],
+    "non_idiotypic": lambda flags: flags["learning"] and not flags["idiotypic"],
+}
+"""A parameter's mechanism (its declaration's ``mechanism``) -> does a system with these
+:data:`FLAGS` use it."""
 
 HAND_DESIGNED = [
     # [paper] random wander, backward turn on collision, steer away from obstacles; no tracking:
@@ -101,41 +129,92 @@ def make_system(
     else:
         raise ValueError(f"unknown system {name!r} (one of {', '.join(SYSTEMS)})")
     antibodies = jax.tree.map(device_array, antibodies)
+    flags = FLAGS[name]
     return System(
         antibodies=antibodies,
         paratopes=device_array(P, np.float32),
-        learning=device_array(name != "HDC"),
-        idiotypic=device_array(name in ("SIE", "UIE")),
-        replacement=device_array(name in ("UIE", "URL")),
+        learning=device_array(flags["learning"]),
+        idiotypic=device_array(flags["idiotypic"]),
+        replacement=device_array(flags["replacement"]),
         network=network,
         readings=DEFAULT if readings is None else readings,
     )
 
 
-# A System's traced parameters (grid axes, an optimiser's variables): name -> (field, type).
-PARAMETERS: dict[str, tuple[str, type]] = {
-    **dict.fromkeys(("k1", "k2", "k3", "b", "Phi", "initial_clones", "penalty_idiotypic",
-                     "penalty_non_idiotypic"), ("network", float)),
-    "hold": ("readings", int), "encounter_gap": ("readings", int),
-    "sigma0_floor": ("readings", float), "alpha_on_self": ("readings", bool),
-}  # fmt: skip
+@functools.cache
+def _declarations(
+    network: type = NetworkParams, readings: type = Readings
+) -> dict[str, tuple[str, Param]]:
+    """Every declared parameter of a System with these parts: name -> (its part, declaration),
+    in field order; ValueError on a name in both parts or an unknown mechanism."""
+    out: dict[str, tuple[str, Param]] = {}
+    for part, cls in (("network", network), ("readings", readings)):
+        for name, declaration in declared(cls).items():
+            if name in out:
+                raise ValueError(f"parameter {name!r} is declared in both network and readings")
+            if declaration.mechanism not in MECHANISMS:
+                raise ValueError(
+                    f"{cls.__name__}.{name}: unknown mechanism {declaration.mechanism!r} "
+                    f"(one of {', '.join(MECHANISMS)})"
+                )
+            out[name] = (part, declaration)
+    return out
+
+
+def parameters(
+    network: type = NetworkParams, readings: type = Readings
+) -> dict[str, tuple[str, type]]:
+    """The sweepable parameters of a System with these parts (a subclass adds its fields):
+    name -> (the System field that holds it, its type), in field order."""
+    declarations = _declarations(network, readings).items()
+    return {name: (part, p.kind) for name, (part, p) in declarations if p.fixed is None}
+
+
+def users(mechanism: str) -> tuple[str, ...]:
+    """The systems (in :data:`SYSTEMS` order) that have ``mechanism``."""
+    return tuple(name for name in SYSTEMS if MECHANISMS[mechanism](FLAGS[name]))
+
+
+def used_by(network: type = NetworkParams, readings: type = Readings) -> dict[str, tuple[str, ...]]:
+    """name -> the systems that use it, for each sweepable parameter that not all systems use."""
+    declarations = _declarations(network, readings).items()
+    out = {name: users(p.mechanism) for name, (_, p) in declarations if p.fixed is None}
+    return {name: names for name, names in out.items() if names != SYSTEMS}
+
+
+def fixed(network: type = NetworkParams, readings: type = Readings) -> dict[str, str]:
+    """name -> why it is not a sweep's or an optimiser's variable (compiled in, or used before
+    the trials start), for the declared parameters that are not."""
+    declarations = _declarations(network, readings).items()
+    return {name: p.fixed for name, (_, p) in declarations if p.fixed is not None}
+
+
+PARAMETERS: dict[str, tuple[str, type]] = parameters()
+"""A System's traced parameters (grid axes, an optimiser's variables): name -> (field, type)."""
+USED_BY: dict[str, tuple[str, ...]] = used_by()
+"""The systems that use a parameter, where not all do (a penalty ends HDC's bout too)."""
+FIXED: dict[str, str] = fixed()
+"""Parameters that look sweepable but are compiled in or act before the trials, and why."""
 
 
 def system_params(system: System, names: Sequence[str] | None = None) -> dict[str, Any]:
-    """``system``'s parameters ``names`` (default: all of :data:`PARAMETERS`) as name -> value."""
-    names = PARAMETERS if names is None else names
-    _unknown(names)
-    return {name: getattr(getattr(system, PARAMETERS[name][0]), name) for name in names}
+    """``system``'s parameters ``names`` (default: all of :data:`PARAMETERS`, and a subclassed
+    part's own) as name -> value."""
+    known = _parameters_of(system)
+    names = known if names is None else names
+    _unknown(names, known)
+    return {name: getattr(getattr(system, known[name][0]), name) for name in names}
 
 
 def with_params(system: System, params: Mapping[str, Any]) -> System:
     """``system`` with ``params`` (:data:`PARAMETERS` name -> value), jit-safe: each value takes
     its leaf's dtype (the same program) and the network is clipped into its valid ranges (an
     optimiser never runs a negative k1)."""
-    _unknown(params)
+    known = _parameters_of(system)
+    _unknown(params, known)
     parts = {"network": {}, "readings": {}}
     for name, value in params.items():
-        part = PARAMETERS[name][0]
+        part = known[name][0]
         dtype = getattr(getattr(getattr(system, part), name), "dtype", None)
         if dtype is not None:  # traced values stay traced, host values on the host
             traced = isinstance(value, jax.Array)
@@ -145,8 +224,13 @@ def with_params(system: System, params: Mapping[str, Any]) -> System:
     return system.replace(network=network, readings=system.readings.replace(**parts["readings"]))
 
 
-def _unknown(names: Any) -> None:
-    """ValueError naming the first name that is not a :data:`PARAMETERS` name."""
-    unknown = [name for name in names if name not in PARAMETERS]
+def _parameters_of(system: System) -> dict[str, tuple[str, type]]:
+    """:func:`parameters` of ``system``'s own part classes."""
+    return parameters(type(system.network), type(system.readings))
+
+
+def _unknown(names: Any, known: Mapping[str, Any]) -> None:
+    """ValueError naming the first name that is not a parameter name."""
+    unknown = [name for name in names if name not in known]
     if unknown:
-        raise ValueError(f"unknown parameter {unknown[0]!r} (one of {', '.join(PARAMETERS)})")
+        raise ValueError(f"unknown parameter {unknown[0]!r} (one of {', '.join(known)})")

@@ -156,3 +156,41 @@ def test_vehicle_params_are_traced_data():
     _, w = act(jax.random.key(0), jnp.int32(0), pc, braitenberg_params(speed=300.0))
     assert act._cache_size() == before
     np.testing.assert_allclose(np.asarray(w), [300.0, 300.0])
+
+
+def _vehicle_as_first_written(pc, params):
+    """The vehicle's act with its perception inline, as before jaxais.perception existed."""
+    weights = np.array([1.0, 0.7, 0.3, 0.0, 0.0, 0.3, 0.7, 1.0], np.float32)
+    right_side = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0], np.float32)
+    p = jnp.clip((pc.ir - 100.0) / 500.0, 0.0, 1.0) * weights
+    right, left = jnp.max(p * right_side), jnp.max(p * (1.0 - right_side))
+    near = jnp.maximum(left, right)
+    away = jnp.where(left >= right, 1.0, -1.0)
+    toward = jnp.where(pc.blue_pixels > 0, (pc.centroid - 7.0) / 7.0, 0.0)
+    turn = params.avoid * near * away + (1.0 - near) * params.steer * toward
+    forward = params.speed * (1.0 - near)
+    wheels = jnp.stack([forward + params.speed * turn, forward - params.speed * turn])
+    return jnp.clip(wheels, -1000.0, 1000.0)
+
+
+def test_vehicle_on_perception_helpers_is_bit_for_bit_the_inline_one():
+    # Readings around each threshold of the proximity ramp and the centroid's range, one batch.
+    rng = np.random.default_rng(0)
+    n = 512
+    levels = np.array([0.0, 99.0, 100.0, 101.0, 350.0, 599.0, 600.0, 601.0, 4095.0])
+    ir = rng.choice(levels, (n, 8)) * rng.choice([1.0, rng.uniform(0.5, 1.5)], (n, 8))
+    pc = jax.vmap(lambda i, b, c: F.percept(0, ir=i, blue_pixels=b, centroid=c))(
+        jnp.asarray(ir, jnp.float32),
+        jnp.asarray(rng.integers(0, 3, n), jnp.int32),
+        jnp.asarray(rng.uniform(0.0, 14.0, n), jnp.float32),
+    )
+    params = braitenberg_params(speed=900.0, avoid=1.7, steer=1.3)  # some wheels clip
+    both = jax.jit(
+        jax.vmap(
+            lambda pc: (BRAITENBERG.act(jax.random.key(0), 0, pc, params)[1],
+                        _vehicle_as_first_written(pc, params))
+        )
+    )  # fmt: skip
+    got, want = both(pc)
+    np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+    assert np.any(np.abs(np.asarray(got)) == 1000.0)

@@ -153,8 +153,9 @@ def test_defaults_match_spec():
     assert (p.rho, p.phi, p.initial_clones, p.idiotope_period) == (8.0, 20.0, 1000.0, 120)
     # The penalties of SPEC 6 (Table 2's text): 0.5 with idiotypic selection, 1.0 without.
     assert (p.penalty_idiotypic, p.penalty_non_idiotypic) == (0.5, 1.0)
-    # idiotope_period is static: ten float leaves, the period lives in the treedef.
-    assert len(jax.tree_util.tree_leaves(p)) == 10
+    # idiotope_period is static: every other field is a leaf, the period lives in the treedef.
+    assert len(jax.tree_util.tree_leaves(p)) == len(nw.BOUNDS)
+    assert jax.tree.structure(p) != jax.tree.structure(p.replace(idiotope_period=60))
     assert p.replace(k1=0.5).k1 == 0.5
 
 
@@ -367,7 +368,7 @@ HAND_EPS_ALL, HAND_DELTA_ALL = [0.125, 0.375, 0.875], [0.875, 0.75, 0.875]
 
 def _check_hand_worked(alpha_on_self, eps_want, delta_want, s2_want, N0_want, beta_want):
     C = concentrations(HAND_N, 6.0)
-    eps, delta = stimulation_suppression(HAND_P, HAND_I, C, 0, 1.0, 1.0, alpha_on_self)
+    eps, delta = stimulation_suppression(HAND_P, HAND_I, C, 0, HAND_PARAMS, alpha_on_self)
     np.testing.assert_allclose(eps, eps_want, rtol=1e-6)
     np.testing.assert_allclose(delta, delta_want, rtol=1e-6)
     alpha, beta, N_new = idiotypic_select_reading(
@@ -423,8 +424,8 @@ def test_select_floors_clones_at_zero():
 )
 def test_alpha_own_eps_and_delta_are_zero_by_default(P, N, I, n):
     C = concentrations(N, PARAMS.Phi)
-    eps, delta = stimulation_suppression(P, I, C, n, PARAMS.k1, PARAMS.k2)
-    eps_all, delta_all = stimulation_suppression(P, I, C, n, PARAMS.k1, PARAMS.k2, True)
+    eps, delta = stimulation_suppression(P, I, C, n, PARAMS)
+    eps_all, delta_all = stimulation_suppression(P, I, C, n, PARAMS, True)
     assert float(eps[n]) == 0.0 and float(delta[n]) == 0.0
     others = np.arange(X) != n
     np.testing.assert_array_equal(np.asarray(eps)[others], np.asarray(eps_all)[others])
@@ -444,7 +445,7 @@ def test_select_reference(seed, alpha_on_self):
         P, I, N, m, params.b, params.k1, params.k2, params.k3, params.Phi, alpha_on_self
     )
     C = concentrations(N, params.Phi)
-    eps, delta = stimulation_suppression(P, I, C, n, params.k1, params.k2, alpha_on_self)
+    eps, delta = stimulation_suppression(P, I, C, n, params, alpha_on_self)
     np.testing.assert_allclose(eps, eps_ref, rtol=1e-4, atol=1e-7)
     np.testing.assert_allclose(delta, delta_ref, rtol=1e-4, atol=1e-7)
     assert (int(alpha), int(beta)) == (n, p)

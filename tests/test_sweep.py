@@ -116,6 +116,19 @@ def test_parse_axis_errors_say_what_is_wrong(spec, message):
         sweep.parse_axis(spec)
 
 
+def test_axes_and_their_users_are_read_from_the_declarations():
+    # The paper's systems: eqs (5)-(10) are SIE's and UIE's, the stage-1 penalty SRL's and
+    # URL's, eq (4) every learning system's; bouts and penalty counts are every system's.
+    assert sweep.USED_BY["k1"] == sweep.USED_BY["alpha_on_self"] == ("SIE", "UIE")
+    assert sweep.USED_BY["penalty_non_idiotypic"] == ("SRL", "URL")
+    assert sweep.USED_BY["sigma0_floor"] == ("SIE", "SRL", "UIE", "URL")
+    assert {"hold", "encounter_gap", "count_encounters"} <= set(sweep.PARAMETERS)
+    assert not {"hold", "encounter_gap", "count_encounters"} & set(sweep.USED_BY)
+    for name in ("rho", "phi", "idiotope_period"):  # seeding-only, or compiled in
+        assert name in sweep.FIXED and name not in sweep.PARAMETERS
+    assert sweep.parse_axis("count_encounters=0,1")[1].tolist() == [False, True]
+
+
 def test_grid_points_are_the_product_with_the_last_axis_fastest():
     axes = [("k1", np.array([0.5, 1.0])), ("hold", np.array([1, 2, 3], np.int32))]
     points = sweep.grid_points(axes)

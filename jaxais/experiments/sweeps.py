@@ -34,28 +34,13 @@ from jaxais.io import RUN_BYTES, Run, atomic_write_json, check_memory, open_run
 from jaxais.labels import SYSTEMS, label, parse_label
 from jaxais.loop import EpisodeConfig
 from jaxais.runner import run_pool, segment_length
-from jaxais.systems import PARAMETERS, system_params, with_params
+from jaxais.systems import FIXED, PARAMETERS, USED_BY, system_params, with_params
 from jaxais.trials import batch_keys, run_trials, trial_records
 
-_IDIOTYPIC = ("k1", "k2", "k3", "b", "Phi", "initial_clones", "penalty_idiotypic", "alpha_on_self")
-USED_BY: dict[str, tuple[str, ...]] = {
-    **dict.fromkeys(_IDIOTYPIC, ("SIE", "UIE")),
-    "penalty_non_idiotypic": ("SRL", "URL"),
-    "sigma0_floor": ("SIE", "SRL", "UIE", "URL"),  # eq (4): the learning systems
-}  # the systems that use a parameter, where not all do (a penalty ends HDC's bout too)
+# The axes' names, the systems that use each (USED_BY) and those that cannot be axes (FIXED)
+# are read from the parameters' declarations (jaxais.systems).
 MAX_AXIS = 10**6  # values of one axis at most (the grid's size is bounded by its memory)
 _WHOLE = {int: (np.int32, "an integer parameter"), bool: (bool, "a switch, 0 (off) or 1 (on)")}
-
-_SEEDING = (
-    "rho and phi set the seeded paratopes (eqs 1-2) before the trials start; build the system "
-    "with other NetworkParams instead"
-)
-STATIC: dict[str, str] = {
-    "idiotope_period": "NetworkParams.idiotope_period is a loop schedule, fixed when the "
-    "program is compiled; run one sweep per value",
-    "rho": _SEEDING,
-    "phi": _SEEDING,
-}  # parameters that look sweepable but are not traced, and why
 
 # Summarised per point (c capped at 100): name -> its outcome array.
 METRICS = {"tau": "tau", "c": "collisions_capped", "f": "fitness", "trapped_s": "trapped_s"}
@@ -69,8 +54,8 @@ def parse_axis(spec: str) -> tuple[str, np.ndarray]:
     name = name.strip()
     if not sep or not values.strip():
         raise ValueError(f"--grid {spec!r}: write NAME=START:STOP:COUNT or NAME=V1,V2,...")
-    if name in STATIC:
-        raise ValueError(f"--grid {name}: not traced ({STATIC[name]})")
+    if name in FIXED:
+        raise ValueError(f"--grid {name}: not traced ({FIXED[name]})")
     if name not in PARAMETERS:
         raise ValueError(f"--grid {name}: unknown parameter (one of {', '.join(PARAMETERS)})")
     kind = PARAMETERS[name][1]

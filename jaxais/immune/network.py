@@ -8,17 +8,87 @@ callers vmap over robots, trials and grids. Readings decided here (SPEC 7 has th
 - Eq (4) is not clipped; a column of mean 0 is left unchanged [ours: guard].
 - Eqs (7)-(8) sum over the sets i != n of the stage-1 winner (section 4.3: alpha acts on "the
   other antibodies"); ``alpha_on_self=True`` keeps the earlier reading that also summed i = n.
+  They are one replaceable function (:data:`Interaction`), the paper's by default.
 - After eq (9), "using (1)" and "using (2)" are read as eqs (5) and (6); clones floored at 0 [ours].
 - Ties in both selection stages are broken uniformly at random [ours].
 """
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Callable
+from typing import Any
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxais.envs.struct import pytree_dataclass, static_field
+from jaxais.envs.struct import pytree_dataclass
+
+
+@dataclasses.dataclass(frozen=True)
+class Param:
+    """A parameter field's declaration (its ``metadata["param"]``, made by :func:`param`).
+
+    Attributes:
+        help: what it is, with the equation or SPEC section.
+        mechanism: the part of the network that reads it; :data:`jaxais.systems.MECHANISMS`
+            maps each to the systems that have that part (e.g. ``"idiotypic"``: SIE, UIE).
+        kind: float, int or bool: a sweep's values are of this type.
+        bound: the valid [low, high] (None: a switch); float32's smallest normal for "> 0".
+        unit: what an int counts (error messages), or None.
+        fixed: why it is not a sweep's or an optimiser's variable (None: it is one).
+        static: not a pytree leaf but part of the compiled program (a loop schedule).
+    """
+
+    help: str
+    mechanism: str
+    kind: type = float
+    bound: tuple[float, float] | None = None
+    unit: str | None = None
+    fixed: str | None = None
+    static: bool = False
+
+
+def param(
+    default: Any,
+    *,
+    help: str,
+    mechanism: str,
+    kind: type = float,
+    bound: tuple[float, float] | None = None,
+    unit: str | None = None,
+    fixed: str | None = None,
+    static: bool = False,
+) -> Any:
+    """A parameter field with ``default`` and its :class:`Param` declaration (the arguments).
+
+    The bounds, the sweepable parameters and the systems that use each (:data:`BOUNDS`,
+    :data:`jaxais.systems.PARAMETERS`, :data:`jaxais.systems.USED_BY`) are read from these.
+    """
+    if static and fixed is None:
+        raise ValueError("a static parameter is compiled in: say why in fixed=")
+    declaration = Param(help, mechanism, kind, bound, unit, fixed, static)
+    # "static" is pytree_dataclass's marker for a field kept out of the leaves.
+    return dataclasses.field(default=default, metadata={"param": declaration, "static": static})
+
+
+def declared(cls: Any) -> dict[str, Param]:
+    """The :func:`param` fields of a dataclass (or of an instance's class), in field order."""
+    return {f.name: f.metadata["param"] for f in dataclasses.fields(cls) if "param" in f.metadata}
+
+
+def bounds(cls: Any) -> dict[str, tuple[float, float]]:
+    """Each bounded traced field's valid [low, high], in field order (:data:`BOUNDS` for
+    :class:`NetworkParams`; a subclass's own fields too)."""
+    return {n: p.bound for n, p in declared(cls).items() if p.bound and not p.static}
+
+
+_POSITIVE = float(np.finfo(np.float32).tiny)  # "> 0" as a closed bound
+_SEEDING = (
+    "rho and phi set the seeded paratopes (eqs 1-2) before the trials start; build the system "
+    "with other NetworkParams instead"
+)
 
 
 @pytree_dataclass
@@ -26,28 +96,39 @@ class NetworkParams:
     """Constants of the idiotypic network [paper, SPEC 7]: traced leaves (a batch of constants
     is one vmap) but for the static ``idiotope_period``. Build with :func:`network_params`, which
     validates (concrete values, outside jit); inside jit, :meth:`clip_valid` keeps proposed values
-    in :data:`BOUNDS`.
-
-    Attributes:
-        b, k3: clone production and death rate of eq (5). k1, k2: eqs (7), (8).
-        Phi: eq (6)'s scale. rho: eq (1)'s collision weight. phi: eq (2)'s scale.
-        initial_clones: clones per antibody as the STL starts.
-        penalty_idiotypic, penalty_non_idiotypic: paratope a penalty removes from the acting
-            antibody, with and without idiotypic selection (SPEC 6).
-        idiotope_period: iterations between idiotope redraws (eq 3).
+    in :data:`BOUNDS`. Each field declares its range, help and mechanism (:func:`param`); a new
+    constant is one such field (or a subclass's) and the equation that reads it.
     """
 
-    b: float = 100.0
-    k1: float = 0.85
-    k2: float = 1.10
-    k3: float = 0.0
-    Phi: float = 25.0
-    rho: float = 8.0
-    phi: float = 20.0
-    initial_clones: float = 1000.0
-    penalty_idiotypic: float = 0.5
-    penalty_non_idiotypic: float = 1.0
-    idiotope_period: int = static_field(default=120)
+    # fmt: off
+    b: float = param(100.0, bound=(0.0, np.inf), mechanism="idiotypic",
+                     help="clone production rate, eq (5)")
+    k1: float = param(0.85, bound=(0.0, np.inf), mechanism="idiotypic",
+                      help="stimulation rate, eq (7)")
+    k2: float = param(1.10, bound=(0.0, np.inf), mechanism="idiotypic",
+                      help="suppression rate, eq (8)")
+    k3: float = param(0.0, bound=(0.0, 1.0), mechanism="idiotypic",
+                      help="clone death rate, eq (5)")
+    Phi: float = param(25.0, bound=(_POSITIVE, np.inf), mechanism="idiotypic",
+                       help="concentration scale, eq (6)")
+    rho: float = param(8.0, bound=(0.0, np.inf), mechanism="seeding", fixed=_SEEDING,
+                       help="collision weight in the relative fitness, eq (1)")
+    phi: float = param(20.0, bound=(_POSITIVE, np.inf), mechanism="seeding", fixed=_SEEDING,
+                       help="scale of the seeded paratopes, eq (2)")
+    initial_clones: float = param(1000.0, bound=(_POSITIVE, np.inf), mechanism="idiotypic",
+                                  help="clones per antibody as the STL starts")
+    penalty_idiotypic: float = param(0.5, bound=(0.0, np.inf), mechanism="idiotypic",
+                                     help="paratope a penalty removes from the acting "
+                                     "antibody with idiotypic selection (SPEC 6)")
+    penalty_non_idiotypic: float = param(1.0, bound=(0.0, np.inf), mechanism="non_idiotypic",
+                                         help="paratope a penalty removes from the acting "
+                                         "antibody with stage 1 alone (SPEC 6)")
+    idiotope_period: int = param(120, kind=int, bound=(1, np.inf), mechanism="idiotypic",
+                                 help="iterations between idiotope redraws, eq (3)",
+                                 static=True, fixed="NetworkParams.idiotope_period is a loop "
+                                 "schedule, fixed when the program is compiled; run one sweep "
+                                 "per value")
+    # fmt: on
 
     def validate(self) -> NetworkParams:
         """``self`` once every range holds (elementwise; concrete values, not under jit).
@@ -55,44 +136,38 @@ class NetworkParams:
         Raises:
             ValueError: one line naming the first bad field.
         """
-        for name, (low, high) in BOUNDS.items():
+        cls = type(self).__name__
+        for name, (low, high) in bounds(self).items():
             try:
                 value = np.asarray(getattr(self, name), dtype=np.float64)
             except (TypeError, ValueError):
                 raise ValueError(
-                    f"NetworkParams.{name} must be a number, got {getattr(self, name)!r:.40}"
+                    f"{cls}.{name} must be a number, got {getattr(self, name)!r:.40}"
                 ) from None
             if not np.all((value >= low) & (value <= high)):  # NaN fails too
                 rule = "> 0" if low == _POSITIVE else f">= {low:g}"
                 rule = f"in [{low:g}, {high:g}]" if high < np.inf else rule
-                raise ValueError(f"NetworkParams.{name} must be {rule}, got {value}")
-        period = self.idiotope_period
-        if isinstance(period, bool) or not isinstance(period, int | np.integer) or period < 1:
-            raise ValueError(f"NetworkParams.idiotope_period must be an int >= 1, got {period!r}")
+                raise ValueError(f"{cls}.{name} must be {rule}, got {value}")
+        for name, declaration in declared(self).items():
+            if declaration.static:  # a schedule: a Python int (it fixes the program)
+                value, low = getattr(self, name), declaration.bound[0]
+                whole = isinstance(value, int | np.integer) and not isinstance(value, bool)
+                if not whole or value < low:
+                    raise ValueError(f"{cls}.{name} must be an int >= {low}, got {value!r}")
         return self
 
     def clip_valid(self) -> NetworkParams:
         """A copy with each float constant clipped into :data:`BOUNDS`: jit-safe, for values an
         optimiser proposes (NaN stays NaN); host values stay on the host."""
         clip = lambda v, lo, hi: (jnp if isinstance(v, jax.Array) else np).clip(v, lo, hi)
-        return self.replace(**{k: clip(getattr(self, k), *BOUNDS[k]) for k in BOUNDS})
+        valid = bounds(self)
+        return self.replace(**{k: clip(getattr(self, k), *valid[k]) for k in valid})
 
 
-_POSITIVE = float(np.finfo(np.float32).tiny)  # "> 0" as a closed bound
-BOUNDS: dict[str, tuple[float, float]] = {
-    "b": (0.0, np.inf),
-    "k1": (0.0, np.inf),
-    "k2": (0.0, np.inf),
-    "k3": (0.0, 1.0),
-    "Phi": (_POSITIVE, np.inf),
-    "rho": (0.0, np.inf),
-    "phi": (_POSITIVE, np.inf),
-    "initial_clones": (_POSITIVE, np.inf),
-    "penalty_idiotypic": (0.0, np.inf),
-    "penalty_non_idiotypic": (0.0, np.inf),
-}
-"""Each float constant's valid range [low, high] (float32's smallest normal number for "> 0"):
-what ``validate`` checks, ``clip_valid`` clips to, and an optimiser may read."""
+BOUNDS: dict[str, tuple[float, float]] = bounds(NetworkParams)
+"""Each float constant's valid range [low, high] (float32's smallest normal number for "> 0"),
+read from the fields: what ``validate`` checks, ``clip_valid`` clips to, and an optimiser may
+read."""
 
 
 def network_params(**overrides: float | int) -> NetworkParams:
@@ -179,27 +254,46 @@ def select_alpha(u: jax.Array, P: jax.Array, antigen: jax.Array | int) -> jax.Ar
     return argmax_ties(jnp.asarray(P, jnp.float32)[:, antigen], u)
 
 
+def acted_on(x: int, n: jax.Array | int, alpha_on_self: jax.Array | bool = False) -> jax.Array:
+    """[x] bool: the sets alpha's set ``n`` stimulates and suppresses in eqs (7)-(8), every set
+    but n (section 4.3, "the other antibodies"), or all of them with ``alpha_on_self``."""
+    return (jnp.arange(x) != n) | alpha_on_self
+
+
 def stimulation_suppression(
     P: jax.Array,
     I: jax.Array,
     C: jax.Array,
     n: jax.Array | int,
-    k1: float,
-    k2: float,
+    params: NetworkParams,
     alpha_on_self: jax.Array | bool = False,
 ) -> tuple[jax.Array, jax.Array]:
-    """Eqs (7)-(8): stimulation eps [x] and suppression delta [x] of each set by alpha's set n.
+    """Eqs (7)-(8), the paper's :data:`Interaction`: stimulation eps [x] and suppression
+    delta [x] of each set by alpha's set n.
 
     eps_i = k1 * sum_j (1 - P_ij) I_nj C_ij C_nj and delta_i = k2 * sum_j P_nj I_ij C_ij C_nj
-    for i != n, 0 for n unless ``alpha_on_self`` (traced). P, I, C [x, y]: C before the update.
+    for the sets :func:`acted_on` (0 for the others). P, I, C [x, y]: C before the update.
     """
     P = jnp.asarray(P, jnp.float32)
     I = jnp.asarray(I, jnp.float32)
     C = jnp.asarray(C, jnp.float32)
-    acted_on = (jnp.arange(P.shape[0]) != n) | alpha_on_self
-    eps = k1 * jnp.sum((1.0 - P) * I[n] * C * C[n], axis=1)
-    delta = k2 * jnp.sum(P[n] * I * C * C[n], axis=1)
-    return jnp.where(acted_on, eps, 0.0), jnp.where(acted_on, delta, 0.0)
+    on = acted_on(P.shape[0], n, alpha_on_self)
+    eps = params.k1 * jnp.sum((1.0 - P) * I[n] * C * C[n], axis=1)
+    delta = params.k2 * jnp.sum(P[n] * I * C * C[n], axis=1)
+    return jnp.where(on, eps, 0.0), jnp.where(on, delta, 0.0)
+
+
+Interaction = Callable[
+    [jax.Array, jax.Array, jax.Array, jax.Array, NetworkParams, jax.Array | bool],
+    tuple[jax.Array, jax.Array],
+]
+"""Eqs (7)-(8) as a replaceable function (an argument of :func:`idiotypic_select` and
+:func:`jaxais.controllers.stl_controller`; the paper's is :func:`stimulation_suppression`):
+``interaction(P, I, C, n, params, alpha_on_self) -> (eps [x], delta [x])`` with P, I, C [x, y]
+float32 (C of the clones before eq 5), n alpha's set (int32), ``params`` the system's
+:class:`NetworkParams` (traced; a subclass carries a variant's own constants) and
+``alpha_on_self`` a traced bool (:func:`acted_on`). Pure and shape-preserving: it runs inside
+the trials' compiled loop, once per selection."""
 
 
 def stage2_stimulus(
@@ -234,6 +328,7 @@ def idiotypic_select(
     antigen: jax.Array | int,
     params: NetworkParams,
     alpha_on_self: jax.Array | bool = False,
+    interaction: Interaction = stimulation_suppression,
 ) -> tuple[jax.Array, jax.Array, jax.Array]:
     """Three-stage idiotypic selection (eqs 5-10): alpha (stage 1), S2 and the antigen's clone
     column (eqs 5, 7-9), beta the highest activation (eq 10); alpha != beta is an idiotypic
@@ -243,6 +338,7 @@ def idiotypic_select(
         u: [2 * x] uniforms, stage 1's tie-breaks then stage 3's, sliced from the controller's
             one draw per iteration; ``u[:x]`` alone gives the same alphas as stage 1 alone.
         P, I, N: [x, y] paratopes, idiotopes, clone counts.
+        interaction: eqs (7)-(8), an :data:`Interaction` (default the paper's).
 
     Returns:
         alpha, beta (int32), and N [x, y] with column ``antigen`` updated.
@@ -251,9 +347,7 @@ def idiotypic_select(
     N = jnp.asarray(N, jnp.float32)
     x = P.shape[0]
     alpha = select_alpha(u[:x], P, antigen)
-    eps, delta = stimulation_suppression(
-        P, I, concentrations(N, params.Phi), alpha, params.k1, params.k2, alpha_on_self
-    )
+    eps, delta = interaction(P, I, concentrations(N, params.Phi), alpha, params, alpha_on_self)
     s2 = stage2_stimulus(P, eps, delta, antigen)
     N_new = update_clones(N, s2, antigen, params.b, params.k3)
     beta = argmax_ties(activation(N_new, s2, antigen, params.Phi), u[x:])

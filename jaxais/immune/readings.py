@@ -7,10 +7,14 @@ leaves: runs with different readings share one compiled program.
 
 from __future__ import annotations
 
+import dataclasses
+from typing import Any
+
 import jax.numpy as jnp
 import numpy as np
 
 from jaxais.envs.struct import pytree_dataclass
+from jaxais.immune.network import Param, declared, param
 
 HOLD = 31
 """Iterations a selected behaviour acts, about 1 s [ours]: a reverse turn then backs out of IR
@@ -29,45 +33,60 @@ antibodies"); True, the earlier reading, keeps the idiotypic difference rate nea
 
 @pytree_dataclass
 class Readings:
-    """The readings (scalars, or [n] under ``vmap``).
-
-    Attributes:
-        hold: :data:`HOLD` (a new obstacle or collision interrupts it).
-        count_encounters: the obstacle penalty counts encounters, not iterations
-            (:func:`~jaxais.immune.reinforcement.update_penalty`).
-        encounter_gap: :data:`ENCOUNTER_GAP`.
-        sigma0_floor: :data:`SIGMA0_FLOOR`. alpha_on_self: :data:`ALPHA_ON_SELF`.
+    """The readings (scalars, or [n] under ``vmap``); build with :func:`readings`. Each field
+    declares its default, range, help and mechanism (:func:`~jaxais.immune.network.param`).
     """
 
-    hold: jnp.ndarray
-    count_encounters: jnp.ndarray
-    encounter_gap: jnp.ndarray
-    sigma0_floor: jnp.ndarray
-    alpha_on_self: jnp.ndarray
+    # fmt: off
+    hold: jnp.ndarray = param(HOLD, kind=int, bound=(1, np.inf), unit="iterations",
+                              mechanism="every", help="iterations a selected behaviour acts "
+                              "unless a new obstacle or collision interrupts it (HOLD)")
+    count_encounters: jnp.ndarray = param(True, kind=bool, mechanism="every",
+                                          help="the obstacle penalty counts encounters, not "
+                                          "iterations (reinforcement.update_penalty)")
+    encounter_gap: jnp.ndarray = param(ENCOUNTER_GAP, kind=int, bound=(1, np.inf),
+                                       unit="iterations", mechanism="every",
+                                       help="clear iterations that end a run of obstacle "
+                                       "encounters (ENCOUNTER_GAP)")
+    sigma0_floor: jnp.ndarray = param(SIGMA0_FLOOR, bound=(0.0, 1.0), mechanism="learning",
+                                      help="floor on eq (4)'s initial column means "
+                                      "(SIGMA0_FLOOR)")
+    alpha_on_self: jnp.ndarray = param(ALPHA_ON_SELF, kind=bool, mechanism="idiotypic",
+                                       help="eqs (7)-(8) also sum alpha's own set "
+                                       "(ALPHA_ON_SELF)")
+    # fmt: on
 
 
-def readings(
-    hold: int = HOLD,
-    count_encounters: bool = True,
-    encounter_gap: int = ENCOUNTER_GAP,
-    sigma0_floor: float = SIGMA0_FLOOR,
-    alpha_on_self: bool = ALPHA_ON_SELF,
-) -> Readings:
-    """A validated :class:`Readings` (defaults: ours; ValueError names a bad value)."""
-    for name, value in (("hold", hold), ("encounter_gap", encounter_gap)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise ValueError(f"{name} must be an int >= 1 (iterations), got {value!r}")
-    if not 0.0 <= sigma0_floor <= 1.0:
-        raise ValueError(f"sigma0_floor must lie in [0, 1], got {sigma0_floor!r}")
-    for name, flag in (("count_encounters", count_encounters), ("alpha_on_self", alpha_on_self)):
-        if not isinstance(flag, bool | np.bool_):
-            raise ValueError(f"{name} must be True or False, got {flag!r}")
+_DTYPES = {int: np.int32, bool: np.bool_, float: np.float32}  # a reading's leaf per kind
+
+
+def _checked(name: str, value: Any, declaration: Param) -> np.ndarray:
+    """``value`` as its leaf; ValueError (one line) when it is not of its kind and range."""
+    kind, (low, high) = declaration.kind, declaration.bound or (-np.inf, np.inf)
+    if kind is bool:
+        if not isinstance(value, bool | np.bool_):
+            raise ValueError(f"{name} must be True or False, got {value!r}")
+    elif kind is int:
+        whole = isinstance(value, int) and not isinstance(value, bool)
+        if not whole or not low <= value <= high:
+            rule = f">= {low}" if high == np.inf else f"in [{low}, {high}]"
+            unit = f" ({declaration.unit})" if declaration.unit else ""
+            raise ValueError(f"{name} must be an int {rule}{unit}, got {value!r}")
+    elif not low <= value <= high:  # NaN fails too
+        raise ValueError(f"{name} must lie in [{low:g}, {high:g}], got {value!r}")
+    return np.asarray(value, _DTYPES[kind])
+
+
+def readings(**overrides: Any) -> Readings:
+    """A validated :class:`Readings`: the fields' defaults (ours) with ``overrides`` (e.g.
+    ``hold=1``); ValueError names a bad value."""
+    fields = {f.name: f.default for f in dataclasses.fields(Readings)}
+    for name in overrides:
+        if name not in fields:  # as Python says for a keyword argument
+            raise TypeError(f"readings() got an unexpected keyword argument {name!r}")
+    values = fields | overrides
     return Readings(
-        hold=np.asarray(hold, np.int32),
-        count_encounters=np.asarray(count_encounters, bool),
-        encounter_gap=np.asarray(encounter_gap, np.int32),
-        sigma0_floor=np.asarray(sigma0_floor, np.float32),
-        alpha_on_self=np.asarray(alpha_on_self, bool),
+        **{name: _checked(name, values[name], p) for name, p in declared(Readings).items()}
     )
 
 

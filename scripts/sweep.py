@@ -1,25 +1,24 @@
-"""Sweep the STL's parameters (--grid) or the world's noise (--noise): landscapes with 95 % CIs.
+"""Sweep the STL's (or a --contender's) parameters (--grid) or the world's noise (--noise).
 
     python scripts/sweep.py --grid k1=0:2:11 --grid k2=0:2:11 --system SIE --out sweep/
     python scripts/sweep.py --noise 0,0.5,1,2,4 --system SIE,SRL,HDC --world real --out gap/
+    python scripts/sweep.py --grid speed=300:700:5 --contender mine.py:braitenberg --out bv/
 
-Writes DIR/sweep.json and sweep.png or DIR/reality_gap.json and .png (docs/formats.md), the
-same on one process or several (--coordinator); --resume finishes an interrupted run.
+Writes DIR/sweep.json and sweep.png or DIR/reality_gap.json and .png (docs/formats.md): means and
+95 % CIs; the same on one process or several; --resume finishes an interrupted run.
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
-from pathlib import Path
 
 from jaxais import distributed
 from jaxais.cli import ArgumentParser, main_wrapper, run_script
-from jaxais.experiments import protocol
+from jaxais.experiments import contenders, protocol
 from jaxais.labels import RANDOM_SETS, SYSTEMS
 
 
-def parse_args(argv: list[str] | None) -> argparse.Namespace:
+def parse_args(argv: list[str] | None):
     p = ArgumentParser(prog="sweep.py", description=__doc__.split("\n\n")[0])
     what = p.add_mutually_exclusive_group(required=True)
     # fmt: off
@@ -30,9 +29,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--noise-kinds", help="which noise --noise scales (default: ir,camera,wheel)")
     p.add_argument("--system", help=f"one (--grid; default SIE) or more (--noise; default "
                    f"SIE,SRL,HDC) of {', '.join(SYSTEMS)}")
+    contenders.add_argument(p, repeatable=False)  # instead of --system: --grid over its params
     p.add_argument("--random-set", choices=tuple(RANDOM_SETS), default=None)
-    p.add_argument("--world", help=f"{', '.join(protocol.WORLDS)} or a .toml path "
-                   f"(default: world1 with --grid, {protocol.REAL_WORLD} with --noise)")
+    p.add_argument("--world", help="a world's name or .toml path (default: world1 with --grid, "
+                   f"{protocol.REAL_WORLD} with --noise)")
     p.add_argument("--trials", type=int, help="trials per point (default: the paper's count)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--seeds", default=None, help="LTL seed directory (default: the shipped one)")
@@ -64,16 +64,16 @@ def main(argv: list[str] | None = None) -> None:
         system=args.system, random_set=args.random_set, world=args.world, trials=args.trials,
         seed=args.seed, seeds=args.seeds, tau_cap=args.tau_cap, collision_cap=args.collision_cap,
         slots=args.slots, command=command, resume=args.resume, records=args.records,
+        contender=args.contender,
     )  # fmt: skip
     if jax.process_index() != 0:  # process 0 reports
         return
-    if args.grid:
-        its = doc["robot_iterations_per_s"] / 1e6
-        what, name = f"{doc['runs']} runs ({its:.2f} M robot-iterations/s)", "sweep.json"
-    else:
+    its = doc.get("robot_iterations_per_s", 0) / 1e6
+    what, name = f"{doc.get('runs')} runs ({its:.2f} M robot-iterations/s)", "sweep.json"
+    if not args.grid:
         what, name = f"{len(doc['scales'])} levels x {doc['trials']} trials", "reality_gap.json"
     print(f"{doc['system']} in {doc['world']}: {what} in {doc['wall_s_total']:.0f} s, compile "
-          f"included; wrote {Path(args.out) / name} and its figure")  # fmt: skip
+          f"included; wrote {name} and its figure in {args.out}")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -144,9 +144,9 @@ def test_scripts_take_their_worlds_and_defaults_from_the_protocol(
     assert args.worlds == "world2,world1"
     assert args.tau_cap == 123.0 and args.collision_cap == 9
     with pytest.raises(SystemExit) as exit_:
-        script.main(["--out", out, "--worlds", "real"])  # a paper world, not this protocol's
+        script.main(["--out", out, "--worlds", "mars"])
     assert exit_.value.code == 2
-    assert "unknown world(s) ['real'] (choose from world2, world1)" in capsys.readouterr().err
+    assert "unknown world(s) ['mars'] (the paper's: world2, world1;" in capsys.readouterr().err
 
 
 def test_trials_script_takes_its_defaults_from_the_protocol(changed_protocol, tmp_path):

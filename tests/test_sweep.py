@@ -169,7 +169,12 @@ SWEEP_ERRORS = [
     (dict(noise=[1.0], system="SIE,SIE"), "--system names a system twice"),
     (dict(noise=[1.0], system=""), "unknown system ''"),
     (dict(noise=[1.0], world=""), "no such world file"),
-]
+    (dict(noise=[1.0], contender="examples/braitenberg.py:braitenberg"), "sweeps a --grid"),
+    (dict(grid=["speed=1"], system="SIE", contender="x.py:y"), "--contender replaces --system"),
+    (dict(grid=["k1=1"], contender="examples/braitenberg.py:braitenberg"),
+     "unknown parameter of the contender (one of avoid, speed, steer)"),
+    (dict(grid=["speed=1"], contender="none.py:x"), "no such file none.py"),
+]  # fmt: skip
 
 
 def test_sweep_refuses_what_it_would_run_wrongly_or_not_at_all(tmp_path):
@@ -205,6 +210,42 @@ def test_sweep_points_are_plain_trials_with_the_points_constants():
         assert point["idiotypic_difference_rate"]["mean"] == pytest.approx(rate, rel=1e-6)
     assert doc["base_values"] == {"k1": pytest.approx(0.85)}
     assert doc["robot_iterations"] > 0 and doc["robot_iterations_per_s"] > 0
+
+
+BV = "BV=examples/braitenberg.py:braitenberg"  # a contender from a user's file
+
+
+def test_a_contenders_parameters_are_named_by_their_key_paths():
+    params = {"gain": np.float32(1.5), "net": {"w": np.zeros(3, np.float32)}, "on": np.bool_(1)}
+    params["n"] = np.int32(4)
+    assert sweep.leaf_kinds(params) == {"gain": float, "n": int, "on": bool}  # scalars only
+    stacked = sweep.point_params(params, [{"gain": 2.0}, {"gain": 3.0, "n": 7}])
+    assert stacked["gain"].dtype == np.float32 and stacked["gain"].tolist() == [2.0, 3.0]
+    assert stacked["n"].dtype == np.int32 and stacked["n"].tolist() == [4, 7]
+    assert stacked["net"]["w"].shape == (2, 3)  # the rest repeated per point
+    assert sweep.parse_axis("n=1,2", sweep.leaf_kinds(params))[1].dtype == np.int32
+    with pytest.raises(ValueError, match=r"unknown parameter of the contender \(one of gain, "):
+        sweep.parse_axis("k1=1,2", sweep.leaf_kinds(params))
+
+
+@pytest.mark.slow
+def test_a_contenders_sweep_points_are_its_plain_trials():
+    """A grid over a contender's ``speed``: each point's runs are run_trials' of the contender
+    with that speed, on its label's streams (common random numbers)."""
+    from jaxais.experiments.contenders import load_spec
+    from jaxais.trials import run_trials
+
+    bv = load_spec(BV)
+    axes = [("speed", np.array([500.0, 650.0], np.float32))]
+    doc = sweep.run_sweep(F.world(), bv.params, "BV", axes, N, 3, F.CONFIG, F.sim_params(),
+                          slots=1, records=True, controller=bv.controller)  # fmt: skip
+    assert doc["base_values"] == {"speed": 500.0}
+    for point in doc["points"]:
+        params = bv.params | {"speed": np.float32(point["values"]["speed"])}
+        plain = run_trials(F.world(), {"BV": params}, N, 3, F.CONFIG, F.sim_params(),
+                           controller=bv.controller)["BV"].records  # fmt: skip
+        assert [r["tau"] for r in point["trials"]] == [r["tau"] for r in plain]
+        assert [r["collisions"] for r in point["trials"]] == [r["collisions"] for r in plain]
 
 
 def test_point_summary_intervals_by_hand():

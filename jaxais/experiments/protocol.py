@@ -126,16 +126,20 @@ def check_caps(tau_cap: float | None, collision_cap: int | None) -> tuple[float,
 
 def check_worlds(worlds: str | Sequence[str] | None) -> list[str]:
     """``--worlds`` (comma-separated or a sequence; None: all the paper's) as a list: the
-    paper's worlds by name, or world files (``PATH.toml``, run with the simulated worlds'
-    protocol), each named once (one-line ValueError otherwise)."""
+    paper's worlds, other worlds by name (``envs.world_names()``: built-in or on
+    ``JAXAIS_WORLDS``) or world files (``PATH.toml``), the others run with the simulated worlds'
+    protocol; each named once (one-line ValueError otherwise)."""
+    from jaxais.baselines.config import world_names_module  # JAX-free
+
     names = WORLDS if worlds is None else worlds
     names = [w for w in names.split(",") if w] if isinstance(names, str) else list(names)
     names = [str(w) for w in names]
-    unknown = sorted(w for w in names if w not in WORLDS and not is_world_file(w))
+    known = set(WORLDS) | set(world_names_module().world_names())
+    unknown = sorted(w for w in names if w not in known and not is_world_file(w))
     if unknown or not names:
         raise ValueError(
-            f"--worlds: unknown world(s) {unknown} (choose from {', '.join(WORLDS)}, or give a "
-            "world file PATH.toml)"
+            f"--worlds: unknown world(s) {unknown} (the paper's: {', '.join(WORLDS)}; or a world "
+            "by name, envs.world_names(), or a world file PATH.toml)"
         )
     if len(set(names)) < len(names):
         raise ValueError(f"--worlds names a world twice: {','.join(names)}")

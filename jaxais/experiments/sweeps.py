@@ -47,18 +47,22 @@ METRICS = {"tau": "tau", "c": "collisions_capped", "f": "fitness", "trapped_s": 
 PAPER_POINT = {"k1": 0.85, "k2": 1.10}  # [paper] section 5: ~20 % idiotypic difference rate
 
 
-def parse_axis(spec: str) -> tuple[str, np.ndarray]:
+def parse_axis(spec: str, kinds: dict[str, type] | None = None) -> tuple[str, np.ndarray]:
     """``"k1=0:2:11"`` (11 points from 0 to 2) or ``"k1=0.5,0.85,1.1"`` -> (name, values); a
-    switch (``alpha_on_self=0,1``) takes 0 and 1. ValueError (one line) on a bad spec."""
+    switch (``alpha_on_self=0,1``) takes 0 and 1. ``kinds``: a contender's parameters, name ->
+    float, int or bool (:func:`leaf_kinds`); default the STL's. ValueError (one line) on a bad
+    spec."""
     name, sep, values = spec.partition("=")
     name = name.strip()
     if not sep or not values.strip():
         raise ValueError(f"--grid {spec!r}: write NAME=START:STOP:COUNT or NAME=V1,V2,...")
-    if name in FIXED:
+    if kinds is None and name in FIXED:
         raise ValueError(f"--grid {name}: not traced ({FIXED[name]})")
-    if name not in PARAMETERS:
-        raise ValueError(f"--grid {name}: unknown parameter (one of {', '.join(PARAMETERS)})")
-    kind = PARAMETERS[name][1]
+    known = {n: kind for n, (_, kind) in PARAMETERS.items()} if kinds is None else kinds
+    if name not in known:
+        whose = "" if kinds is None else " of the contender"
+        raise ValueError(f"--grid {name}: unknown parameter{whose} (one of {', '.join(known)})")
+    kind = known[name]
     try:
         if ":" in values:
             start, stop, count = values.split(":")
@@ -92,6 +96,38 @@ def grid_points(axes: Sequence[tuple[str, np.ndarray]]) -> list[dict[str, Any]]:
         dict(zip(names, (v.item() for v in combo), strict=True))
         for combo in itertools.product(*(values for _, values in axes))
     ]
+
+
+def _leaves(params: Any) -> dict[str, tuple[Any, Any]]:
+    """A pytree's leaves by key path, ``name -> (path, leaf)``: names join the keys with dots
+    (``speed``, ``network.k1``, ``w.0``)."""
+    named = {}
+    for path, leaf in jax.tree_util.tree_flatten_with_path(params)[0]:
+        keys = [getattr(k, "key", getattr(k, "name", getattr(k, "idx", k))) for k in path]
+        named[".".join(map(str, keys))] = (path, leaf)
+    return named
+
+
+def leaf_kinds(params: Any) -> dict[str, type]:
+    """A contender's sweepable parameters: each scalar leaf's name -> bool, int or float."""
+    kinds = {}
+    for name, (_, leaf) in _leaves(params).items():
+        a = np.asarray(leaf)
+        if a.ndim == 0 and a.dtype.kind in "biuf":
+            kinds[name] = {"b": bool, "i": int, "u": int}.get(a.dtype.kind, float)
+    return kinds
+
+
+def point_params(base: Any, points: Sequence[dict[str, Any]]) -> Any:
+    """A contender's ``base`` params once per point, each named leaf set to the point's value
+    in the leaf's dtype, stacked [P]."""
+    leaves = _leaves(base)
+    by_path = [{leaves[k][0]: v for k, v in point.items()} for point in points]
+
+    def stack(path, b):
+        return np.stack([np.asarray(p.get(path, b), np.asarray(b).dtype) for p in by_path])
+
+    return jax.tree_util.tree_map_with_path(stack, base)
 
 
 def point_systems(base: System, points: Sequence[dict[str, Any]]) -> System:
@@ -166,9 +202,10 @@ def run_sweep(
     progress: Callable[[int], None] | None = None,
     run: Run | None = None,
     records: bool = False,
+    controller: Any = None,
 ) -> dict[str, Any]:
     """Every grid point's ``n_trials`` trials of ``base`` with the point's values, in
-    :func:`chunks` of whole points.
+    :func:`chunks` of whole points: a System, or with ``controller`` a contender's params.
 
     ``label`` names the random streams (as in ``run_trials``); ``axes`` are :func:`parse_axis`'s;
     ``progress`` gets the runs ended; each chunk is a unit of ``run`` (a held one is not rerun);
@@ -176,8 +213,13 @@ def run_sweep(
     :func:`grid_points` order.
     """
     points = grid_points(axes)
-    grid = point_systems(base, points)
-    align = segment_length(config.chunk, int(base.network.idiotope_period))
+    if controller is None:  # the STL: the smallest network that runs the grid
+        grid = point_systems(base, points)
+        controller = stl_for(grid)
+        align = segment_length(config.chunk, int(base.network.idiotope_period))
+    else:
+        grid = point_params(base, points)
+        align = segment_length(config.chunk)
     start = time.perf_counter()
     out_points, iterations = [], 0
     for lo, hi in chunks(len(points), n_trials, slots):
@@ -190,7 +232,7 @@ def run_sweep(
             # Trial i of every point: run_trials' trial i of ``label`` (common random numbers).
             reset_keys, run_keys = batch_keys(seed, ((label, n_trials),) * (hi - lo))
             params = jax.tree.map(lambda a, lo=lo, hi=hi: np.repeat(a[lo:hi], n_trials, 0), grid)
-            res = run_pool(reset_keys, run_keys, params, world, sim_params, stl_for(grid),
+            res = run_pool(reset_keys, run_keys, params, world, sim_params, controller,
                            config, slots=slots, align=align, progress=progress)  # fmt: skip
             got = {"points": [], "iterations": int(np.sum(res["iterations"], dtype=np.int64))}
             for p in range(hi - lo):
@@ -204,7 +246,11 @@ def run_sweep(
         iterations += got["iterations"]
     wall = time.perf_counter() - start
     runs = n_trials * len(points)
-    base_values = system_params(base, [name for name, _ in axes])
+    names = [name for name, _ in axes]
+    if isinstance(base, System):
+        base_values = system_params(base, names)
+    else:
+        base_values = {name: _leaves(base)[name][1] for name in names}
     return {
         "format": FORMATS["sweep"],  # docs/formats.md
         "axes": {name: values.tolist() for name, values in axes},
@@ -314,6 +360,20 @@ def run_noise_sweep(
     }
 
 
+def _contender(contender: Any, grid: Any, system: Any, random_set: Any, seeds: Any) -> Any:
+    """The sweep's contender (:func:`jaxais.experiments.contenders.resolve`'s), or None."""
+    if contender is None:
+        return None
+    if grid is None:
+        raise ValueError("--contender sweeps a --grid of its parameters (--noise runs --system)")
+    if system is not None or random_set or seeds:
+        raise ValueError("--contender replaces --system (and --random-set and --seeds)")
+    from jaxais.experiments.contenders import Contender, resolve
+
+    own = isinstance(contender, str | Contender)  # a spec or a Contender: its own label
+    return resolve([contender] if own else {"contender": contender})[0]
+
+
 def sweep(
     out: str | Path,
     *,
@@ -332,11 +392,16 @@ def sweep(
     command: str | None = None,
     resume: bool = False,
     records: bool = False,
+    contender: Any = None,
 ) -> dict[str, Any]:
     """A grid over the STL's parameters (``grid``: :func:`parse_axis` specs) or the reality gap
     (``noise``: scales of the world's noise, or them comma-separated), written into ``out``
     (missing or empty; ``resume`` finishes an interrupted run) as sweep.json/.png or
     reality_gap.json/.png; returns it.
+
+    ``contender`` (instead of ``system``): a grid over a contender's parameters, named by their
+    key paths in its params pytree (``speed``, ``network.k1``; :func:`leaf_kinds`), given as a
+    spec ``[LABEL=]FILE.py:NAME``, a ``(controller, params)`` tuple or a ``Contender``.
 
     Defaults as ``scripts/sweep.py --help`` says. Under ``jax.distributed`` every process computes
     the same numbers and process 0 writes. ValueError (one line) on a bad argument, before any run.
@@ -359,9 +424,10 @@ def sweep(
         raise ValueError(f"--trials must be >= 1, got {trials}")
     if slots < 1:
         raise ValueError(f"--slots must be >= 1, got {slots}")
+    entrant = _contender(contender, grid, system, random_set, seeds)
     system = ("SIE" if grid is not None else "SIE,SRL,HDC") if system is None else system
-    names = system.split(",")
-    for name in names:
+    names = [entrant.label] if entrant else system.split(",")
+    for name in names if entrant is None else ():
         if name not in SYSTEMS:
             raise ValueError(f"--system: unknown system {name!r} (one of {', '.join(SYSTEMS)})")
     if len(set(names)) < len(names):
@@ -372,14 +438,16 @@ def sweep(
         raise ValueError("--grid sweeps one system: give --system NAME")
     if random_set and not {"UIE", "URL"} & set(names):
         raise ValueError("--random-set applies to UIE and URL only")
-    names = [label(n, random_set or "R1") for n in names]
+    if entrant is None:
+        names = [label(n, random_set or "R1") for n in names]
     if grid is not None:
-        axes = [parse_axis(spec) for spec in grid]
+        own = None if entrant is None else leaf_kinds(entrant.params)
+        axes = [parse_axis(spec, own) for spec in grid]
         axis_names = [name for name, _ in axes]
         if len(set(axis_names)) < len(axis_names):
             raise ValueError(f"--grid names a parameter twice: {', '.join(axis_names)}")
-        code = parse_label(names[0])[0]
-        for name in axis_names:
+        code = parse_label(names[0])[0] if entrant is None else None
+        for name in axis_names if entrant is None else ():  # a contender uses all of its own
             if code not in USED_BY.get(name, SYSTEMS):
                 users = ", ".join(USED_BY[name])
                 raise ValueError(f"--grid {name}: {code} does not use it (only {users} do)")
@@ -400,11 +468,15 @@ def sweep(
     loaded = envs.load_world(world)
     config = EpisodeConfig(tau_cap=tau_cap, collision_cap=collision_cap)
     network = NetworkParams()
-    systems, seed_info = build_systems(names, seeds, network)
+    if entrant is None:
+        systems, seed_info = build_systems(names, seeds, network)
+    else:
+        systems, seed_info = {entrant.label: entrant.params}, None
     params = envs.default_params()
     if grid is not None:
         points = grid_points(axes)
-        point_systems(systems[names[0]], points)  # every value in range, before any run
+        if entrant is None:
+            point_systems(systems[names[0]], points)  # every value in range, before any run
         total, unit = trials * len(points), "run"
     else:
         total, unit = len(noise), "level"
@@ -413,6 +485,8 @@ def sweep(
     settings = dict(grid=grid, noise=noise, noise_kinds=noise_kinds, system=names, world=world,
                     trials=trials, seed=seed, seeds=None if seeds is None else str(seeds),
                     tau_cap=tau_cap, collision_cap=collision_cap, slots=slots)  # fmt: skip
+    if entrant is not None:  # recorded only when given: earlier runs' manifests stay valid
+        settings["contender"] = entrant.source
     run = open_run(out, "sweep", settings, resume=resume, write=lead)
     start = time.perf_counter()
     desc = f"{','.join(names)} in {loaded.name}"
@@ -420,7 +494,7 @@ def sweep(
         if grid is not None:
             doc = run_sweep(
                 loaded, systems[names[0]], names[0], axes, trials, seed, config, params, slots,
-                bar.update, run, records,
+                bar.update, run, records, None if entrant is None else entrant.controller,
             )  # fmt: skip
         else:
             doc = run_noise_sweep(
@@ -428,10 +502,14 @@ def sweep(
             )
     doc["wall_s_total"] = time.perf_counter() - start
     doc |= {"system": ",".join(names), "world": loaded.name, "seed": seed, "trials": trials}
-    if grid is not None:
+    if grid is not None and entrant is None:
         rate = interpolate(doc, "idiotypic_difference_rate", PAPER_POINT)
         doc["paper_point"] = {"values": PAPER_POINT, "idiotypic_difference_rate": rate}
-    doc["config"] = run_config(loaded, world, config, network, params, seed_info) | {
+    cfg = run_config(loaded, world, config, network, params, seed_info)
+    if entrant is not None:  # the network's parts do not apply; how the contender was given does
+        cfg = {k: v for k, v in cfg.items() if k not in ("network", "readings", "ltl_seed")}
+        cfg["contender"] = entrant.source
+    doc["config"] = cfg | {
         "command": None if command is None else portable_command(command),
         "processes": jax.process_count(),
         "devices": jax.device_count(),

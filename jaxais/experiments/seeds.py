@@ -81,7 +81,7 @@ def _seed_row(docs: Mapping[str, Any]) -> dict[str, Any]:
     tables, claims = docs["tables"], docs["claims"]
     ltl_summary, ltl_seed = docs.get("ltl_summary") or {}, docs.get("ltl_seed") or {}
     worlds = list(tables["table5"])
-    return {
+    row = {
         "claims_held": claims["summary"]["reproduced"],
         "claims_total": claims["summary"]["total"],
         "held": [c["id"] for c in claims["claims"] if c.get("held") is True],
@@ -92,17 +92,6 @@ def _seed_row(docs: Mapping[str, Any]) -> dict[str, Any]:
         "locked_s": {w: {k: _get(tables, "locked_s", w, k) for k in SYSTEMS} for w in worlds},
         "trapped_s": {w: _get(tables, "trapped_s", w, "SIE") for w in worlds},
         "difference_rate": {w: _get(tables, "idiotypic_difference_rate", w, "SIE") for w in worlds},
-        # Each contender's mean f and Table 4's level of its f against SIE's, per world.
-        "contenders": {
-            label: {
-                w: {
-                    "f": _get(tables, "contenders", "table3", w, label, "f"),
-                    "level_vs_SIE": _get(tables, "contenders", "table4", w, f"{label} vs SIE", "f"),
-                }
-                for w in worlds
-            }
-            for label in _get(tables, "contenders", "contenders") or {}
-        },
         "ltl": {
             "generations": ltl_seed.get("generations", ltl_summary.get("generations_run")),
             "stopped_by": ltl_summary.get("stopped_by"),
@@ -110,6 +99,19 @@ def _seed_row(docs: Mapping[str, Any]) -> dict[str, Any]:
         },
         "wall_s": docs.get("wall_s"),
     }
+    labels = _get(tables, "contenders", "contenders") or {}
+    if labels:  # each contender's mean f and Table 4's level of its f against SIE's, per world
+        row["contenders"] = {
+            label: {
+                w: {
+                    "f": _get(tables, "contenders", "table3", w, label, "f"),
+                    "level_vs_SIE": _get(tables, "contenders", "table4", w, f"{label} vs SIE", "f"),
+                }
+                for w in worlds
+            }
+            for label in labels
+        }
+    return row
 
 
 def summarise(

@@ -162,21 +162,60 @@ def _advance(batch, idx, world, sim_params, params, controller, config, sharding
 
 
 @functools.partial(jax.jit, static_argnames=_STATIC)
-def _refill(
-    batch, mask, reset_keys, run_keys, idx, world, sim_params, params, controller, config, sharding
+def _pool_segment(
+    batch, fresh, idx, reset_keys, run_keys, world, sim_params, params, controller, config, sharding
 ):
-    """The slots ``mask`` [b] restarted with their new runs ``idx``."""
+    """The pool's one program: the slots ``fresh`` [b] (re)started with their runs ``idx`` [b]
+    (the first call starts every slot), then one segment of every slot, and what the host reads
+    of them. Starting inside the segment's program keeps a pool to one compile per slot count."""
+
+    def restart(batch: Batch) -> Batch:
+        p = jax.tree.map(lambda a: a[idx], params)
+        new = start_batch(reset_keys[idx], run_keys[idx], world, sim_params, controller, p, config)
+        runs = jax.tree.map(
+            lambda a, b: jnp.where(fresh.reshape(-1, *[1] * (b.ndim - 1)), a, b),
+            new.runs,
+            batch.runs,
+        )
+        # A segment that stopped early (every live run ended) leaves the tick short of a multiple
+        # of the segment: the new runs start on one, so a run's ticks never depend on its start.
+        chunks = config.segment // config.chunk
+        return batch.replace(runs=runs, chunks=-(-batch.chunks // chunks) * chunks)
+
+    batch = jax.lax.cond(jnp.any(fresh), restart, lambda b: b, _spread(batch, sharding))
+    return _advance(batch, idx, world, sim_params, params, controller, config, sharding)
+
+
+@functools.partial(jax.jit, static_argnames=("sharding",))
+def _take(batch: Batch, keep: jax.Array, sharding) -> Batch:
+    """The slots ``keep`` [b'] of ``batch``, sharded as the pool's programs take them (a shrink
+    on the host would hand the next segment a batch of another layout: another compile)."""
+    runs, poses = jax.tree.map(lambda a: a[keep], (batch.runs, batch.poses))
+    return _spread(batch.replace(runs=runs, poses=poses), sharding)
+
+
+def _blank(
+    b: int, reset_keys, run_keys, world, sim_params, params, controller, config, sharding
+) -> Batch:
+    """A batch of ``b`` slots of zeros in the pool's layout, for its first segment to start."""
     static = dict(controller=controller, config=config, sharding=sharding)
-    fresh = _start(reset_keys, run_keys, idx, world, sim_params, params, **static)
-    runs = jax.tree.map(
-        lambda new, old: jnp.where(mask.reshape(-1, *[1] * (old.ndim - 1)), new, old),
-        fresh.runs,
-        batch.runs,
-    )
-    # A segment that stopped early (every live run ended) leaves the tick short of a multiple of
-    # the segment: the next runs start on one.
-    chunks = config.segment // config.chunk
-    return _spread(batch.replace(runs=runs, chunks=-(-batch.chunks // chunks) * chunks), sharding)
+    shapes = jax.eval_shape(
+        functools.partial(_start, **static),
+        reset_keys, run_keys, np.zeros(b, np.int32), world, sim_params, params,
+    )  # fmt: skip
+
+    def zeros(s: jax.ShapeDtypeStruct) -> jax.Array:
+        if jax.dtypes.issubdtype(s.dtype, jax.dtypes.prng_key):
+            data = jax.eval_shape(jax.random.key_data, s)
+            return jax.random.wrap_key_data(np.zeros(data.shape, data.dtype))
+        return np.zeros(s.shape, s.dtype)
+
+    blank = jax.tree.map(zeros, shapes)
+    if sharding is None:
+        return blank
+    runs, poses = jax.device_put((blank.runs, blank.poses), sharding)
+    chunks = jax.device_put(blank.chunks, distributed.replicated(sharding))
+    return Batch(runs=runs, poses=poses, chunks=chunks)
 
 
 def rollout(
@@ -224,8 +263,31 @@ def segment_length(chunk: int, period: int = 1, about: int = 600) -> int:
 
 
 SHRINK = 8
-"""With the queue empty, the batch shrinks by this factor when that many slots idle per live run
-(each size compiles once)."""
+"""With the queue empty, the batch shrinks by this factor once that many slots idle per live run
+(a power of two stays one), after :func:`patience` segments so: a smaller batch costs another
+compile (or cache load), which a short tail does not repay."""
+IDLE_BUDGET = 2048
+"""Slot-segments a pool may run idle before it shrinks (:func:`patience`): an idle slot's
+segment costs about a millisecond on a CPU core (600 iterations of about 2 us), about what a
+warm compile of the smaller batch costs per 2048."""
+
+
+def patience(slots_per_device: int) -> int:
+    """Segments a pool of ``slots_per_device`` waits, idle, before it shrinks: at once for
+    a thousand slots, after about 77k iterations for 16 (only a time-capped tail repays it)."""
+    return max(1, IDLE_BUDGET // slots_per_device)
+
+
+def pool_slots(n: int, slots: int, devices: int = 1) -> int:
+    """A pool's slot count for ``n`` runs: a power of two per device, so that the compile cache
+    serves pools of any size (30, 300 or 1000 trials alike). The power of two at or above
+    ``n`` if it pads by at most a quarter, else the one below (its slots refill); at most
+    ``slots``."""
+    per = -(-min(n, slots) // devices)
+    up = 1 << (per - 1).bit_length()
+    b = up if up * 4 <= per * 5 else max(1, up // 2)
+    cap = 1 << (max(1, slots // devices).bit_length() - 1)
+    return min(b, cap) * devices
 
 
 def run_pool(
@@ -240,7 +302,8 @@ def run_pool(
     align: int = 600,
     progress: Callable[[int], None] | None = None,
 ) -> dict[str, np.ndarray]:
-    """Every run to its end, ``slots`` at a time, sharded over every process's devices.
+    """Every run to its end, ``slots`` at a time (:func:`pool_slots`), sharded over every
+    process's devices; one compiled program per slot count.
 
     Args:
         reset_keys, run_keys, params: [n] as :func:`rollout`'s.
@@ -260,46 +323,45 @@ def run_pool(
     sharding = distributed.batch_sharding()
     # Slots come in whole multiples of the devices: each holds as many.
     d = 1 if sharding is None else sharding.mesh.size
-    b = -(-min(slots, n) // d) * d
+    b = pool_slots(n, slots, d)
     config = dataclasses.replace(config, segment=align, record=False)
     static = dict(controller=controller, config=config, sharding=sharding)
+    keys = (reset_keys, run_keys)
 
     idx = np.arange(b, dtype=np.int32) % n  # slots past n pad the batch with ended copies
     queued = min(b, n)  # the next run to start
     live = np.arange(b) < n  # the slot holds a run not yet read out
-    batch = _start(reset_keys, run_keys, idx, world, sim_params, params, **static)
+    fresh = np.ones(b, bool)  # the slots the next segment (re)starts
+    idle = 0  # segments run with the queue empty and most slots idle
+    batch = _blank(b, *keys, world, sim_params, params, **static)
     got: dict[str, np.ndarray] = {}
     while live.any():
-        batch, read = _advance(batch, idx, world, sim_params, params, **static)
+        batch, read = _pool_segment(batch, fresh, idx, *keys, world, sim_params, params, **static)
         read = jax.device_get(read)
+        fresh = np.zeros(b, bool)
         ended = live & (read["status"] != RUNNING)
-        if not ended.any():
+        idle = idle + 1 if queued == n and live.sum() - ended.sum() <= b // SHRINK else 0
+        if not ended.any() and (b <= d or idle < patience(b // d)):
             continue
         for name, values in read.items():
             got.setdefault(name, np.zeros((n, *values.shape[1:]), values.dtype))
             got[name][idx[ended]] = values[ended]
         live &= ~ended
-        if progress is not None:
+        if progress is not None and ended.any():
             progress(int(ended.sum()))
         new = np.flatnonzero(ended)[: n - queued]
         if new.size:
             idx[new] = np.arange(queued, queued + new.size)
             queued += new.size
-            live[new] = True
-            mask = np.zeros(b, bool)
-            mask[new] = True
-            batch = _refill(
-                batch, mask, reset_keys, run_keys, idx, world, sim_params, params, **static
-            )
-        elif b > d and live.sum() <= b // SHRINK:
-            # The queue is empty and most slots idle: go on with a batch an eighth the size
-            # (ended runs never change, so an idle slot can pad it).
+            live[new] = fresh[new] = True
+        elif b > d and live.sum() <= b // SHRINK and idle >= patience(b // d):
+            # The queue is empty and most slots have idled long enough: go on with a batch an
+            # eighth the size (ended runs never change, so an idle slot can pad it).
             while b > d and live.sum() <= b // SHRINK:
-                b = max(d, -(-(b // SHRINK) // d) * d)
+                b = max(d, b // SHRINK)
             keep = np.flatnonzero(live)
             keep = np.concatenate([keep, np.full(b - keep.size, np.flatnonzero(~live)[0])])
-            runs, poses = jax.tree.map(lambda a, k=keep: a[k], (batch.runs, batch.poses))
-            batch = batch.replace(runs=runs, poses=poses)
-            idx, live = idx[keep], live[keep]
+            batch = _take(batch, keep.astype(np.int32), sharding)
+            idx, live, fresh, idle = idx[keep], live[keep], fresh[keep], 0
     counts = {name: got.pop(name) for name in ("t", "status", "collisions", "trapped", "locked")}
     return outcome(types.SimpleNamespace(**counts), config, float(sim_params.dt)) | got

@@ -176,7 +176,7 @@ def test_trials_script_same_results_on_one_and_two_devices(runs):
 @pytest.mark.slow
 def test_trials_script_fills_its_compilation_cache(runs):
     # JAXAIS_CACHE_DIR: the run stored its task-loop programs for the next one.
-    assert {"jit__start", "jit__advance"} <= set(runs["cached"])
+    assert {"jit__pool_segment"} <= set(runs["cached"])
 
 
 @pytest.mark.slow

@@ -266,15 +266,15 @@ SHRINK = 8
 """With the queue empty, the batch shrinks by this factor once that many slots idle per live run
 (a power of two stays one), after :func:`patience` segments so: a smaller batch costs another
 compile (or cache load), which a short tail does not repay."""
-IDLE_BUDGET = 2048
+IDLE_BUDGET = 512
 """Slot-segments a pool may run idle before it shrinks (:func:`patience`): an idle slot's
-segment costs about a millisecond on a CPU core (600 iterations of about 2 us), about what a
-warm compile of the smaller batch costs per 2048."""
+segment costs about a millisecond on a CPU core (600 iterations of about 2 us), so 512 of them
+about what loading the smaller batch's program from the compilation cache costs."""
 
 
 def patience(slots_per_device: int) -> int:
     """Segments a pool of ``slots_per_device`` waits, idle, before it shrinks: at once for
-    a thousand slots, after about 77k iterations for 16 (only a time-capped tail repays it)."""
+    512 slots, after about 19k iterations for 16 (a long tail repays a smaller batch)."""
     return max(1, IDLE_BUDGET // slots_per_device)
 
 

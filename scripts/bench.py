@@ -5,7 +5,8 @@
         [--matmul 2048] [--devices N] [--scripts 3]
 
 Measures the simulator's robot-steps per second per batch size (one device and sharded), the
-NumPy reference's, the STL controller's iterations per second, flops per step against the
+NumPy reference's, the STL controller's iterations per second, the GA's and the STL's loops side
+by side (loop_rates, stl_over_ga), flops per step against the
 matmul peak, and with --scripts N the wall time of evolve.py's default run and 30 SIE trials
 end to end (jaxais.experiments.bench.run_bench). --quick uses fewer steps, repeats and batch
 sizes (explicit flags still win).
@@ -29,6 +30,11 @@ FLAGS = (
     ("--matmul", int, "matrix size of the peak benchmark (2048; quick 512)"),
     ("--controller-batches", str, "STL controller batch sizes (30,1000; quick 30)"),
     ("--controller-steps", int, "iterations per timed call (500; quick 50)"),
+    (
+        "--loop-trials",
+        str,
+        "SIE trial counts of the STL loop rates (30,300,1000; quick 30; 0: none)",
+    ),
 )
 
 

@@ -33,7 +33,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--trials", type=int, default=None, help="trials per system and world (default: paper's)"
     )
-    p.add_argument("--jobs", type=int, default=1, help="seeds run side by side (default 1)")
+    p.add_argument("--jobs", type=int, default=None,
+                   help="seeds run side by side (default: one per core)")  # fmt: skip
     contenders.add_argument(p)  # run beside the paper's systems on every seed
     return p.parse_args(argv)
 

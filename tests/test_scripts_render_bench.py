@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import importlib.util
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -174,7 +175,7 @@ def test_bench_quick_json(tmp_path):
         *("--quick", "--devices", 2, "--batches", 2, "--steps", 3, "--repeats", 1),
         *("--numpy-robots", 2, "--numpy-steps", 2, "--matmul", 64, "--out", out),
         # 3 robots do not split over 2 devices: the controller's sharded layout is skipped
-        *("--controller-batches", 3, "--controller-steps", 5),
+        *("--controller-batches", 3, "--controller-steps", 5, "--loop-trials", 0),
     )
     assert proc.returncode == 0, proc.stderr
     r = json.loads(out.read_text())
@@ -199,6 +200,24 @@ def test_bench_quick_json(tmp_path):
     assert r["flops_per_step"] > 0 and 0 < r["fraction_of_peak"] < 1
     assert {"platform", "cpu_count", "jax", "backend", "device_kinds", "date"} <= set(r["machine"])
     assert "wrote" in proc.stdout
+
+
+@pytest.mark.slow
+def test_bench_sets_the_stl_loop_beside_the_gas(monkeypatch):
+    """``loop_rates``: each loop in a child process set up as its script sets it up, and the
+    STL's CPU cost per robot-iteration over the GA's (``stl_over_ga``)."""
+    monkeypatch.setattr(bench, "GA_ROBOTS", 2)
+    environ = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}  # as the scripts start
+    b = bench.Bench(config=bench.bench_config(loop_trials="2"), world=None, params=None,
+                    environ=environ)  # fmt: skip
+    bench.bench_loops(b)
+    loops = b.results["loop_rates"]
+    ga, stl = loops["ga"], loops["stl"]["2"]
+    assert ga["robots"] == 2 and ga["robot_iterations"] % 2 == 0 and ga["per_cpu_s"] > 0
+    assert stl["robot_iterations"] > 0 and stl["per_wall_s"] > 0
+    assert loops["stl_over_ga"]["2"] == pytest.approx(ga["per_cpu_s"] / stl["per_cpu_s"])
+    b.results["load_average_end"] = [0.0]
+    assert "loops, robot-iterations per CPU-s: GA" in bench.summary(b, "b.json", 1.0)
 
 
 def test_bench_bad_values(tmp_path):

@@ -195,7 +195,19 @@ class FakeScripts:
 
 
 def ledger(out: Path, runner, **kw) -> dict:
-    return S.ltl_ledger(out, runner=runner, progress=False, **kw)
+    """The ledger one seed at a time (``jobs`` 1: the fake runner's calls in order)."""
+    return S.ltl_ledger(out, runner=runner, progress=False, **{"jobs": 1} | kw)
+
+
+def test_seeds_run_side_by_side_by_default_one_per_core(tmp_path, monkeypatch):
+    import os
+
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2})
+    assert S.default_jobs() == 3
+    run = FakeScripts()
+    S.ltl_ledger(tmp_path, seeds=[0, 1, 2], runner=run, progress=False)
+    assert json.loads((tmp_path / "run.json").read_text())["jobs"] == 3
+    assert sorted(run.stages()) == [(stage, s) for stage in ("LTL", "STL") for s in (0, 1, 2)]
 
 
 def test_a_signal_that_ends_the_script_would_stop_the_ledgers_children(tmp_path):
@@ -335,7 +347,7 @@ def test_ledger_argument_errors(tmp_path):
         ({"seeds": [1, 1]}, "distinct"),
         ({"seeds": [-1]}, "integers in"),
         ({"trials": 1}, "trials must be >= 2"),
-        ({"jobs": 0}, "jobs must be >= 1"),
+        ({"jobs": 0}, "jobs must be an integer >= 1"),
         ({"extra_args": ["--seed=3"]}, "extra_args may not set"),
         ({"out": tmp_path / "file"}, "file: not a directory"),
     ]:
@@ -384,7 +396,7 @@ def test_script_flag_errors_are_one_line(tmp_path):
     out = ("--out", tmp_path / "o")
     cases = [
         ((*out, "--seeds", 0), "--seeds must be >= 1"),
-        ((*out, "--jobs", 0), "--jobs must be >= 1"),
+        ((*out, "--jobs", 0), "--jobs must be an integer >= 1"),
         ((*out, "--trials", 1), "--trials must be >= 2"),
         ((*out, "--first", -1), "--first must be in"),
         ((*out, "--seeds", "x"), "invalid int value"),

@@ -10,6 +10,7 @@ import contextlib
 import datetime
 import functools
 import itertools
+import json
 import os
 import platform
 import statistics
@@ -28,7 +29,8 @@ SCHEMA = "jaxais-bench/1"
 DEVICE_FLAG = "--xla_force_host_platform_device_count"
 
 QUICK = dict(steps=50, repeats=2, batches=(1, 30, 1000), numpy_robots=4, numpy_steps=5,
-             matmul=512, controller_batches=(30,), controller_steps=50)  # fmt: skip
+             matmul=512, controller_batches=(30,), controller_steps=50,
+             loop_trials=(30,))  # fmt: skip
 SPEEDUP_BATCH = 30  # compared with NumPy: a population of 30, as in the GA
 RESET_CHUNK = 1000  # robots reset in one call; larger batches repeat them (same work per step)
 SHARDING_HELPS = 1.1  # sharding "helps" when this much faster at the largest batch (noise)
@@ -69,6 +71,7 @@ class BenchConfig:
     matmul: int = 2048
     controller_batches: tuple[int, ...] = (30, 1000)
     controller_steps: int = 500
+    loop_trials: tuple[int, ...] = (30, 300, 1000)
     scripts: int = 0
 
 
@@ -96,13 +99,16 @@ def bench_config(quick: bool = False, **values: Any) -> BenchConfig:
         raise ValueError(
             f"--scripts must be a count of runs (0 skips them), got {values['scripts']}"
         )
-    for name in ("batches", "controller_batches"):
-        if name in values:
+    if str(values.get("loop_trials")) in ("0", "(0,)"):  # --loop-trials 0 skips the loop rates
+        values["loop_trials"] = ()
+    for name in ("batches", "controller_batches", "loop_trials"):
+        if values.get(name) != ():
             values[name] = _sizes(values[name], "--" + name.replace("_", "-"))
     config = BenchConfig(quick=quick, **values)
     for flag, count, each in (
         ("--batches", max(config.batches), RUN_BYTES),
         ("--controller-batches", max(config.controller_batches), RUN_BYTES),
+        ("--loop-trials", max(config.loop_trials, default=1), RUN_BYTES),
         ("--numpy-robots x --numpy-steps", config.numpy_robots * config.numpy_steps, 64),
         ("--matmul squared", config.matmul**2, 12),  # three float32 matrices
     ):
@@ -477,6 +483,80 @@ def bench_controller(b: Bench) -> None:
         b.results[f"controller_compile_s{suffix}"] = compile_s
 
 
+GA_ROBOTS = 50  # the GA's population: 5 x 10 robots in lockstep
+
+
+def loop_rate(kind: str, n: int) -> dict[str, Any]:
+    """One loop's rate as its script runs it, in this fresh process (:func:`bench_loops` runs
+    it as a child): ``"ga"``, one full GA rollout of ``n`` random robots in ga_maze (evolve.py's
+    settings: the world compiled in, one device, its one-kernel loops); ``"stl"``, ``n`` SIE
+    trials in world1 through :func:`jaxais.run_trials` (trials.py's: one device per core),
+    tail included. Timed on a second, compiled call: robot-iterations (lockstep for the GA, live
+    for the STL) per CPU-second and per wall second."""
+    from jaxais import _speed
+
+    _speed.setup(cpu_device_per_core=kind == "stl", one_kernel_loops=kind == "ga", cache=False)
+    import jax
+    import numpy as np
+
+    from jaxais import envs
+
+    if kind == "ga":
+        from jaxais.ga import GAConfig, core, driver
+
+        config = GAConfig(populations=1, robots=n)
+        population = core.init(jax.random.key(0), config).population
+        world = envs.load_world("ga_maze")
+
+        def run():
+            out = driver.rollout(driver.start_keys(jax.random.key(1), 1), population, world,
+                                 envs.default_params(), config)  # fmt: skip
+            return n * int(np.ceil(out["tau"].max() / float(envs.default_params().dt) - 1e-9))
+    else:
+        from jaxais import load_seed, make_system, run_trials
+
+        world, sie = envs.load_world("world1"), make_system("SIE", load_seed()[0])
+
+        def run():
+            records = run_trials(world, {"SIE": sie}, n, 0)["SIE"].records
+            return sum(r["iterations"] for r in records)
+
+    run()  # compiled, and the pool's slot counts with it
+    cpu, t0 = time.process_time(), time.perf_counter()
+    iterations = run()
+    cpu, wall = time.process_time() - cpu, time.perf_counter() - t0
+    return {"robot_iterations": iterations, "cpu_s": cpu, "wall_s": wall,
+            "per_cpu_s": iterations / cpu, "per_wall_s": iterations / wall}  # fmt: skip
+
+
+def bench_loops(b: Bench) -> None:
+    """``loop_rates``: the GA's loop and the STL's side by side, each in a fresh process set up
+    as its script sets it up (:func:`loop_rate`), and ``stl_over_ga``, per trial count, the
+    STL's CPU time per robot-iteration over the GA's (1: as fast; a regression shows)."""
+    if not b.config.loop_trials:
+        return
+    code = "import json, sys; from jaxais.experiments.bench import loop_rate; "
+    code += "print(json.dumps(loop_rate(sys.argv[1], int(sys.argv[2]))))"
+
+    def child(kind: str, n: int) -> dict[str, Any]:
+        proc = subprocess.run([sys.executable, "-c", code, kind, str(n)], env=b.environ,
+                              capture_output=True, text=True, check=False)  # fmt: skip
+        if proc.returncode:
+            last = (proc.stderr.strip().splitlines() or ["(nothing on stderr)"])[-1]
+            raise ChildProcessError(f"loop rate {kind} {n}: exit status {proc.returncode}: {last}")
+        return json.loads(proc.stdout.strip().splitlines()[-1])
+
+    ga = child("ga", GA_ROBOTS)
+    stl = {str(n): child("stl", n) for n in b.config.loop_trials}
+    b.results["loop_rates"] = {
+        "ga": ga | {"robots": GA_ROBOTS, "world": "ga_maze"},
+        "stl": stl,
+        "stl_over_ga": {n: ga["per_cpu_s"] / r["per_cpu_s"] for n, r in stl.items()},
+        "units": "robot-iterations per CPU-second (GA: lockstep, a full 500 s rollout; STL: "
+        "live, N SIE trials in world1 to their ends); timed on a second call, compiled",
+    }
+
+
 def bench_scripts(b: Bench) -> None:
     """``scripts``: :data:`SCRIPT_RUNS` ``config.scripts`` times each, alternating, in fresh
     processes with ``JAXAIS_CACHE_DIR=off``; ``within_target`` counts runs <= ``target_s``."""
@@ -525,6 +605,7 @@ BENCHMARKS: list[tuple[str, Callable[[Bench], None]]] = [
     ("sharded simulator", bench_sharded),
     ("numpy reference", bench_numpy),
     ("STL controller + simulator", bench_controller),
+    ("GA and STL loops", bench_loops),
     ("flops per step", bench_flops),
     ("matmul peak", bench_peak),
     ("scripts end to end", bench_scripts),
@@ -573,6 +654,15 @@ def summary(b: Bench, out: str | os.PathLike[str], seconds: float) -> str:
                 f"{per_batch(r[f'controller_iterations_per_s{suffix}'], ',.0f')} (compile s: "
                 f"{per_batch(r[f'controller_compile_s{suffix}'], '.1f')})"
             )
+    if r.get("loop_rates"):
+        loops = r["loop_rates"]
+        lines.append(
+            f"  loops, robot-iterations per CPU-s: GA {loops['ga']['per_cpu_s']:,.0f}; STL "
+            + ", ".join(f"N={k}: {v['per_cpu_s']:,.0f}" for k, v in loops["stl"].items())
+            + " (STL/GA cost: "
+            + ", ".join(f"N={k}: {v:.1f}x" for k, v in loops["stl_over_ga"].items())
+            + ")"
+        )
     if "numpy_steps_per_s" in r:
         text = f"  NumPy reference: {r['numpy_steps_per_s']:,.1f} robot-steps/s"
         if "speedup_vs_numpy" in r:
@@ -609,7 +699,8 @@ def run_bench(
         params=envs.default_params(),
         environ=dict(os.environ if environ is None else environ),
     )
-    names = ("steps", "batches", "repeats", "quick", "numpy_robots", "numpy_steps", "scripts")
+    names = ("steps", "batches", "repeats", "quick", "numpy_robots", "numpy_steps", "scripts",
+             "loop_trials")  # fmt: skip
     b.results.update(
         schema=SCHEMA,
         config={

@@ -15,6 +15,7 @@ import contextlib
 import hashlib
 import json
 import operator
+import os
 import shutil
 import signal
 import statistics
@@ -326,6 +327,15 @@ def _versions(out: Path, done: Iterable[int]) -> dict[str, Any]:
     return versions
 
 
+def default_jobs() -> int:
+    """Seeds side by side by default: one per core this process may use. The GA runs on one
+    core (evolve.py keeps one device) in about 400 MB, so a 2-core machine runs two seeds'
+    LTLs at once instead of one after another; the compilation cache then serves every later
+    seed's programs."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, cores or 1)
+
+
 def _contender_records(specs: Sequence[str]) -> list[dict[str, str | None]]:
     """Each ``--contender`` spec checked (form, label, file) with its file's sha256 (None for a
     module's spec)."""
@@ -385,7 +395,7 @@ def ltl_ledger(
     out: str | Path,
     seeds: Iterable[int] = range(10),
     trials: int | None = None,
-    jobs: int = 1,
+    jobs: int | None = None,
     extra_args: Sequence[str] = (),
     progress: bool = True,
     *,
@@ -399,7 +409,8 @@ def ltl_ledger(
     Args:
         seeds: the GA seeds (each also the STL's trial seed).
         trials: reproduce.py's ``--trials`` (default: the paper's counts).
-        jobs: seeds run side by side; above 1 subprocesses log to ``OUT/logs/seed_s.{ltl,stl}.log``.
+        jobs: seeds run side by side (default: one per core, :func:`default_jobs`); above 1
+            subprocesses log to ``OUT/logs/seed_s.{ltl,stl}.log``.
         extra_args: further reproduce.py flags (``--worlds``, ``--tau-cap``, ...).
         contenders: reproduce.py's ``--contender`` specs (``[LABEL=]FILE.py:NAME``), run on
             every seed; each file's sha256 is recorded, so a resume refuses a changed file.
@@ -417,8 +428,9 @@ def ltl_ledger(
         raise ValueError(f"seeds must be integers in [0, {MAX_SEED}], got {seeds}")
     if trials is not None and trials < 2:
         raise ValueError(f"--trials must be >= 2 (t-tests need two per group), got {trials}")
-    if jobs < 1:
-        raise ValueError(f"--jobs must be >= 1, got {jobs}")
+    jobs = default_jobs() if jobs is None else jobs
+    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+        raise ValueError(f"--jobs must be an integer >= 1, got {jobs!r}")
     if trials is not None:  # --jobs reproduce.py side by side, each with reproduce.py's pool
         runs = max(len(protocol.systems_for_world(w)) for w in protocol.WORLDS) + 2
         io.check_memory(trials, min(jobs, len(seeds)) * runs * io.RUN_BYTES, "--trials")

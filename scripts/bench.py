@@ -30,11 +30,7 @@ FLAGS = (
     ("--matmul", int, "matrix size of the peak benchmark (2048; quick 512)"),
     ("--controller-batches", str, "STL controller batch sizes (30,1000; quick 30)"),
     ("--controller-steps", int, "iterations per timed call (500; quick 50)"),
-    (
-        "--loop-trials",
-        str,
-        "SIE trial counts of the STL loop rates (30,300,1000; quick 30; 0: none)",
-    ),
+    ("--loop-trials", str, "STL loop rates' SIE trial counts (30,300,1000; quick 30; 0: none)"),
 )
 
 

@@ -102,7 +102,7 @@ def bench_config(quick: bool = False, **values: Any) -> BenchConfig:
     if str(values.get("loop_trials")) in ("0", "(0,)"):  # --loop-trials 0 skips the loop rates
         values["loop_trials"] = ()
     for name in ("batches", "controller_batches", "loop_trials"):
-        if values.get(name) != ():
+        if values.get(name, ()) != ():
             values[name] = _sizes(values[name], "--" + name.replace("_", "-"))
     config = BenchConfig(quick=quick, **values)
     for flag, count, each in (

@@ -266,16 +266,21 @@ SHRINK = 8
 """With the queue empty, the batch shrinks by this factor once that many slots idle per live run
 (a power of two stays one), after :func:`patience` segments so: a smaller batch costs another
 compile (or cache load), which a short tail does not repay."""
+EAGER = 64
+"""Slots per device from which a pool shrinks as soon as most idle: there an iteration's cost
+grows with its slots (about 1.5 us each on a CPU core), so the smaller batch repays its compile
+within a segment or two."""
 IDLE_BUDGET = 512
-"""Slot-segments a pool may run idle before it shrinks (:func:`patience`): an idle slot's
-segment costs about a millisecond on a CPU core (600 iterations of about 2 us), so 512 of them
-about what loading the smaller batch's program from the compilation cache costs."""
+"""Below :data:`EAGER`, an iteration costs mostly its kernels' dispatch (about 12 us, whatever
+the slots), a smaller batch saves little, and another slot count costs a compile (or a cache
+load of about a second): the pool waits this many idle slot-segments first (:func:`patience`)."""
 
 
 def patience(slots_per_device: int) -> int:
-    """Segments a pool of ``slots_per_device`` waits, idle, before it shrinks: at once for
-    512 slots, after about 19k iterations for 16 (a long tail repays a smaller batch)."""
-    return max(1, IDLE_BUDGET // slots_per_device)
+    """Segments a pool of ``slots_per_device`` waits, idle, before it shrinks: none from
+    :data:`EAGER` slots up, else ``IDLE_BUDGET / slots`` (19k iterations for 16 slots: a long,
+    time-capped tail repays it, a few late finishers do not)."""
+    return 1 if slots_per_device >= EAGER else max(1, IDLE_BUDGET // slots_per_device)
 
 
 def pool_slots(n: int, slots: int, devices: int = 1) -> int:

@@ -103,7 +103,7 @@ def test_pool_slot_counts_are_powers_of_two_per_device():
 def test_a_pool_waits_longer_to_shrink_the_fewer_its_slots():
     from jaxais.runner import patience
 
-    assert [patience(b) for b in (1024, 512, 128, 16, 1)] == [1, 1, 4, 32, 512]
+    assert [patience(b) for b in (1024, 128, 64, 32, 16, 1)] == [1, 1, 1, 16, 32, 512]
 
 
 def test_segment_length_is_a_common_multiple_of_about_600():

@@ -204,18 +204,23 @@ def _blank(
         reset_keys, run_keys, np.zeros(b, np.int32), world, sim_params, params,
     )  # fmt: skip
 
-    def zeros(s: jax.ShapeDtypeStruct) -> jax.Array:
+    def put(a: np.ndarray, layout) -> jax.Array:
+        """A host array laid out as ``layout``, which may span other processes' devices."""
+        return a if layout is None else jax.make_array_from_callback(a.shape, layout, a.__getitem__)
+
+    impl = jax.random.key_impl(reset_keys)
+
+    def zeros(s: jax.ShapeDtypeStruct, layout) -> jax.Array:
         if jax.dtypes.issubdtype(s.dtype, jax.dtypes.prng_key):
             data = jax.eval_shape(jax.random.key_data, s)
-            return jax.random.wrap_key_data(np.zeros(data.shape, data.dtype))
-        return np.zeros(s.shape, s.dtype)
+            return jax.random.wrap_key_data(
+                put(np.zeros(data.shape, data.dtype), layout), impl=impl
+            )
+        return put(np.zeros(s.shape, s.dtype), layout)
 
-    blank = jax.tree.map(zeros, shapes)
-    if sharding is None:
-        return blank
-    runs, poses = jax.device_put((blank.runs, blank.poses), sharding)
-    chunks = jax.device_put(blank.chunks, distributed.replicated(sharding))
-    return Batch(runs=runs, poses=poses, chunks=chunks)
+    runs, poses = jax.tree.map(lambda s: zeros(s, sharding), (shapes.runs, shapes.poses))
+    whole = None if sharding is None else distributed.replicated(sharding)
+    return Batch(runs=runs, poses=poses, chunks=zeros(shapes.chunks, whole))
 
 
 def rollout(

@@ -255,8 +255,8 @@ def slow(cmd, log, fake=FakeScripts()):  # a signal can land between seeds
     return fake(cmd, log)
 
 with main_wrapper("seeds.py"):
-    ltl_ledger({out!r}, [0, 1, 2], trials=2, runner=slow, progress=False, command="seeds.py",
-               resume={resume})
+    ltl_ledger({out!r}, [0, 1, 2], trials=2, jobs=1, runner=slow, progress=False,
+               command="seeds.py", resume={resume})
 """
 
 
@@ -264,7 +264,8 @@ def test_seed_ledger_killed_twice_and_resumed_gives_the_uninterrupted_ledger(tmp
     from jaxais.experiments.seeds import ltl_ledger
 
     ref, out = tmp_path / "ref", tmp_path / "out"
-    ltl_ledger(ref, [0, 1, 2], trials=2, runner=FakeScripts(), progress=False, command="seeds.py")
+    ltl_ledger(ref, [0, 1, 2], trials=2, jobs=1, runner=FakeScripts(), progress=False,
+               command="seeds.py")  # fmt: skip
 
     def ledger(resume: bool) -> subprocess.Popen:
         code = LEDGER.format(tests=str(Path(__file__).parent), out=str(out), resume=resume)

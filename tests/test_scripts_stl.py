@@ -114,6 +114,8 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
         "--out", out / "contender.json",
     )  # fmt: skip
     single = start_script("trials.py", *one_args, JAXAIS_CACHE_DIR="off", **ONE_DEVICE)
+    # The contender's own file, run as a user runs it (its --tiny, as CI runs every example).
+    example = start_script("../examples/braitenberg.py", "--tiny")
     first = _finish(start_script("trials.py", *trials_args, **cache, **TWO_DEVICES))
     return {
         "one_device": _finish(single),
@@ -126,6 +128,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
         "plain": _finish(plain),
         "plain_dir": plain_dir,
         "contender": _finish(contender),
+        "example": _finish(example),
         "seeds": seeds,
     }
 
@@ -176,7 +179,7 @@ def test_trials_script_same_results_on_one_and_two_devices(runs):
 @pytest.mark.slow
 def test_trials_script_fills_its_compilation_cache(runs):
     # JAXAIS_CACHE_DIR: the run stored its task-loop programs for the next one.
-    assert {"jit__pool_segment"} <= set(runs["cached"])
+    assert {"jit__start", "jit__advance"} <= set(runs["cached"])
 
 
 @pytest.mark.slow
@@ -358,6 +361,12 @@ def test_reproduce_runs_a_world_file_under_the_simulated_protocol(runs):
     run = json.loads((out / "run.json").read_text())
     assert run["worlds"]["corridor"]["world"] == {"name": "corridor", "source": CORRIDOR}
     assert "**corridor**" in (out / "report.md").read_text()
+
+
+@pytest.mark.slow
+def test_the_contender_example_runs_as_a_user_runs_it(runs):
+    _ok(runs["example"])
+    assert "BV in world1: 4 trials, mean tau" in runs["example"].stdout
 
 
 @pytest.mark.slow

@@ -34,6 +34,23 @@ def check_type(value: Any, kind: Any, name: str, what: str, hint: str = "") -> N
         raise ArgumentTypeError(f"{name} must be {what}, got {got}{hint}")
 
 
+def load_module_file(name: str, path: str | os.PathLike[str]) -> Any:
+    """The Python file ``path`` executed as the module ``name`` (in ``sys.modules`` once it
+    loaded; removed again if it raised)."""
+    import importlib.util
+    import sys
+
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[name]
+        raise
+    return module
+
+
 IN_FLIGHT: set[Path] = set()  # temporary files being written (the signal handler removes them)
 ON_SIGNAL: list[Callable[[], object]] = []  # run on a signal, newest first; removed by its adder
 

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 from types import ModuleType
 
-from jaxais.io import python_scalars
+from jaxais.io import load_module_file, python_scalars
 
 _NAMES = "jaxais.envs.names"
 
@@ -26,15 +26,7 @@ def world_names_module() -> ModuleType:
     file = Path(spec.origin).with_name("names.py") if spec and spec.origin else None
     if file is None or not file.is_file():  # an install without plain files: JAX it is
         return importlib.import_module(_NAMES)
-    spec = importlib.util.spec_from_file_location(_NAMES, file)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[_NAMES] = module
-    try:
-        spec.loader.exec_module(module)
-    except BaseException:
-        del sys.modules[_NAMES]
-        raise
-    return module
+    return load_module_file(_NAMES, file)
 
 
 NN_LABEL = "NN"  # the trained controller's label in records; it names its trials' random stream

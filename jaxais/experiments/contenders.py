@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import hashlib
 import importlib
-import importlib.util
 import os
 import sys
 from collections.abc import Mapping
@@ -25,7 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from jaxais.io import ArgumentTypeError, UserError
+from jaxais.io import ArgumentTypeError, UserError, load_module_file
 from jaxais.labels import LABELS, SYSTEMS
 
 __all__ = [
@@ -136,15 +135,7 @@ def _module(target: str, spec: str):
             name = f"_jaxais_contender_{_sha256(path)[:16]}"
             if name in sys.modules:  # the same file twice: one module, one controller
                 return sys.modules[name], path
-            module_spec = importlib.util.spec_from_file_location(name, path)
-            module = importlib.util.module_from_spec(module_spec)
-            sys.modules[name] = module
-            try:
-                module_spec.loader.exec_module(module)
-            except BaseException:
-                del sys.modules[name]
-                raise
-            return module, path
+            return load_module_file(name, path), path
         module = importlib.import_module(target)
         file = getattr(module, "__file__", None)
         return module, Path(file) if file else None

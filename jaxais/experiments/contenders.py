@@ -56,7 +56,7 @@ class Contender:
 
 def add_argument(parser: Any, repeatable: bool = True, group: Any = None) -> None:
     """Add ``--contender SPEC`` to a script's flags (``group``: a mutually exclusive group)."""
-    help = (
+    text = (
         "a controller beyond the paper's: [LABEL=]FILE.py:NAME or [LABEL=]package.module:NAME, "
         "NAME a (Controller, params) tuple or a function returning one (docs/extending.md)"
     )
@@ -65,7 +65,7 @@ def add_argument(parser: Any, repeatable: bool = True, group: Any = None) -> Non
         action="append" if repeatable else "store",
         default=None,
         metavar="SPEC",
-        help=help + ("; repeatable" if repeatable else ""),
+        help=text + ("; repeatable" if repeatable else ""),
     )
 
 

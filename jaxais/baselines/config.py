@@ -3,31 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
-import importlib
-import importlib.util
 import math
-import sys
-from pathlib import Path
-from types import ModuleType
 
-from jaxais.io import load_module_file, python_scalars
-
-_NAMES = "jaxais.envs.names"
-
-
-def world_names_module() -> ModuleType:
-    """``jaxais.envs.names`` (the world lookup: built-ins and ``JAXAIS_WORLDS``) without JAX:
-    loaded by its file, as importing it the usual way runs ``jaxais.envs``'s ``__init__``, which
-    imports JAX. Registered under its own name, so ``jaxais.envs`` imported later uses it too
-    (one ``WorldError``)."""
-    if _NAMES in sys.modules or "jaxais.envs" in sys.modules:
-        return importlib.import_module(_NAMES)
-    spec = importlib.util.find_spec("jaxais.envs")
-    file = Path(spec.origin).with_name("names.py") if spec and spec.origin else None
-    if file is None or not file.is_file():  # an install without plain files: JAX it is
-        return importlib.import_module(_NAMES)
-    return load_module_file(_NAMES, file)
-
+from jaxais.io import python_scalars
+from jaxais.labels import world_names_module
 
 NN_LABEL = "NN"  # the trained controller's label in records; it names its trials' random stream
 

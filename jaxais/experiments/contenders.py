@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from jaxais.baselines.config import NN_LABEL
 from jaxais.io import ArgumentTypeError, UserError, load_module_file
 from jaxais.labels import LABELS, SYSTEMS
 
@@ -32,13 +33,14 @@ __all__ = [
     "add_argument",
     "check_label",
     "check_specs",
+    "contender_config",
     "load_spec",
     "neural",
+    "one",
     "resolve",
     "spec_file",
 ]
 
-NEURAL_LABEL = "NN"  # the neural baseline's label: it names its trials' random stream
 _RESERVED = {*LABELS, *SYSTEMS, "SIE_hold1"}  # the paper's labels and the calibration file's
 
 
@@ -203,7 +205,23 @@ def neural(directory: str | os.PathLike[str] | None = None) -> Contender:
         + " (`scripts/train_baseline.py`, `docs/baseline.md`)."
     )
     source = {"weights": where, "made_by": made_by, "about": about}
-    return Contender(NEURAL_LABEL, NEURAL, params, source)
+    return Contender(NN_LABEL, NEURAL, params, source)
+
+
+def one(contender: Any, label: str | None = None) -> Contender:
+    """One contender as :func:`resolve` reads it: a spec or a :class:`Contender` keeps its own
+    label unless ``label`` is given; a ``(controller, params)`` tuple takes ``label`` (default
+    ``contender``)."""
+    if label is None and isinstance(contender, str | Contender):
+        return resolve([contender])[0]
+    return resolve({label or "contender": contender})[0]
+
+
+def contender_config(config: Mapping[str, Any], source: Mapping[str, Any]) -> dict[str, Any]:
+    """A run's config (:func:`jaxais.experiments.records.run_config`) for a contender's trials:
+    the network's parts and the LTL seed do not apply; how the contender was given does."""
+    kept = {k: v for k, v in config.items() if k not in ("network", "readings", "ltl_seed")}
+    return kept | {"contender": dict(source)}
 
 
 def resolve(contenders: Any) -> list[Contender]:

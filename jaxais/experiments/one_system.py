@@ -131,7 +131,7 @@ def trials(
     from tqdm import tqdm
 
     from jaxais import envs
-    from jaxais.experiments.contenders import resolve
+    from jaxais.experiments.contenders import contender_config, one
     from jaxais.experiments.records import build_systems, results_document, run_config
     from jaxais.immune.network import NetworkParams
     from jaxais.loop import EpisodeConfig
@@ -143,10 +143,7 @@ def trials(
     network = NetworkParams()
     params = envs.default_params()
     if contender:  # read before any run: a bad spec fails first
-        if label is not None or isinstance(system, tuple | list):
-            (c,) = resolve({label or "contender": system})
-        else:  # a spec or a Contender: its own label
-            (c,) = resolve([system])
+        c = one(system, label)
         name, systems, controller, seed_info = c.label, {c.label: c.params}, c.controller, None
     else:
         name, controller = label_of(system, random_set or "R1"), None
@@ -157,9 +154,8 @@ def trials(
         results = run_trials(loaded, systems, n, seed, config, params, bar, controller=controller)
         bar.update(bar.total - bar.n)
     cfg = run_config(loaded, str(world), config, network, params, seed_info)
-    if contender:  # the network's parts do not apply; how the contender was given does
-        cfg = {k: v for k, v in cfg.items() if k not in ("network", "readings", "ltl_seed")}
-        cfg["contender"] = c.source
+    if contender:
+        cfg = contender_config(cfg, c.source)
     cfg["command"] = command
     doc = results_document(name, loaded.name, seed, results[name], cfg)
     if not lead:

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
 
-from jaxais.labels import LABELS, parse_label
+from jaxais.labels import LABELS, parse_label, world_names_module
 
 __all__ = [
     "add_cap_arguments",
@@ -129,8 +129,6 @@ def check_worlds(worlds: str | Sequence[str] | None) -> list[str]:
     paper's worlds, other worlds by name (``envs.world_names()``: built-in or on
     ``JAXAIS_WORLDS``) or world files (``PATH.toml``), the others run with the simulated worlds'
     protocol; each named once (one-line ValueError otherwise)."""
-    from jaxais.baselines.config import world_names_module  # JAX-free
-
     names = WORLDS if worlds is None else worlds
     names = [w for w in names.split(",") if w] if isinstance(names, str) else list(names)
     names = [str(w) for w in names]

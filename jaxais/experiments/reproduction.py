@@ -19,7 +19,13 @@ from pathlib import Path
 from typing import Any
 
 from jaxais.experiments import protocol
-from jaxais.experiments.contenders import Contender, check_specs, neural, resolve
+from jaxais.experiments.contenders import (
+    Contender,
+    check_specs,
+    contender_config,
+    neural,
+    resolve,
+)
 from jaxais.experiments.one_system import command_line
 from jaxais.io import RUN_BYTES, Run, atomic_write, atomic_write_json, check_memory, open_run
 
@@ -240,10 +246,8 @@ def _run(run: Run, worlds: dict[str, tuple[str, Any]], n_trials: int | None, see
         cfg = run_config(world, source, config, network, params, seed_info)
         configs[name] = cfg
         hold1_cfg = {**cfg, "readings": {**cfg["readings"], "hold": 1}}
-        # A contender's config: the run's without the network's parts, with how it was given.
-        bare = {k: v for k, v in cfg.items() if k not in ("network", "readings", "ltl_seed")}
         files = {label: (label, cfg) for label in labels} | {"SIE_hold1": (CALIBRATED, hold1_cfg)}
-        files |= {c.label: (c.label, bare | {"contender": c.source}) for c in entrants}
+        files |= {c.label: (c.label, contender_config(cfg, c.source)) for c in entrants}
         if name in run.units:  # a finished world: its trials and examples from its files
             if not lead:
                 continue

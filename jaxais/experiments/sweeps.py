@@ -250,7 +250,8 @@ def run_sweep(
     if isinstance(base, System):
         base_values = system_params(base, names)
     else:
-        base_values = {name: _leaves(base)[name][1] for name in names}
+        leaves = _leaves(base)
+        base_values = {name: leaves[name][1] for name in names}
     return {
         "format": FORMATS["sweep"],  # docs/formats.md
         "axes": {name: values.tolist() for name, values in axes},
@@ -368,10 +369,9 @@ def _contender(contender: Any, grid: Any, system: Any, random_set: Any, seeds: A
         raise ValueError("--contender sweeps a --grid of its parameters (--noise runs --system)")
     if system is not None or random_set or seeds:
         raise ValueError("--contender replaces --system (and --random-set and --seeds)")
-    from jaxais.experiments.contenders import Contender, resolve
+    from jaxais.experiments.contenders import one
 
-    own = isinstance(contender, str | Contender)  # a spec or a Contender: its own label
-    return resolve([contender] if own else {"contender": contender})[0]
+    return one(contender)
 
 
 def sweep(
@@ -427,9 +427,9 @@ def sweep(
     entrant = _contender(contender, grid, system, random_set, seeds)
     system = ("SIE" if grid is not None else "SIE,SRL,HDC") if system is None else system
     names = [entrant.label] if entrant else system.split(",")
-    for name in names if entrant is None else ():
-        if name not in SYSTEMS:
-            raise ValueError(f"--system: unknown system {name!r} (one of {', '.join(SYSTEMS)})")
+    unknown = [] if entrant else [name for name in names if name not in SYSTEMS]
+    if unknown:
+        raise ValueError(f"--system: unknown system {unknown[0]!r} (one of {', '.join(SYSTEMS)})")
     if len(set(names)) < len(names):
         raise ValueError(f"--system names a system twice: {','.join(names)}")
     if records and grid is None:
@@ -446,11 +446,12 @@ def sweep(
         axis_names = [name for name, _ in axes]
         if len(set(axis_names)) < len(axis_names):
             raise ValueError(f"--grid names a parameter twice: {', '.join(axis_names)}")
-        code = parse_label(names[0])[0] if entrant is None else None
-        for name in axis_names if entrant is None else ():  # a contender uses all of its own
-            if code not in USED_BY.get(name, SYSTEMS):
-                users = ", ".join(USED_BY[name])
-                raise ValueError(f"--grid {name}: {code} does not use it (only {users} do)")
+        if entrant is None:  # a paper system may not use an axis; a contender uses all its own
+            code = parse_label(names[0])[0]
+            for name in axis_names:
+                if code not in USED_BY.get(name, SYSTEMS):
+                    users = ", ".join(USED_BY[name])
+                    raise ValueError(f"--grid {name}: {code} does not use it (only {users} do)")
         points = math.prod(len(v) for _, v in axes)
         check_memory(points, RUN_BYTES, "--grid points")  # before the points are listed
     elif not all(0 <= s < math.inf for s in noise):
@@ -506,9 +507,10 @@ def sweep(
         rate = interpolate(doc, "idiotypic_difference_rate", PAPER_POINT)
         doc["paper_point"] = {"values": PAPER_POINT, "idiotypic_difference_rate": rate}
     cfg = run_config(loaded, world, config, network, params, seed_info)
-    if entrant is not None:  # the network's parts do not apply; how the contender was given does
-        cfg = {k: v for k, v in cfg.items() if k not in ("network", "readings", "ltl_seed")}
-        cfg["contender"] = entrant.source
+    if entrant is not None:
+        from jaxais.experiments.contenders import contender_config
+
+        cfg = contender_config(cfg, entrant.source)
     doc["config"] = cfg | {
         "command": None if command is None else portable_command(command),
         "processes": jax.process_count(),

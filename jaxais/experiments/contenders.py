@@ -39,6 +39,7 @@ __all__ = [
     "one",
     "resolve",
     "spec_file",
+    "spec_sha256",
 ]
 
 _RESERVED = {*LABELS, *SYSTEMS, "SIE_hold1"}  # the paper's labels and the calibration file's
@@ -121,6 +122,12 @@ def spec_file(spec: str) -> Path | None:
     """The file a ``FILE.py:NAME`` spec names (None for a module's spec)."""
     _, target, _ = _split(spec)
     return Path(target) if target.endswith(".py") else None
+
+
+def spec_sha256(spec: str) -> str | None:
+    """The sha256 of the file a ``FILE.py:NAME`` spec names (None for a module's spec)."""
+    path = spec_file(spec)
+    return None if path is None else _sha256(path)
 
 
 def _sha256(path: Path) -> str:

@@ -12,7 +12,6 @@ bits). Nothing here imports JAX: the subprocesses have the device.
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import json
 import operator
 import os
@@ -339,14 +338,9 @@ def default_jobs() -> int:
 def _contender_records(specs: Sequence[str]) -> list[dict[str, str | None]]:
     """Each ``--contender`` spec checked (form, label, file) with its file's sha256 (None for a
     module's spec)."""
-    from jaxais.experiments.contenders import check_specs, spec_file
+    from jaxais.experiments.contenders import check_specs, spec_sha256
 
-    records = []
-    for _, spec in check_specs(list(specs)):
-        path = spec_file(spec)
-        digest = None if path is None else hashlib.sha256(path.read_bytes()).hexdigest()
-        records.append({"spec": spec, "sha256": digest})
-    return records
+    return [{"spec": spec, "sha256": spec_sha256(spec)} for _, spec in check_specs(list(specs))]
 
 
 def _run_seed(folder: Run, s: int, settings: dict, run: Runner, logs: bool, note, stop) -> float:

@@ -346,9 +346,14 @@ def comparisons(results_by_world: ResultsByWorld) -> dict[str, dict[str, dict[st
 def table4(results_by_world: ResultsByWorld) -> dict[str, dict[str, dict[str, int]]]:
     """Student's t significance levels ``100 (1 - p)``: ``{world: {"A vs B": {metric: int}}}``
     (the paper's Table 4)."""
+    return _levels(comparisons(results_by_world))
+
+
+def _levels(compared: Mapping[str, Mapping[str, Mapping]]) -> dict[str, dict[str, dict[str, int]]]:
+    """Table 4's levels of :func:`comparisons`-shaped tests: ``{world: {pair: {metric: int}}}``."""
     return {
         world: {pair: {m: row[m]["level"] for m in METRICS} for pair, row in by_pair.items()}
-        for world, by_pair in comparisons(results_by_world).items()
+        for world, by_pair in compared.items()
     }
 
 
@@ -608,10 +613,6 @@ def contender_tables(
         }
         for world, extra in contenders_by_world.items()
     }
-    levels = {
-        world: {pair: {m: row[m]["level"] for m in METRICS} for pair, row in by_pair.items()}
-        for world, by_pair in tests.items()
-    }
     return jsonable(
         {
             "against": list(against),
@@ -619,7 +620,7 @@ def contender_tables(
             "table3_ci": table3_ci(merged),
             "table5": table5(merged),
             "table5_ci": table5_ci(merged),
-            "table4": levels,
+            "table4": _levels(tests),
             "tests": tests,
         }
     )

@@ -152,3 +152,21 @@ def test_network_variant_example_runs_tiny_trials_as_a_user_does():
                       r"rate (\S+) %$", proc.stdout, re.MULTILINE)  # fmt: skip
     assert found, proc.stdout
     assert 0.0 < float(found[1]) <= 10.0 and 0.0 <= float(found[2]) <= 100.0
+
+
+@pytest.mark.parametrize(
+    ("name", "value", "message"),
+    [
+        ("sigma0_floor", "0.1", "sigma0_floor must be a number, got str"),
+        ("sigma0_floor", True, "sigma0_floor must be a number, got bool"),
+        ("sigma0_floor", 2.0, "sigma0_floor must lie in [0, 1], got 2.0"),
+        ("hold", 1.5, "hold must be an int >= 1 (iterations), got 1.5"),
+        ("alpha_on_self", 1, "alpha_on_self must be True or False, got 1"),
+    ],
+)
+def test_readings_check_each_value_type_before_range_in_one_line(name, value, message):
+    from jaxais.immune.readings import readings
+
+    with pytest.raises(ValueError) as info:
+        readings(**{name: value})
+    assert str(info.value) == message

@@ -15,7 +15,6 @@ import numpy as np
 
 from jaxais.envs.struct import pytree_dataclass
 from jaxais.immune.network import Param, declared, param
-from jaxais.io import ArgumentTypeError
 
 HOLD = 31
 """Iterations a selected behaviour acts, about 1 s [ours]: a reverse turn then backs out of IR
@@ -74,7 +73,7 @@ def _checked(name: str, value: Any, declaration: Param) -> np.ndarray:
             unit = f" ({declaration.unit})" if declaration.unit else ""
             raise ValueError(f"{name} must be an int {rule}{unit}, got {value!r}")
     elif isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
-        raise ArgumentTypeError(f"{name} must be a number, got {type(value).__name__}")
+        raise ValueError(f"{name} must be a number, got {type(value).__name__}")
     elif not low <= value <= high:  # NaN fails too
         raise ValueError(f"{name} must lie in [{low:g}, {high:g}], got {value!r}")
     return np.asarray(value, _DTYPES[kind])

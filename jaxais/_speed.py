@@ -6,8 +6,6 @@ least 10 % of some script's wall time and leaves every number as it is:
 - two XLA CPU flags (no YNNPACK fusions; the older loop emitters, which compile the loop's many
   small kernels faster), only for the jaxlib they were checked with (:data:`CHECKED_JAXLIB`);
 - one CPU device per core for the STL scripts, over which :mod:`jaxais.runner` shards batches;
-- for the GA, small while loops compiled into one function (in the STL's loop that form rounds
-  a rare step differently);
 - JAX's persistent compilation cache in ``$JAXAIS_CACHE_DIR`` (default ``~/.cache/jaxais/xla``;
   ``off`` turns it off).
 
@@ -22,21 +20,18 @@ from importlib.metadata import version
 from pathlib import Path
 
 XLA_FLAGS = ("--xla_cpu_experimental_ynn_fusion_type=", "--xla_cpu_use_fusion_emitters=false")
-ONE_KERNEL_LOOPS = "--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold=524288"
 DEVICE_COUNT = "--xla_force_host_platform_device_count"
 CHECKED_JAXLIB = ((0, 10), (0, 11))  # jaxlib releases [from, to) that know the flags above
 CACHE_ENV = "JAXAIS_CACHE_DIR"
 
 
-def setup(
-    cpu_device_per_core: bool = False, one_kernel_loops: bool = False, cache: bool = True
-) -> None:
+def setup(cpu_device_per_core: bool = False, cache: bool = True) -> None:
     """Apply the settings before the first JAX computation (XLA reads its flags then);
     ``cache=False`` for the bench, which times compilation."""
     ours: list[str] = []
     release = tuple(map(int, re.match(r"(\d+)\.(\d+)", version("jaxlib")).groups()))
     if CHECKED_JAXLIB[0] <= release < CHECKED_JAXLIB[1]:
-        ours += [*XLA_FLAGS, *([ONE_KERNEL_LOOPS] if one_kernel_loops else [])]
+        ours += list(XLA_FLAGS)
     if cpu_device_per_core and not os.environ.get("JAX_NUM_CPU_DEVICES"):
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
         ours.append(f"{DEVICE_COUNT}={cores or 1}")

@@ -1,7 +1,9 @@
 """The one driver of the task loop (:mod:`jaxais.loop`): batches of runs, sharded over devices.
 
-A batch advances in lockstep (``vmap`` in a ``while_loop``, :func:`advance`) in segments, between
-which the host reads every run's counts. :func:`rollout` runs one batch to its end (the GA,
+A batch advances in lockstep groups of :data:`GROUP` runs (``vmap`` in a ``while_loop``, mapped
+over the groups: :func:`advance`) in segments, between which the host reads every run's counts.
+On a CPU a segment is one kernel per device (:func:`one_kernel`, each device's runs apart:
+``jax.shard_map``), so an iteration costs its work, not its operations' dispatch. :func:`rollout` runs one batch to its end (the GA,
 recorded trials); :func:`run_pool` refills the slots of ended runs from a queue (trials, sweeps).
 
 Iteration t of a run draws from ``fold_in(run.key, t)`` alone, and slots refill at ticks that are
@@ -23,17 +25,19 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.experimental.xla_metadata import set_xla_metadata
+from jax.extend.core import jaxprs_in_params
 
 from jaxais import distributed, envs
 from jaxais.controllers import Controller
 from jaxais.envs.struct import pytree_dataclass
-from jaxais.loop import RUNNING, EpisodeConfig, Run, draws, iterate, outcome, start
+from jaxais.loop import FINISHED, RUNNING, EpisodeConfig, Run, draws, iterate, outcome, start
 
 
 @pytree_dataclass
 class Batch:
     """Runs [n] advanced together, their poses [n, K, 3] once per chunk (K = 1 unrecorded)
-    and the chunks done."""
+    and the chunks done (one count per device when sharded: :func:`_per_device`)."""
 
     runs: Run
     poses: jnp.ndarray
@@ -59,6 +63,14 @@ def start_batch(
     return Batch(runs=runs, poses=poses, chunks=jnp.int32(0))
 
 
+GROUP = 2
+"""Runs per lockstep group in :func:`advance`: a group ends its segment when its own runs have
+ended, so a pool's ended slots cost nothing and its tail steps only the groups still running
+(no shrink, no other slot count to compile). Two or more: a lone run compiles to a program
+that rounds a rare step differently from the batched one, and its record would then depend on
+its batch."""
+
+
 def advance(
     batch: Batch,
     world: envs.World,
@@ -67,41 +79,111 @@ def advance(
     ctrl_params: Any,
     config: EpisodeConfig,
 ) -> Batch:
-    """Every run on by up to ``config.segment`` iterations (fewer once all ended); iteration t
-    draws from ``fold_in(run.key, t)``."""
+    """Every run on by up to ``config.segment`` iterations, in lockstep groups of
+    :data:`GROUP` (one group unless n is a larger multiple), each stopping once its runs
+    have ended; iteration t draws from ``fold_in(run.key, t)``. One kernel on a CPU
+    (:func:`one_kernel`)."""
+    n = batch.runs.t.shape[0]
+    g = GROUP if n > GROUP and n % GROUP == 0 else n
+    # Unrecorded poses stay out of the kernel (a bitcast of the start poses, which XLA's
+    # one-kernel emitter refuses beside them).
+    poses = batch.poses if config.record else None
+    groups = (batch.runs, poses, ctrl_params)
+
+    def each(groups, chunks, world, sim_params):
+        split = lambda a: a.reshape(n // g, g, *a.shape[1:])
+        runs, poses, chunks = jax.lax.map(
+            lambda a: _segment(*a, chunks, world, sim_params, controller, config),
+            jax.tree.map(split, groups),
+        )
+        merge = lambda a: a.reshape(n, *a.shape[2:])
+        return jax.tree.map(merge, (runs, poses)), jnp.max(chunks)
+
+    if _traced(world):
+        (runs, poses), chunks = one_kernel(each)(groups, batch.chunks, world, sim_params)
+    else:  # a world compiled in as constants (the GA's) stays constants inside the kernel
+        kernel = one_kernel(lambda *a: each(*a, world, sim_params))
+        (runs, poses), chunks = kernel(groups, batch.chunks)
+    return Batch(runs=runs, poses=batch.poses if poses is None else poses, chunks=chunks)
+
+
+def _traced(tree) -> bool:
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(tree))
+
+
+def _segment(runs, poses, ctrl_params, chunks, world, sim_params, controller, config):
+    """One lockstep group's segment: whole chunks until ``config.segment`` or every run of the
+    group has ended. Returns its runs, poses and chunk count."""
     step_all = jax.vmap(iterate, in_axes=(0, 0, None, None, None, None, 0, None))
-    n_chunks = max(1, config.segment // config.chunk)
+    n = runs.t.shape[0]
 
     def chunk_draws(runs: Run):
-        """Every iteration's draws of the chunk, [chunk, n, ...], made at once over flat keys
-        (each threefry hash is a loop of its own on CPU, whatever its size). A run that ends
-        within the chunk leaves its later draws unused."""
-        n = runs.t.shape[0]
+        """Every iteration's draws of the chunk, [chunk, n, ...], made at once over flat keys.
+        A run that ends within the chunk leaves its later draws unused."""
         t = (runs.t[None, :] + jnp.arange(config.chunk)[:, None]).reshape(-1)
         keys = jax.vmap(jax.random.fold_in)(jnp.tile(runs.key, config.chunk), t)
         flat = jax.vmap(draws, in_axes=(0, None))(keys, world)
         return jax.tree.map(lambda a: a.reshape(config.chunk, n, *a.shape[1:]), flat)
 
-    def chunk(batch: Batch) -> Batch:
-        rand = chunk_draws(batch.runs)
+    def chunk(carry):
+        runs, poses, chunks = carry
+        rand = chunk_draws(runs)
 
         def body(i, r):
             at_i = jax.tree.map(lambda a: a[i], rand)
-            tick = batch.chunks * config.chunk + i
+            tick = chunks * config.chunk + i
             return step_all(at_i, r, tick, world, sim_params, controller, ctrl_params, config)
 
-        runs = jax.lax.fori_loop(0, config.chunk, body, batch.runs)
-        poses = batch.poses
+        runs = jax.lax.fori_loop(0, config.chunk, body, runs)
         if config.record:
-            idx = jnp.minimum(batch.chunks + 1, poses.shape[1] - 1)
+            idx = jnp.minimum(chunks + 1, poses.shape[1] - 1)
             poses = jax.lax.dynamic_update_slice_in_dim(poses, runs.sim.pose[:, None], idx, 1)
-        return Batch(runs=runs, poses=poses, chunks=batch.chunks + 1)
+        return runs, poses, chunks + 1
 
-    def cond(carry):
-        i, b = carry
-        return (i < n_chunks) & jnp.any(b.runs.status == RUNNING)
+    end = chunks + max(1, config.segment // config.chunk)
+    cond = lambda c: (c[2] < end) & jnp.any(c[0].status == RUNNING)
+    return jax.lax.while_loop(cond, chunk, (runs, poses, chunks))
 
-    return jax.lax.while_loop(cond, lambda c: (c[0] + 1, chunk(c[1])), (0, batch))[1]
+
+def one_kernel(f: Callable) -> Callable:
+    """``f`` compiled, on a CPU, as one kernel (XLA's "small call" form: the whole loop one LLVM
+    function, no per-operation dispatch), by tagging its call in the program, so that every
+    program that runs the loop compiles it alike, whatever its batch size or process flags.
+    A function with an operation that form cannot emit (:func:`_kernel_can_emit`: a user's
+    controller that sorts, say) runs as XLA compiles it by default."""
+    if jax.default_backend() != "cpu":
+        return f
+    inner = jax.jit(f)
+
+    def tagged(*args):
+        if not _kernel_can_emit(jax.make_jaxpr(f)(*args).jaxpr):
+            return f(*args)
+        out = inner(*args)
+        return set_xla_metadata(out, xla_cpu_small_call="true", inlineable="false")
+
+    return tagged
+
+
+_NOT_IN_ONE_KERNEL = ("scatter", "sort", "top_k", "approx_top_k", "ffi_call", "pallas_call")
+_NOT_IN_ONE_KERNEL += ("cholesky", "eig", "lu", "geqrf", "householder", "svd", "schur")
+_NOT_IN_ONE_KERNEL += ("hessenberg", "fft", "triangular_solve", "tridiagonal", "psum", "all_")
+_NOT_IN_ONE_KERNEL += ("ppermute", "reduce_scatter")
+"""Operations (name prefixes) XLA's one-kernel form cannot emit (runtime calls: scatter, sort,
+LAPACK, FFT, foreign calls, collectives; XLA's own pass leaves loops that hold them alone); any
+host callback too."""
+
+
+def _kernel_can_emit(jaxpr) -> bool:
+    """Whether no operation in ``jaxpr`` (nested ones included) is one of
+    :data:`_NOT_IN_ONE_KERNEL` or a callback."""
+    for eqn in jaxpr.eqns:
+        name = eqn.primitive.name
+        if name.startswith(_NOT_IN_ONE_KERNEL) or "callback" in name:
+            return False
+        for sub in jaxprs_in_params(eqn.params):
+            if not _kernel_can_emit(sub):
+                return False
+    return True
 
 
 @jax.tree_util.register_static
@@ -126,11 +208,19 @@ _STATIC = ("controller", "config", "sharding")
 
 
 def _spread(batch: Batch, sharding) -> Batch:
-    """The runs split over the devices; a no-op on one device."""
+    """The runs split over the devices (and the chunks counted on each); a no-op on one."""
     if sharding is None:
         return batch
     split = lambda x: jax.lax.with_sharding_constraint(x, sharding)
-    return batch.replace(runs=jax.tree.map(split, batch.runs), poses=split(batch.poses))
+    return jax.tree.map(split, batch)
+
+
+def _per_device(batch: Batch, sharding) -> Batch:
+    """``batch`` with a chunk count per device ([devices]), as :func:`_advance` keeps it when
+    sharded: each device's loop stops when its own runs have ended."""
+    if sharding is None:
+        return batch
+    return _spread(batch.replace(chunks=jnp.full(sharding.mesh.size, batch.chunks)), sharding)
 
 
 @functools.partial(jax.jit, static_argnames=_STATIC)
@@ -139,7 +229,28 @@ def _start(reset_keys, run_keys, idx, world, sim_params, params, controller, con
     world = world.world if isinstance(world, _Constant) else world
     p = jax.tree.map(lambda a: a[idx], params)
     batch = start_batch(reset_keys[idx], run_keys[idx], world, sim_params, controller, p, config)
-    return _spread(batch, sharding)
+    return _per_device(batch, sharding)
+
+
+def _advance_local(batch, world, sim_params, p, controller, config, sharding) -> Batch:
+    """:func:`advance` on each device's slots alone (``jax.shard_map``): no collective inside
+    the loop, so that it compiles to one kernel (:func:`one_kernel`) on every device."""
+    if sharding is None:
+        return advance(batch, world, sim_params, controller, p, config)
+    spec, whole = sharding.spec, jax.sharding.PartitionSpec()
+    constant = not any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(world))
+
+    def local(batch, world, sim_params, p):
+        batch = advance(batch.replace(chunks=batch.chunks[0]), world, sim_params, controller, p,
+                        config)  # fmt: skip
+        return batch.replace(chunks=batch.chunks[None])
+
+    if constant:  # a world compiled in stays constants (_Constant)
+        fn = lambda batch, sim_params, p: local(batch, world, sim_params, p)
+        args, specs = (batch, sim_params, p), (spec, whole, spec)
+    else:
+        fn, args, specs = local, (batch, world, sim_params, p), (spec, whole, whole, spec)
+    return jax.shard_map(fn, mesh=sharding.mesh, in_specs=specs, out_specs=spec)(*args)
 
 
 @functools.partial(jax.jit, static_argnames=_STATIC)
@@ -147,9 +258,8 @@ def _advance(batch, idx, world, sim_params, params, controller, config, sharding
     """One segment of the slots' runs ``idx`` [b], and what the host reads of them."""
     world = world.world if isinstance(world, _Constant) else world
     p = jax.tree.map(lambda a: a[idx], params)
-    batch = _spread(
-        advance(_spread(batch, sharding), world, sim_params, controller, p, config), sharding
-    )
+    batch = _advance_local(_spread(batch, sharding), world, sim_params, p, controller, config,
+                           sharding)  # fmt: skip
     runs = batch.runs
     read = {"t": runs.t, "status": runs.status, "collisions": runs.collisions}
     read |= {"trapped": runs.trapped, "locked": runs.locked}
@@ -186,18 +296,10 @@ def _pool_segment(
     return _advance(batch, idx, world, sim_params, params, controller, config, sharding)
 
 
-@functools.partial(jax.jit, static_argnames=("sharding",))
-def _take(batch: Batch, keep: jax.Array, sharding) -> Batch:
-    """The slots ``keep`` [b'] of ``batch``, sharded as the pool's programs take them (a shrink
-    on the host would hand the next segment a batch of another layout: another compile)."""
-    runs, poses = jax.tree.map(lambda a: a[keep], (batch.runs, batch.poses))
-    return _spread(batch.replace(runs=runs, poses=poses), sharding)
-
-
 def _blank(
     b: int, reset_keys, run_keys, world, sim_params, params, controller, config, sharding
 ) -> Batch:
-    """A batch of ``b`` slots of zeros in the pool's layout, for its first segment to start."""
+    """A batch of ``b`` ended slots (zeros) in the pool's layout, for its segments to start."""
     static = dict(controller=controller, config=config, sharding=sharding)
     shapes = jax.eval_shape(
         functools.partial(_start, **static),
@@ -218,9 +320,9 @@ def _blank(
             )
         return put(np.zeros(s.shape, s.dtype), layout)
 
-    runs, poses = jax.tree.map(lambda s: zeros(s, sharding), (shapes.runs, shapes.poses))
-    whole = None if sharding is None else distributed.replicated(sharding)
-    return Batch(runs=runs, poses=poses, chunks=zeros(shapes.chunks, whole))
+    batch = jax.tree.map(lambda s: zeros(s, sharding), shapes)
+    ended = put(np.full(b, FINISHED, np.int32), sharding)  # no slot runs until it is started
+    return batch.replace(runs=batch.runs.replace(status=ended))
 
 
 def rollout(
@@ -267,37 +369,14 @@ def segment_length(chunk: int, period: int = 1, about: int = 600) -> int:
     return align * max(1, -(-about // align))
 
 
-SHRINK = 8
-"""With the queue empty, the batch shrinks by this factor once that many slots idle per live run
-(a power of two stays one), after :func:`patience` segments so: a smaller batch costs another
-compile (or cache load), which a short tail does not repay."""
-EAGER = 64
-"""Slots per device from which a pool shrinks as soon as most idle: there an iteration's cost
-grows with its slots (about 1.5 us each on a CPU core), so the smaller batch repays its compile
-within a segment or two."""
-IDLE_BUDGET = 512
-"""Below :data:`EAGER`, an iteration costs mostly its kernels' dispatch (about 12 us, whatever
-the slots), a smaller batch saves little, and another slot count costs a compile (or a cache
-load of about a second): the pool waits this many idle slot-segments first (:func:`patience`)."""
-
-
-def patience(slots_per_device: int) -> int:
-    """Segments a pool of ``slots_per_device`` waits, idle, before it shrinks: none from
-    :data:`EAGER` slots up, else ``IDLE_BUDGET / slots`` (19k iterations for 16 slots: a long,
-    time-capped tail repays it, a few late finishers do not)."""
-    return 1 if slots_per_device >= EAGER else max(1, IDLE_BUDGET // slots_per_device)
-
-
 def pool_slots(n: int, slots: int, devices: int = 1) -> int:
-    """A pool's slot count for ``n`` runs: a power of two per device, so that the compile cache
-    serves pools of any size (30, 300 or 1000 trials alike). The power of two at or above
-    ``n`` if it pads by at most a quarter, else the one below (its slots refill); at most
-    ``slots``."""
+    """A pool's slot count for ``n`` runs: the power of two per device at or above ``n``, at
+    most ``slots``, so that the compile cache serves pools of any size (30, 300 or 1000 trials
+    alike). Slots beyond the runs stay ended, and an ended group of slots costs nothing
+    (:func:`advance`)."""
     per = -(-min(n, slots) // devices)
-    up = 1 << (per - 1).bit_length()
-    b = up if up * 4 <= per * 5 else max(1, up // 2)
     cap = 1 << (max(1, slots // devices).bit_length() - 1)
-    return min(b, cap) * devices
+    return min(1 << (per - 1).bit_length(), cap) * devices
 
 
 def run_pool(
@@ -338,11 +417,10 @@ def run_pool(
     static = dict(controller=controller, config=config, sharding=sharding)
     keys = (reset_keys, run_keys)
 
-    idx = np.arange(b, dtype=np.int32) % n  # slots past n pad the batch with ended copies
+    idx = np.arange(b, dtype=np.int32) % n
     queued = min(b, n)  # the next run to start
-    live = np.arange(b) < n  # the slot holds a run not yet read out
-    fresh = np.ones(b, bool)  # the slots the next segment (re)starts
-    idle = 0  # segments run with the queue empty and most slots idle
+    live = np.arange(b) < n  # the slot holds a run not yet read out; slots past n stay ended
+    fresh = live.copy()  # the slots the next segment (re)starts
     batch = _blank(b, *keys, world, sim_params, params, **static)
     got: dict[str, np.ndarray] = {}
     while live.any():
@@ -350,28 +428,17 @@ def run_pool(
         read = jax.device_get(read)
         fresh = np.zeros(b, bool)
         ended = live & (read["status"] != RUNNING)
-        idle = idle + 1 if queued == n and live.sum() - ended.sum() <= b // SHRINK else 0
-        if not ended.any() and (b <= d or idle < patience(b // d)):
+        if not ended.any():
             continue
         for name, values in read.items():
             got.setdefault(name, np.zeros((n, *values.shape[1:]), values.dtype))
             got[name][idx[ended]] = values[ended]
         live &= ~ended
-        if progress is not None and ended.any():
+        if progress is not None:
             progress(int(ended.sum()))
         new = np.flatnonzero(ended)[: n - queued]
-        if new.size:
-            idx[new] = np.arange(queued, queued + new.size)
-            queued += new.size
-            live[new] = fresh[new] = True
-        elif b > d and live.sum() <= b // SHRINK and idle >= patience(b // d):
-            # The queue is empty and most slots have idled long enough: go on with a batch an
-            # eighth the size (ended runs never change, so an idle slot can pad it).
-            while b > d and live.sum() <= b // SHRINK:
-                b = max(d, b // SHRINK)
-            keep = np.flatnonzero(live)
-            keep = np.concatenate([keep, np.full(b - keep.size, np.flatnonzero(~live)[0])])
-            batch = _take(batch, keep.astype(np.int32), sharding)
-            idx, live, fresh, idle = idx[keep], live[keep], fresh[keep], 0
+        idx[new] = np.arange(queued, queued + new.size)
+        queued += new.size
+        live[new] = fresh[new] = True
     counts = {name: got.pop(name) for name in ("t", "status", "collisions", "trapped", "locked")}
     return outcome(types.SimpleNamespace(**counts), config, float(sim_params.dt)) | got

@@ -59,7 +59,7 @@ def _run(args: argparse.Namespace, argv: list[str] | None) -> dict:
     from jaxais.experiments import evolution
 
     logging.getLogger("absl").setLevel(logging.CRITICAL)  # orbax's failures: our one line
-    _speed.setup(one_kernel_loops=True)
+    _speed.setup()
     given = dict(config=args.config, world=args.world, seed=args.seed)
     given["crossing_starts"] = args.crossing_starts
     if args.check_seed is not None:

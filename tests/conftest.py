@@ -46,7 +46,7 @@ XLA_FLAGS = os.environ["XLA_FLAGS"]
 @pytest.fixture(autouse=True)
 def _suite_xla_flags():
     """After each test, the suite's XLA flags again: a script's ``main`` run in a test process
-    adds its own (a device per core, one-kernel loops), which the processes that later tests of
+    adds its own (a device per core), which the processes that later tests of
     this worker start would otherwise inherit."""
     yield
     os.environ["XLA_FLAGS"] = XLA_FLAGS

@@ -171,7 +171,7 @@ def test_check_seed_measures_the_recorded_rates(full_run: Path, capsys):
 
 @pytest.mark.slow
 def test_run_as_a_user_runs_it(tmp_path: Path, full_run: Path):
-    """The script as a process, with its XLA flags (jaxais._speed: the GA's one-kernel loops,
+    """The script as a process, with its XLA flags (jaxais._speed: its CPU flags,
     which the in-process run has not): status 0, the same seed as the in-process run, nothing on
     stderr but the progress bar."""
     out = tmp_path / "run"

@@ -51,10 +51,10 @@ def test_flags_are_added_and_a_users_own_setting_kept(tmp_path: Path):
     assert flags.split() == [own, "--xla_cpu_experimental_ynn_fusion_type="]
 
 
-def test_devices_and_one_kernel_loops_when_asked():
+def test_a_device_per_core_when_asked():
     code = (
         "import os, jax\nfrom jaxais import _speed\n"
-        "_speed.setup(cpu_device_per_core=True, one_kernel_loops=True)\n"
+        "_speed.setup(cpu_device_per_core=True)\n"
         "print(os.environ['XLA_FLAGS'])\nprint(jax.local_device_count())\n"
     )
     out = run_python(code, _env(**{_speed.CACHE_ENV: "off"}))
@@ -62,9 +62,6 @@ def test_devices_and_one_kernel_loops_when_asked():
     flags, count = out.stdout.split("\n")[:2]
     assert int(count) == len(os.sched_getaffinity(0))
     assert f"{_speed.DEVICE_COUNT}={count}" in flags.split()
-    release = tuple(map(int, re.match(r"(\d+)\.(\d+)", version("jaxlib")).groups()))
-    if _speed.CHECKED_JAXLIB[0] <= release < _speed.CHECKED_JAXLIB[1]:
-        assert _speed.ONE_KERNEL_LOOPS in flags.split()
     # A device count the user chose is kept.
     mine = run_python(code, _env(JAX_NUM_CPU_DEVICES="3", **{_speed.CACHE_ENV: "off"}))
     assert mine.returncode == 0, mine.stderr[-2000:]

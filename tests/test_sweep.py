@@ -64,46 +64,39 @@ def test_one_slot_refilled_gives_make_trials_runs_bit_for_bit():
 
 
 @pytest.mark.slow
-def test_a_shrinking_pool_gives_make_trials_runs_bit_for_bit(monkeypatch):
-    """Eight slots shrunk to one (on the device, in the pool's layout) once seven runs ended:
-    every run's numbers are those of one batch of all eight (a Braitenberg vehicle, whose
-    runs end apart within a minute)."""
+def test_a_pool_gives_make_trials_runs_bit_for_bit_whatever_its_groups(monkeypatch):
+    """Eight runs in a pool of eight slots (lockstep groups of two, each ending its segments
+    alone) and in make_trials' one batch with groups of two and of eight: every run's numbers
+    are the same (a Braitenberg vehicle, whose runs end apart within a minute)."""
     from jaxais import runner
     from jaxais.controllers import BRAITENBERG, braitenberg_params
     from jaxais.loop import EpisodeConfig
     from jaxais.trials import TrialsConfig, batch_keys, make_trials
 
-    monkeypatch.setattr(runner, "IDLE_BUDGET", 1)  # shrink after one idle segment
-    taken, take = [], runner._take
-    monkeypatch.setattr(runner, "_take", lambda b, k, s: taken.append(k.size) or take(b, k, s))
     config, n, params = EpisodeConfig(tau_cap=60.0), 8, braitenberg_params()
-    want = make_trials(TrialsConfig(F.WORLD, n, "BV", BRAITENBERG, config))(
-        jax.random.key(0), params
-    )
+    trials = TrialsConfig(F.WORLD, n, "BV", BRAITENBERG, config)
+    want = make_trials(trials)(jax.random.key(0), params)
+    monkeypatch.setattr(runner, "GROUP", n)  # one lockstep group of all eight (a fresh trace)
+    whole = make_trials(trials)(jax.random.key(0), params)
     reset_keys, run_keys = batch_keys(0, (("BV", n),))
     got = run_pool(reset_keys, run_keys, repeated(params, n), F.world(), F.sim_params(),
                    BRAITENBERG, config, slots=n, align=100)  # fmt: skip
-    assert taken and taken[-1] == 1, taken  # the pool shrank, to one slot at last
+    assert len(set(np.asarray(want["iterations"]).tolist())) > 1  # the runs end apart
     for k in ("iterations", "collisions", "status"):
         np.testing.assert_array_equal(got[k], want[k], err_msg=k)
+        np.testing.assert_array_equal(whole[k], want[k], err_msg=k)
 
 
 def test_pool_slot_counts_are_powers_of_two_per_device():
     from jaxais.runner import pool_slots
 
-    # The power of two at or above n if it pads by at most a quarter, else the one below.
+    # The power of two at or above n, at most slots.
     assert [pool_slots(n, 1024) for n in (1, 2, 3, 5, 30, 40, 240, 300, 1000)] == [
-        1, 2, 2, 4, 32, 32, 256, 256, 1024,
+        1, 2, 4, 8, 32, 64, 256, 512, 1024,
     ]  # fmt: skip
     assert pool_slots(10**6, 1024) == 1024 and pool_slots(10**6, 1000) == 512  # at most slots
     assert pool_slots(30, 1024, devices=2) == 32 and pool_slots(3, 1024, devices=2) == 4
-    assert pool_slots(300, 1024, devices=4) == 256
-
-
-def test_a_pool_waits_longer_to_shrink_the_fewer_its_slots():
-    from jaxais.runner import patience
-
-    assert [patience(b) for b in (1024, 128, 64, 32, 16, 1)] == [1, 1, 1, 16, 32, 512]
+    assert pool_slots(300, 1024, devices=4) == 512
 
 
 def test_segment_length_is_a_common_multiple_of_about_600():

@@ -294,7 +294,8 @@ def test_the_task_loop_hashes_once_or_twice_per_iteration(ltl):
     start = lambda p: runner.start_batch(*keys, w, sp, controller, p, F.CONFIG)
     advance = lambda b, p: runner.advance(b, w, sp, controller, p, F.CONFIG)
     jaxpr = jax.make_jaxpr(advance)(jax.eval_shape(start, params), params)
-    expected = Counter({1: 3, 2: 1}) if ltl else Counter({1: 3, 2: 2, "branch": 1})
+    # Loops: the map over lockstep groups, the segment's chunks, the chunk's iterations.
+    expected = Counter({2: 3, 3: 1}) if ltl else Counter({2: 3, 3: 2, "branch": 1})
     assert _hashes(jaxpr.jaxpr) == expected
 
 
@@ -611,3 +612,18 @@ def test_trial_sets_keep_where_each_trial_had_its_boxes_and_goal():
     for a, b in zip(res["SIE"].placements, res["HDC"].placements, strict=True):
         np.testing.assert_array_equal(a.goal, b.goal)
         np.testing.assert_array_equal(a.boxes, b.boxes)
+
+
+def test_a_loop_is_one_kernel_unless_it_holds_what_that_form_cannot_emit():
+    """The loop's call is tagged for XLA's one-kernel form; a loop with a sort or a scatter (a
+    user's controller may hold one) is left untagged, and computes the same either way."""
+    from jaxais.runner import _kernel_can_emit, one_kernel
+
+    plain = lambda x: jax.lax.fori_loop(0, 5, lambda i, s: s * 0.5 + i, x)
+    sorts = lambda x: jax.lax.fori_loop(0, 5, lambda i, s: jnp.sort(s) + s.at[i % 4].add(1.0), x)
+    x = jnp.arange(4.0)
+    for f, emits in ((plain, True), (sorts, False)):
+        assert _kernel_can_emit(jax.make_jaxpr(f)(x).jaxpr) is emits
+        program = jax.jit(lambda a, f=f: one_kernel(f)(a))
+        assert ('xla_cpu_small_call = "true"' in program.lower(x).as_text()) is emits
+        np.testing.assert_array_equal(program(x), jax.jit(f)(x))

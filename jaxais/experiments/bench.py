@@ -489,13 +489,13 @@ GA_ROBOTS = 50  # the GA's population: 5 x 10 robots in lockstep
 def loop_rate(kind: str, n: int) -> dict[str, Any]:
     """One loop's rate as its script runs it, in this fresh process (:func:`bench_loops` runs
     it as a child): ``"ga"``, one full GA rollout of ``n`` random robots in ga_maze (evolve.py's
-    settings: the world compiled in, one device, its one-kernel loops); ``"stl"``, ``n`` SIE
+    settings: the world compiled in, one device); ``"stl"``, ``n`` SIE
     trials in world1 through :func:`jaxais.run_trials` (trials.py's: one device per core),
     tail included. Timed on a second, compiled call: robot-iterations (lockstep for the GA, live
     for the STL) per CPU-second and per wall second."""
     from jaxais import _speed
 
-    _speed.setup(cpu_device_per_core=kind == "stl", one_kernel_loops=kind == "ga", cache=False)
+    _speed.setup(cpu_device_per_core=kind == "stl", cache=False)
     import jax
     import numpy as np
 

@@ -3,8 +3,9 @@
 A batch advances in lockstep groups of :data:`GROUP` runs (``vmap`` in a ``while_loop``, mapped
 over the groups: :func:`advance`) in segments, between which the host reads every run's counts.
 On a CPU a segment is one kernel per device (:func:`one_kernel`, each device's runs apart:
-``jax.shard_map``), so an iteration costs its work, not its operations' dispatch. :func:`rollout` runs one batch to its end (the GA,
-recorded trials); :func:`run_pool` refills the slots of ended runs from a queue (trials, sweeps).
+``jax.shard_map``), so an iteration costs its work, not its operations' dispatch.
+:func:`rollout` runs one batch to its end (the GA, recorded trials); :func:`run_pool` refills
+the slots of ended runs from a queue (trials, sweeps).
 
 Iteration t of a run draws from ``fold_in(run.key, t)`` alone, and slots refill at ticks that are
 multiples of the segment, so a run's numbers depend neither on chunk or segment sizes nor on its

@@ -11,13 +11,13 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import subprocess
 import sys
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from jaxais import children
 from jaxais.experiments import protocol
 from jaxais.experiments.contenders import (
     Contender,
@@ -44,7 +44,7 @@ def run_ltl(out: Path, seed: int, generations: int | None = None, resume: bool =
     cmd = [sys.executable, "-m", "jaxais.scripts.evolve", "--out", str(out), "--seed", str(seed)]
     if generations is not None:
         cmd += ["--generations", str(generations)]
-    if subprocess.run(cmd + ["--resume"] * resume).returncode != 0:
+    if children.run(cmd + ["--resume"] * resume).returncode != 0:  # dies with this one
         raise LTLRunError("the LTL run (scripts/evolve.py) failed; see its message above")
     return out / "seed"
 

@@ -11,8 +11,10 @@ the folder in one line while the lock is live, and takes it over once it is stal
 - at once when it names this host and a PID that is no longer running (``kill -9``);
 - at once when it names this very process (an earlier run in it that raised).
 
-The lock goes when the run completes, when the process exits, and on SIGINT/SIGTERM (the file is
-in :data:`jaxais.io.IN_FLIGHT`, which the scripts' signal handler removes). A process stopped for
+The lock goes when the run completes, when the call that took it returns or raises (the drivers
+are :func:`scoped`: a notebook's Ctrl-C does not keep the folder), when the process exits, and
+on SIGINT/SIGTERM (the file is in :data:`jaxais.io.IN_FLIGHT`, which the scripts' signal handler
+removes). A process stopped for
 longer than :data:`STALE_S` (``kill -STOP``, a suspended laptop) may find its lock taken over;
 its heartbeat then says so on stderr and stops.
 """
@@ -21,6 +23,7 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import functools
 import json
 import os
 import socket
@@ -29,12 +32,15 @@ import tempfile
 import threading
 import time
 import uuid
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, ParamSpec, TypeVar
 
 from jaxais import children, io
 
-__all__ = ["HEARTBEAT_S", "NAME", "STALE_S", "FolderLock", "acquire"]
+__all__ = ["HEARTBEAT_S", "NAME", "STALE_S", "FolderLock", "acquire", "scoped"]
+
+P, R = ParamSpec("P"), TypeVar("R")
 
 NAME = ".jaxais-lock"  # one dot: open_run's sweep of cut temporary files (".x.y") leaves it
 HEARTBEAT_S = 20.0  # how often a holder rewrites its lock
@@ -77,6 +83,7 @@ class FolderLock:
     def __init__(self, folder: Path) -> None:
         self.folder, self.path = folder, folder / NAME
         self.token = uuid.uuid4().hex  # tells this holder from an earlier one in the same PID
+        self.thread = threading.get_ident()  # the thread that took it (scoped)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -163,6 +170,23 @@ def acquire(folder: str | os.PathLike[str]) -> FolderLock:
         lock.start()
         return lock
     raise io.UserError(f"{lock.folder}: could not take its lock {NAME}: other processes race")
+
+
+def scoped(fn: Callable[P, R]) -> Callable[P, R]:
+    """Decorate a driver: the locks it takes (in its thread) go when it returns or raises."""
+
+    @functools.wraps(fn)
+    def call(*args: P.args, **kwargs: P.kwargs) -> R:
+        me = threading.get_ident()
+        before = {lock for lock in _HELD if lock.thread == me}
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            for lock in [lock for lock in list(_HELD) if lock.thread == me]:
+                if lock not in before:
+                    lock.release()
+
+    return call
 
 
 @atexit.register

@@ -141,3 +141,21 @@ def test_evolves_checkpoints_are_locked_by_their_writer(tmp_path, sleeper):
     with GACheckpointer(ck, {"seed": 0}, resume=False):
         assert json.loads((ck / lock.NAME).read_text())["pid"] == os.getpid()
     assert not (ck / lock.NAME).exists()
+
+
+def test_a_driver_that_raises_gives_up_its_folders_lock(tmp_path):
+    """A notebook's failed or interrupted call does not keep the folder from a later --resume."""
+    from jaxais.experiments.seeds import ltl_ledger
+
+    def fails(cmd, log):
+        raise RuntimeError("the LTL broke")
+
+    with pytest.raises(RuntimeError, match="the LTL broke"):
+        ltl_ledger(tmp_path, [0], trials=2, jobs=1, runner=fails, progress=False)
+    assert (tmp_path / MANIFEST).exists() and not (tmp_path / lock.NAME).exists()
+    (tmp_path / "ltl").mkdir()
+    outer = lock.acquire(tmp_path / "ltl")  # a lock taken before the call is the caller's
+    with pytest.raises(RuntimeError):
+        ltl_ledger(tmp_path, [0], trials=2, jobs=1, runner=fails, progress=False, resume=True)
+    assert outer.ours()
+    outer.release()

@@ -28,6 +28,7 @@ from jaxais.experiments.contenders import (
 )
 from jaxais.experiments.one_system import command_line
 from jaxais.io import RUN_BYTES, Run, atomic_write, atomic_write_json, check_memory, open_run
+from jaxais.lock import scoped
 
 __all__ = ["LTLRunError", "check_reproduce", "headline", "reproduce", "run_ltl"]
 
@@ -88,6 +89,7 @@ def check_reproduce(
     return Path(out), names, tau_cap, collision_cap
 
 
+@scoped  # its folder's lock goes when it returns or raises
 def reproduce(
     out: str | os.PathLike[str], *, trials: int | None = None, seed: int = 0,
     seeds: str | os.PathLike[str] | None = None, evolve: bool = False,

@@ -30,6 +30,7 @@ from typing import Any
 from jaxais import children, io
 from jaxais.experiments import protocol
 from jaxais.io import MANIFEST, ON_SIGNAL, Run, atomic_write_json, atomic_write_text, open_run
+from jaxais.lock import scoped
 
 __all__ = ["SeedRunError", "headline", "ltl_ledger", "ltl_state", "markdown", "summarise"]
 
@@ -386,6 +387,7 @@ def _run_seed(folder: Run, s: int, settings: dict, run: Runner, logs: bool, note
     return round(time.perf_counter() - t, 3)
 
 
+@scoped  # its folder's lock goes when it returns or raises
 def ltl_ledger(
     out: str | Path,
     seeds: Iterable[int] = range(10),

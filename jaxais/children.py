@@ -16,6 +16,7 @@ about to take over:
 from __future__ import annotations
 
 import ctypes
+import functools
 import os
 import signal
 import subprocess
@@ -46,17 +47,15 @@ def _libc_prctl() -> Callable[..., int] | None:
 _PRCTL = _libc_prctl()
 
 
-def _die_with_parent() -> None:
-    """Run in the child between fork and exec: a signal when the parent (thread) ends."""
-    ignored = signal.getsignal(signal.SIGTERM) is signal.SIG_IGN  # inherited by the child too
-    _PRCTL(PR_SET_PDEATHSIG, signal.SIGKILL if ignored else signal.SIGTERM, 0, 0, 0)
-
-
 def _options(kwargs: dict[str, Any]) -> dict[str, Any]:
     env = dict(os.environ if kwargs.get("env") is None else kwargs["env"])
     env[PARENT_ENV] = str(os.getpid())
     if _PRCTL is not None and kwargs.get("preexec_fn") is None:
-        kwargs["preexec_fn"] = _die_with_parent
+        # SIGKILL where SIGTERM is ignored here (and so in the child, which inherits it).
+        ignored = signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
+        sig = int(signal.SIGKILL if ignored else signal.SIGTERM)
+        # Run between fork and exec: one C call, decided here (no Python lock to take there).
+        kwargs["preexec_fn"] = functools.partial(_PRCTL, PR_SET_PDEATHSIG, sig, 0, 0, 0)
     return kwargs | {"env": env}
 
 

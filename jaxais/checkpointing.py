@@ -18,6 +18,7 @@ from typing import Any
 import jax
 import numpy as np
 
+from jaxais import lock
 from jaxais.ga.config import GAConfig
 from jaxais.ga.core import GAState, abstract_state
 from jaxais.immune.antibodies import within_limits
@@ -108,6 +109,22 @@ class GACheckpointer:
 
         self.directory = Path(directory).absolute()
         self._ocp = ocp
+        self._lock = None  # the directory's (jaxais.lock): one GA writes it
+        if self.directory.is_dir() or not resume:
+            self.directory.mkdir(parents=True, exist_ok=True)
+            self._lock = lock.acquire(self.directory)
+        try:
+            self._open(run_info, resume)
+        except BaseException:
+            self._release()
+            raise
+
+    def _release(self) -> None:
+        if self._lock is not None:
+            self._lock.release()
+
+    def _open(self, run_info: dict[str, Any], resume: bool) -> None:
+        ocp = self._ocp
         run_file = self.directory / RUN_JSON
         info = {"format": FORMAT, **json.loads(json.dumps(run_info))}
         # Orbax names complete checkpoints by their step; temporary ones carry a suffix.
@@ -171,10 +188,13 @@ class GACheckpointer:
             ) from None
 
     def close(self) -> None:
-        """Wait for pending writes and release orbax's manager."""
-        with self._writing():
-            self._manager.wait_until_finished()
-        self._manager.close()
+        """Wait for pending writes and release orbax's manager and the directory's lock."""
+        try:
+            with self._writing():
+                self._manager.wait_until_finished()
+            self._manager.close()
+        finally:
+            self._release()
 
     def latest_generation(self) -> int | None:
         """The generation of the newest complete checkpoint (None if there is none)."""

@@ -7,6 +7,9 @@
   files of writes in flight (:data:`jaxais.io.IN_FLIGHT`) and exits at once. Outputs are atomic
   and checkpoints whole, so nothing is half-written and a resumable run resumes.
 - A multi-process run whose collective fails (another process died) ends with one line too.
+- A script started by another (:mod:`jaxais.children`) ends like a SIGTERM when its parent dies,
+  even by ``kill -9``: no orphan keeps writing into a folder that a ``--resume`` takes over.
+- I/O errors name their file (``out/x.json: No space left on device``).
 
 Scripts wrap ``main`` in ``@main_wrapper("name.py")``, run it with :func:`run_script` and import
 JAX inside ``main`` (a bad flag is reported before JAX starts). ``JAXAIS_DEBUG=1`` re-raises.
@@ -23,7 +26,7 @@ import threading
 from collections.abc import Callable
 from typing import Any, NoReturn
 
-from jaxais import distributed, io
+from jaxais import children, distributed, io
 
 # The scripts' (and tests') names for these, with the CLI's own.
 from jaxais.io import (  # noqa: F401
@@ -36,6 +39,7 @@ from jaxais.io import (  # noqa: F401
 
 EXIT_USAGE, EXIT_INTERRUPTED, EXIT_TERMINATED = 2, 130, 143  # argparse's; 128 + the signal
 DEBUG_ENV = "JAXAIS_DEBUG"  # set (not to 0): errors propagate with their traceback
+_WATCHING: list[Any] = []  # the parent's watcher (jaxais.children), started once per process
 _STATUS = {
     signal.SIGINT: (EXIT_INTERRUPTED, "interrupted"),
     signal.SIGTERM: (EXIT_TERMINATED, "terminated"),
@@ -96,6 +100,8 @@ class main_wrapper(contextlib.ContextDecorator):  # noqa: N801 (used like a func
 
     def __enter__(self) -> main_wrapper:
         previous = {}
+        if not _WATCHING:
+            _WATCHING.append(children.watch_parent(self._on_orphaned))
         distributed.ON_LOST[0] = lambda message: io.abandon(_error_line(self.prog, message), 2)
         if not _debug() and threading.current_thread() is threading.main_thread():
             for signum in _STATUS:
@@ -110,6 +116,10 @@ class main_wrapper(contextlib.ContextDecorator):  # noqa: N801 (used like a func
         traceback or a crash."""
         status, message = _STATUS[signum]
         io.abandon(_error_line(self.prog, message), status)
+
+    def _on_orphaned(self) -> None:
+        """The parent process is gone (killed): end as its SIGTERM would have ended us."""
+        io.abandon(_error_line(self.prog, "its parent process ended; stopped"), EXIT_TERMINATED)
 
     def __exit__(self, exc_type, exc, tb) -> bool:
         for signum, handler in self._previous.pop().items():

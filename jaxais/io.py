@@ -94,9 +94,12 @@ def atomic_write(path: str | os.PathLike[str], write_fn: Callable[[Path], Any]) 
         os.umask(mask)
         os.chmod(tmp, 0o666 & ~mask)
         os.replace(tmp, dest)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(OSError):
             tmp.unlink()
+        if isinstance(err, OSError) and err.filename in (None, str(tmp), tmp):
+            # A full disk or a file size limit (ENOSPC, EFBIG) names no file: name the target.
+            raise OSError(err.errno, err.strerror or str(err), str(dest)) from err
         raise
     finally:
         IN_FLIGHT.discard(tmp)
@@ -176,6 +179,15 @@ MANIFEST = "manifest.json"
 _FIELDS = [str, str, dict, dict]  # the types of kind, status, config, units
 
 
+def manifest_checksum(doc: dict[str, Any]) -> str:
+    """sha256 of a manifest's kind, status, config and units as canonical JSON (sorted keys)."""
+    import hashlib
+
+    body = {k: doc.get(k) for k in ("kind", "status", "config", "units")}
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
 @dataclasses.dataclass
 class Run:
     """A results folder: ``manifest.json`` holds kind, config, status ("partial"/"complete")
@@ -187,6 +199,7 @@ class Run:
     config: dict[str, Any]
     units: dict[str, Any]
     write: bool = True
+    lock: Any = dataclasses.field(default=None, repr=False, compare=False)  # a jaxais.lock's
 
     def finish(self, unit: str, info: Any = None) -> None:
         """Record ``unit`` (its files written) as finished."""
@@ -194,13 +207,16 @@ class Run:
         self._save("partial")
 
     def complete(self) -> None:
-        """Record the run as complete (every output written)."""
+        """Record the run as complete (every output written); its folder's lock goes."""
         self._save("complete")
+        if self.lock is not None:
+            self.lock.release()
 
     def _save(self, status: str) -> None:
         if self.write:
             doc = {"kind": self.kind, "status": status, "config": self.config,
                    "units": self.units}  # fmt: skip
+            doc["checksum"] = manifest_checksum(doc)
             atomic_write_json(self.out / MANIFEST, doc)
 
 
@@ -210,9 +226,26 @@ def open_run(
 ) -> Run:  # fmt: skip
     """Start a run of ``kind`` in a missing or empty ``out``, or ``resume`` the same kind and
     config there. ``write=False`` checks and writes nothing. A UserError says what is in the way
-    and how to go on, or names the first setting that differs."""
+    and how to go on, or names the first setting that differs. Writing, it holds the folder's
+    lock (:mod:`jaxais.lock`: refused while another live process writes there) until
+    :meth:`Run.complete` or the process ends. A manifest's checksum must match its contents (one
+    written before manifests had one is taken as it is, and gets one when next saved)."""
+    from jaxais import lock
 
     out = Path(out)
+    held = lock.acquire(check_writable_dir(out)) if write and out.is_dir() else None
+    try:
+        return _open_run(out, kind, config, resume, write, held)
+    except BaseException:
+        if held is not None:
+            held.release()
+        raise
+
+
+def _open_run(out: Path, kind: str, config: dict[str, Any], resume: bool, write: bool,
+              held: Any) -> Run:  # fmt: skip
+    from jaxais import lock
+
     config = json.loads(json.dumps(config))  # as it reads back: tuples as lists
     path, old = out / MANIFEST, None
     if path.is_file():
@@ -222,6 +255,11 @@ def open_run(
                 raise ValueError("no kind, status, config and units")
         except (OSError, ValueError, AttributeError) as err:
             raise UserError(f"{path}: not a run manifest ({err}); use a fresh --out") from None
+        if "checksum" in old and old["checksum"] != manifest_checksum(old):
+            raise UserError(
+                f"{path}: its checksum does not match its contents (edited by hand or damaged), "
+                "so the run there cannot be trusted to resume: start it again with a fresh --out"
+            )
     if not write:
         return Run(out, kind, config, dict(old["units"]) if resume and old else {}, False)
     if resume and old is None:
@@ -241,7 +279,7 @@ def open_run(
                     f"--{key.replace('_', '-')}: the run in {out} has {json.dumps(was)}, not "
                     f"{json.dumps(now)}; resume it with the same settings, or give a fresh --out"
                 )
-    elif out.is_dir() and any(out.iterdir()):
+    elif out.is_dir() and any(p.name != lock.NAME for p in out.iterdir()):
         raise UserError(f"{out} is not empty and holds no run: give a fresh or empty --out")
     elif out.exists() and not out.is_dir():
         raise UserError(f"{out}: not a directory")
@@ -250,7 +288,12 @@ def open_run(
     for tmp in [*out.glob(".*"), *out.glob("*/.*")] if old else ():
         if tmp.is_file() and tmp.name.count(".") >= 2:  # an atomic write that a SIGKILL cut
             tmp.unlink()
-    run = Run(out, kind, config, dict(old["units"]) if old else {})
+    run = Run(out, kind, config, dict(old["units"]) if old else {}, lock=held)
     if old is None:
-        run._save("partial")  # the folder says at once what it holds
+        run.lock = held or lock.acquire(out)  # a folder this call made: before its first file
+        try:
+            run._save("partial")  # the folder says at once what it holds
+        except BaseException:
+            run.lock.release()
+            raise
     return run

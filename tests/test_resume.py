@@ -9,6 +9,7 @@ one compilation cache, so each program compiles once.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import signal
 import subprocess
@@ -36,10 +37,13 @@ def _manifest(out: Path) -> dict:
 
 def test_a_fresh_run_needs_an_empty_folder_and_says_at_once_that_it_is_partial(tmp_path):
     run = open_run(tmp_path / "new", "sweep", {"trials": 2, "grid": ("k1=1",)})
-    assert _manifest(tmp_path / "new") == {
-        "kind": "sweep", "status": "partial", "config": {"trials": 2, "grid": ["k1=1"]},
-        "units": {},
-    }  # fmt: skip
+    body = {"kind": "sweep", "status": "partial", "config": {"grid": ["k1=1"], "trials": 2},
+            "units": {}}  # fmt: skip
+    canonical = '{"config":{"grid":["k1=1"],"trials":2},"kind":"sweep","status":"partial",'
+    canonical += '"units":{}}'
+    assert _manifest(tmp_path / "new") == body | {
+        "checksum": hashlib.sha256(canonical.encode()).hexdigest()  # sorted keys, no spaces
+    }
     run.finish("points 0-0", {"mean": 1.5})
     assert _manifest(run.out)["units"] == {"points 0-0": {"mean": 1.5}}
     run.complete()
@@ -85,6 +89,46 @@ def test_another_run_in_the_folder_is_refused_in_one_line(tmp_path):
     (out / MANIFEST).write_text('["not", "a", "manifest"]')
     with pytest.raises(UserError, match=r"manifest.json: not a run manifest \(.*\); use a fresh"):
         open_run(out, "reproduce", cfg, resume=True)
+
+
+def test_a_hand_edited_or_damaged_manifest_is_refused_and_an_old_one_taken_once(tmp_path):
+    cfg = {"trials": 2, "seed": 0}
+    run = open_run(tmp_path / "r", "reproduce", cfg)
+    run.finish("world1", {"run_s": 1.0})
+    run.lock.release()  # as its process ended
+    path = tmp_path / "r" / MANIFEST
+    good = path.read_text()
+    edits = {
+        "settings": good.replace('"trials": 2', '"trials": 4'),
+        "units": good.replace('"run_s": 1.0', '"run_s": 2.0'),
+        "status": good.replace('"partial"', '"complete"'),
+        "checksum": good.replace('"checksum": "', '"checksum": "0'),
+    }
+    for name, text in edits.items():
+        assert text != good, name
+        path.write_text(text)
+        with pytest.raises(UserError) as err:
+            open_run(tmp_path / "r", "reproduce", json.loads(text)["config"], resume=True)
+        assert str(err.value) == (
+            f"{path}: its checksum does not match its contents (edited by hand or damaged), so "
+            "the run there cannot be trusted to resume: start it again with a fresh --out"
+        ), name
+        assert path.read_text() == text  # nothing written
+    # A manifest from before checksums is taken as it is, and has one once saved again.
+    old = json.loads(good)
+    del old["checksum"]
+    path.write_text(json.dumps(old))
+    again = open_run(tmp_path / "r", "reproduce", cfg, resume=True)
+    assert again.units == {"world1": {"run_s": 1.0}}
+    again.finish("world2")
+    assert (
+        _manifest(tmp_path / "r")["checksum"]
+        == hashlib.sha256(
+            json.dumps(
+                {**old, "units": again.units}, sort_keys=True, separators=(",", ":")
+            ).encode()
+        ).hexdigest()
+    )
 
 
 def test_resume_removes_the_temporary_files_a_sigkill_left(tmp_path):

@@ -36,6 +36,7 @@ from jaxais.io import (
     open_run,
     read_json_object,
 )
+from jaxais.lock import scoped
 from jaxais.loop import EpisodeConfig
 from jaxais.seed import Seed
 from jaxais.systems import HAND_DESIGNED, hand_designed_sets, make_system, parse_label
@@ -495,6 +496,7 @@ def figure(doc: Mapping[str, Any]) -> Any:
     return fig
 
 
+@scoped  # its folder's lock goes when it returns or raises
 def ablate(
     out: str | Path,
     *,

@@ -19,6 +19,7 @@ from jaxais import io
 from jaxais.baselines.config import NN_LABEL, TrainConfig
 from jaxais.experiments import protocol
 from jaxais.io import UserError, atomic_write_json, atomic_write_text, open_run, read_json_object
+from jaxais.lock import scoped
 
 REFERENCE = ("SIE", "HDC")  # the paper's systems it runs beside
 
@@ -214,6 +215,7 @@ def evaluate_baseline(
     return doc
 
 
+@scoped  # its folder's lock goes when it returns or raises
 def baseline(
     out: str | Path,
     config: TrainConfig | None = None,

@@ -14,7 +14,6 @@ import json
 import os
 import platform
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -23,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from jaxais import children
 from jaxais.io import RUN_BYTES, atomic_write_json, check_memory
 
 SCHEMA = "jaxais-bench/1"
@@ -539,7 +539,7 @@ def bench_loops(b: Bench) -> None:
     code += "print(json.dumps(loop_rate(sys.argv[1], int(sys.argv[2]))))"
 
     def child(kind: str, n: int) -> dict[str, Any]:
-        proc = subprocess.run([sys.executable, "-c", code, kind, str(n)], env=b.environ,
+        proc = children.run([sys.executable, "-c", code, kind, str(n)], env=b.environ,
                               capture_output=True, text=True, check=False)  # fmt: skip
         if proc.returncode:
             last = (proc.stderr.strip().splitlines() or ["(nothing on stderr)"])[-1]
@@ -576,7 +576,7 @@ def bench_scripts(b: Bench) -> None:
             out.parent.mkdir()
             where = [str(path)] if path.is_absolute() else ["-m", f"jaxais.scripts.{path.stem}"]
             t0 = time.perf_counter()
-            proc = subprocess.run([sys.executable, *where, *run.argv[1:], "--out", str(out)],
+            proc = children.run([sys.executable, *where, *run.argv[1:], "--out", str(out)],
                                   env=env, capture_output=True, text=True, check=False)  # fmt: skip
             times[run.name].append(time.perf_counter() - t0)
             if proc.returncode:

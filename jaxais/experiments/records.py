@@ -4,6 +4,8 @@ with every parameter it used, so a run can be regenerated from its JSON."""
 from __future__ import annotations
 
 import dataclasses
+import math
+import os
 import platform
 from collections.abc import Mapping
 from pathlib import Path
@@ -16,7 +18,7 @@ from jaxais import envs
 from jaxais.controllers import System
 from jaxais.immune.network import NetworkParams
 from jaxais.immune.readings import DEFAULT
-from jaxais.io import UserError, read_json_object
+from jaxais.io import UserError, check_type, read_json_object
 from jaxais.loop import EpisodeConfig
 from jaxais.seed import Seed, default_seed_dir, load_seed
 from jaxais.systems import make_system, parse_label
@@ -134,11 +136,16 @@ def results_document(
     }
 
 
-def records_frame(source: str | Path | Mapping[str, Any], runs: bool = False):
+def records_frame(source: str | os.PathLike[str] | Mapping[str, Any], runs: bool = False):
     """A results file (a path or its JSON) as a ``pandas.DataFrame`` (docs/formats.md): a
     trials file's trials; a sweep's points (the axes, n, per metric its mean, ``_low`` and
     ``_high``) or with ``runs`` its kept runs; a reality gap's (scale, label) rows. One-line
-    ValueError otherwise."""
+    ValueError otherwise: a wrong type, a missing field (named), or a record holding a NaN or an
+    infinity (named by its index and label: results files hold finite numbers, ``null`` where a
+    value does not apply)."""
+    check_type(source, str | os.PathLike | Mapping, "records_frame's source",
+               "a results file's path or its JSON document (a dict)")  # fmt: skip
+    check_type(runs, bool, "records_frame's runs", "a bool")
     try:
         import pandas as pd
     except ImportError:
@@ -146,31 +153,60 @@ def records_frame(source: str | Path | Mapping[str, Any], runs: bool = False):
     where = "the document" if isinstance(source, Mapping) else str(source)
     doc = source if isinstance(source, Mapping) else read_json_object(source)
     fmt = doc.get("format")
+    named: list[tuple[str, dict[str, Any]]] = []  # (the record's name in an error, its row)
     if fmt == FORMATS["trials"]:
-        head = {k: doc[k] for k in ("label", "system", "world", "random_set", "seed")}
-        rows = [{**head, "trial": i, **r} for i, r in enumerate(doc["trials"])]
+        head = {k: _field(doc, k, where) for k in ("label", "system", "world", "random_set")}
+        head["seed"] = _field(doc, "seed", where)
+        for i, r in enumerate(_objects(doc, "trials", where)):
+            named.append((f"trial {i} (label {head['label']!r})", {**head, "trial": i, **r}))
     elif fmt == FORMATS["sweep"] and runs:
-        if any("trials" not in p for p in doc["points"]):
+        points = _objects(doc, "points", where)
+        if any("trials" not in p for p in points):
             raise UserError(f"{where} kept no runs: run the sweep with --records")
-        rows = [
-            {**p["values"], "trial": i, **r}
-            for p in doc["points"]
-            for i, r in enumerate(p["trials"])
-        ]
+        for j, p in enumerate(points):
+            values = _field(p, "values", f"{where}: point {j}", Mapping, "an object")
+            for i, r in enumerate(_objects(p, "trials", f"{where}: point {j}")):
+                named.append((f"point {j}'s trial {i}", {**values, "trial": i, **r}))
     elif fmt == FORMATS["sweep"]:
-        rows = [{**p["values"], **_flat(p)} for p in doc["points"]]
+        for j, p in enumerate(_objects(doc, "points", where)):
+            values = _field(p, "values", f"{where}: point {j}", Mapping, "an object")
+            named.append((f"point {j}", {**values, **_flat(p)}))
     elif fmt == FORMATS["reality_gap"] and not runs:
-        rows = [
-            {"scale": p["scale"], "label": k, **_flat(v)}
-            for p in doc["points"]
-            for k, v in p["systems"].items()
-        ]
+        for j, p in enumerate(_objects(doc, "points", where)):
+            systems = _field(p, "systems", f"{where}: point {j}", Mapping, "an object")
+            for k, v in systems.items():
+                check_type(v, Mapping, f"{where}: point {j}'s {k!r}", "an object")
+                row = {"scale": _field(p, "scale", f"{where}: point {j}"), "label": k, **_flat(v)}
+                named.append((f"point {j}'s label {k!r}", row))
     elif fmt == FORMATS["reality_gap"]:
         raise UserError(f"{where}: a reality gap keeps no runs (runs=True reads a sweep's)")
     else:
         known = ", ".join(FORMATS.values())
         raise UserError(f"{where}: not a jaxais results file (format {fmt!r}; reads {known})")
-    return pd.DataFrame(rows)
+    for name, row in named:
+        for key, value in row.items():
+            if isinstance(value, float | np.floating) and not math.isfinite(value):
+                raise UserError(
+                    f"{where}: {name} holds {key} = {value}: a results file holds finite numbers "
+                    "(null where a value does not apply); it was damaged or edited"
+                )
+    return pd.DataFrame([row for _, row in named])
+
+
+def _field(doc: Mapping[str, Any], key: str, where: str, kind: Any = object, what: str = "") -> Any:
+    """``doc[key]``, or a one-line UserError naming the missing field (or its wrong type)."""
+    if key not in doc:
+        raise UserError(f"{where}: no {key!r} field (docs/formats.md)")
+    check_type(doc[key], kind, f"{where}: {key!r}", what)
+    return doc[key]
+
+
+def _objects(doc: Mapping[str, Any], key: str, where: str) -> list[Mapping[str, Any]]:
+    """``doc[key]`` checked to be a list of JSON objects (each named by its index if not)."""
+    items = _field(doc, key, where, list, "a list of objects")
+    for i, item in enumerate(items):
+        check_type(item, Mapping, f"{where}: {key}[{i}]", "an object")
+    return items
 
 
 def _flat(summary: Mapping[str, Any]) -> dict[str, Any]:

@@ -11,13 +11,13 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import subprocess
 import sys
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from jaxais import children
 from jaxais.experiments import protocol
 from jaxais.experiments.contenders import (
     Contender,
@@ -28,6 +28,7 @@ from jaxais.experiments.contenders import (
 )
 from jaxais.experiments.one_system import command_line
 from jaxais.io import RUN_BYTES, Run, atomic_write, atomic_write_json, check_memory, open_run
+from jaxais.lock import scoped
 
 __all__ = ["LTLRunError", "check_reproduce", "headline", "reproduce", "run_ltl"]
 
@@ -44,7 +45,7 @@ def run_ltl(out: Path, seed: int, generations: int | None = None, resume: bool =
     cmd = [sys.executable, "-m", "jaxais.scripts.evolve", "--out", str(out), "--seed", str(seed)]
     if generations is not None:
         cmd += ["--generations", str(generations)]
-    if subprocess.run(cmd + ["--resume"] * resume).returncode != 0:
+    if children.run(cmd + ["--resume"] * resume).returncode != 0:  # dies with this one
         raise LTLRunError("the LTL run (scripts/evolve.py) failed; see its message above")
     return out / "seed"
 
@@ -88,6 +89,7 @@ def check_reproduce(
     return Path(out), names, tau_cap, collision_cap
 
 
+@scoped  # its folder's lock goes when it returns or raises
 def reproduce(
     out: str | os.PathLike[str], *, trials: int | None = None, seed: int = 0,
     seeds: str | os.PathLike[str] | None = None, evolve: bool = False,

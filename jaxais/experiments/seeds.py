@@ -27,9 +27,10 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
-from jaxais import io
+from jaxais import children, io
 from jaxais.experiments import protocol
 from jaxais.io import MANIFEST, ON_SIGNAL, Run, atomic_write_json, atomic_write_text, open_run
+from jaxais.lock import scoped
 
 __all__ = ["SeedRunError", "headline", "ltl_ledger", "ltl_state", "markdown", "summarise"]
 
@@ -253,7 +254,8 @@ def markdown(summary: Mapping[str, Any]) -> str:
 
 
 class _Processes:
-    """The default runner: child processes, remembered so that an interrupted ledger stops them."""
+    """The default runner: child processes, remembered so that an interrupted ledger stops them
+    (and ended by the kernel if this process is killed: :mod:`jaxais.children`)."""
 
     def __init__(self) -> None:
         self._lock, self._live, self._stopped = threading.Lock(), set(), False
@@ -266,7 +268,7 @@ class _Processes:
                 if self._stopped:
                     return -int(signal.SIGTERM)
                 err = None if stream is None else subprocess.STDOUT
-                proc = subprocess.Popen(cmd, stdout=stream, stderr=err)
+                proc = children.popen(cmd, stdout=stream, stderr=err)  # dies with this one
                 self._live.add(proc)
             try:
                 return proc.wait()
@@ -385,6 +387,7 @@ def _run_seed(folder: Run, s: int, settings: dict, run: Runner, logs: bool, note
     return round(time.perf_counter() - t, 3)
 
 
+@scoped  # its folder's lock goes when it returns or raises
 def ltl_ledger(
     out: str | Path,
     seeds: Iterable[int] = range(10),

@@ -32,6 +32,7 @@ from jaxais.immune.network import BOUNDS, NetworkParams
 from jaxais.immune.readings import readings as make_readings
 from jaxais.io import RUN_BYTES, Run, atomic_write_json, check_memory, open_run
 from jaxais.labels import SYSTEMS, label, parse_label
+from jaxais.lock import scoped
 from jaxais.loop import EpisodeConfig
 from jaxais.runner import run_pool, segment_length
 from jaxais.systems import FIXED, PARAMETERS, USED_BY, system_params, with_params
@@ -374,6 +375,7 @@ def _contender(contender: Any, grid: Any, system: Any, random_set: Any, seeds: A
     return one(contender)
 
 
+@scoped  # its folder's lock goes when it returns or raises
 def sweep(
     out: str | Path,
     *,

@@ -6,7 +6,9 @@ built-in worlds to brax's registry as ``jaxais_{world}``. ``step`` takes no key:
 when terminated or truncated, ``info["truncation"]`` 1.0 in the second case (brax's
 ``EpisodeWrapper`` overwrites it with its ``episode_length`` cap: keep ``max_steps_in_episode``
 above that). ``metrics`` (:data:`METRICS`) per step: ``collision`` (1.0 when one is counted),
-``progress`` (m toward the goal), ``found``. brax's ``AutoResetWrapper`` restarts from
+``progress`` (m toward the goal), ``found``; ``info["invalid_action"]``: the action was not
+finite (the step dropped, as in the gymnax face; eagerly such an action, or one of another
+shape, is refused). brax's ``AutoResetWrapper`` restarts from
 ``info["first_pipeline_state"]``: so that episodes do not all restart from one placement,
 ``reset`` draws ``resets`` placements and ``step`` writes a random one there (a gather, not a
 reset); ``resets=0`` keeps brax's behaviour.

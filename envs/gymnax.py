@@ -12,14 +12,16 @@ the same but cannot be deep-copied, which rejax does to its config.
 - reward: ``progress_scale`` x metres gained toward the goal, minus ``collision_penalty`` per
   counted collision (one per contact episode, SPEC 9), plus ``finish_bonus`` on finding it.
 - terminated: the paper's finish rule; truncated: ``max_steps_in_episode`` steps; never both.
-- info: ``collisions``, ``distance`` (m), ``goal_pixels``, ``max_ir``, ``discount``; ``step``
-  adds gymnax's ``terminated``, ``truncated``, ``final_observation``.
+- info: ``collisions``, ``distance`` (m), ``goal_pixels``, ``max_ir``, ``discount``,
+  ``invalid_action`` (the action was not finite: the step was dropped, the state kept, reward 0);
+  ``step`` adds gymnax's ``terminated``, ``truncated``, ``final_observation``.
 
 Auto-reset is cheap: ``reset`` also draws ``reset_pool`` starts into the state and an ended
 episode restarts from one (a gather and a select), where gymnax's ``step`` runs ``reset_env``
 every step (10-15x a step under ``vmap``). ``auto_reset=False``: ``step`` never resets.
-Outside jit, ``make``, ``reset`` and ``step`` reject out-of-range ``EnvParams`` fields and bad
-actions with a one-line ``ValueError``; traced values are not checked.
+Outside jit, ``make``, ``reset`` and ``step`` reject ``EnvParams`` fields of the wrong type, out
+of range or out of order, and bad keys and actions, with a one-line ``ValueError``; traced values
+are not checked, but an action's shape is (it is static) and a non-finite action is flagged.
 """
 
 from __future__ import annotations

@@ -6,7 +6,9 @@ built-in worlds to brax's registry as ``jaxais_{world}``. ``step`` takes no key:
 when terminated or truncated, ``info["truncation"]`` 1.0 in the second case (brax's
 ``EpisodeWrapper`` overwrites it with its ``episode_length`` cap: keep ``max_steps_in_episode``
 above that). ``metrics`` (:data:`METRICS`) per step: ``collision`` (1.0 when one is counted),
-``progress`` (m toward the goal), ``found``. brax's ``AutoResetWrapper`` restarts from
+``progress`` (m toward the goal), ``found``; ``info["invalid_action"]``: the action was not
+finite (the step dropped, as in the gymnax face; eagerly such an action, or one of another
+shape, is refused). brax's ``AutoResetWrapper`` restarts from
 ``info["first_pipeline_state"]``: so that episodes do not all restart from one placement,
 ``reset`` draws ``resets`` placements and ``step`` writes a random one there (a gather, not a
 reset); ``resets=0`` keeps brax's behaviour.
@@ -22,7 +24,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .gymnax import OBS_NAMES, EnvParams, EpuckEnv, goal_distance, make
+from .gymnax import (
+    OBS_NAMES,
+    EnvParams,
+    EpuckEnv,
+    check_action,
+    check_params,
+    goal_distance,
+    make,
+)
+from .struct import check_type
 from .world import BUILTIN_WORLDS, World
 
 try:
@@ -64,14 +75,22 @@ class BraxEnv(_BraxEnvBase):
         resets: int = 16,
         **overrides: Any,
     ):
+        if "backend" in overrides:  # brax.envs.get_environment's argument (mjx, generalized...)
+            raise ValueError(
+                f"backend={overrides['backend']!r} is an argument of brax's get_environment, not "
+                "of BraxEnv: jaxais has one simulator, leave it out"
+            )
+        check_type(resets, int | np.integer, "resets", "a non-negative integer")
+        if resets < 0:
+            raise ValueError(f"resets must be a non-negative integer, got {resets!r}")
+        if params is not None:
+            check_params(params)
         if isinstance(world, EpuckEnv):
             if overrides:
                 raise ValueError("pass overrides to make(), not with an environment")
             self._env = world
         else:
             self._env = make(world, auto_reset=False, **overrides)
-        if int(resets) != resets or resets < 0:
-            raise ValueError(f"resets must be a non-negative integer, got {resets!r}")
         self._params = self._env.default_params if params is None else params
         self._resets = int(resets)
 
@@ -86,7 +105,8 @@ class BraxEnv(_BraxEnvBase):
         pool = jax.vmap(self._env.reset_env, (0, None))(keys, self._params)
         obs, state = jax.tree.map(lambda a: a[0], pool)
         zero = jnp.zeros((), jnp.float32)
-        info = {"rng": rng, "truncation": zero}
+        # invalid_action: the step's action was not finite, and was dropped (its state kept).
+        info = {"rng": rng, "truncation": zero, "invalid_action": jnp.zeros((), bool)}
         if self._resets:
             info["placements"] = pool
         return BraxState(
@@ -99,6 +119,7 @@ class BraxEnv(_BraxEnvBase):
         )
 
     def step(self, state: BraxState, action: jax.Array) -> BraxState:
+        check_action(action)  # eagerly its shape and values; traced, its shape
         rng, key, k_pick = jax.random.split(state.info["rng"], 3)
         before = state.pipeline_state
         obs, env_state, reward, terminated, info = self._env.step_env(
@@ -110,7 +131,8 @@ class BraxEnv(_BraxEnvBase):
             "progress": goal_distance(before.sim) - info["distance"],
             "found": terminated,
         }
-        new_info = {**state.info, "rng": rng, "truncation": truncated.astype(jnp.float32)}
+        new_info = {**state.info, "rng": rng, "truncation": truncated.astype(jnp.float32),
+                    "invalid_action": info["invalid_action"]}  # fmt: skip
         if self._resets and "first_pipeline_state" in state.info:
             pick = jax.random.randint(k_pick, (), 0, self._resets)
             first_obs, first = jax.tree.map(lambda a: a[pick], state.info["placements"])

@@ -12,14 +12,16 @@ the same but cannot be deep-copied, which rejax does to its config.
 - reward: ``progress_scale`` x metres gained toward the goal, minus ``collision_penalty`` per
   counted collision (one per contact episode, SPEC 9), plus ``finish_bonus`` on finding it.
 - terminated: the paper's finish rule; truncated: ``max_steps_in_episode`` steps; never both.
-- info: ``collisions``, ``distance`` (m), ``goal_pixels``, ``max_ir``, ``discount``; ``step``
-  adds gymnax's ``terminated``, ``truncated``, ``final_observation``.
+- info: ``collisions``, ``distance`` (m), ``goal_pixels``, ``max_ir``, ``discount``,
+  ``invalid_action`` (the action was not finite: the step was dropped, the state kept, reward 0);
+  ``step`` adds gymnax's ``terminated``, ``truncated``, ``final_observation``.
 
 Auto-reset is cheap: ``reset`` also draws ``reset_pool`` starts into the state and an ended
 episode restarts from one (a gather and a select), where gymnax's ``step`` runs ``reset_env``
 every step (10-15x a step under ``vmap``). ``auto_reset=False``: ``step`` never resets.
-Outside jit, ``make``, ``reset`` and ``step`` reject out-of-range ``EnvParams`` fields and bad
-actions with a one-line ``ValueError``; traced values are not checked.
+Outside jit, ``make``, ``reset`` and ``step`` reject ``EnvParams`` fields of the wrong type, out
+of range or out of order, and bad keys and actions, with a one-line ``ValueError``; traced values
+are not checked, but an action's shape is (it is static) and a non-finite action is flagged.
 """
 
 from __future__ import annotations
@@ -34,12 +36,20 @@ import jax.numpy as jnp
 import numpy as np
 from gymnax.environments import environment, spaces
 
-from .params import CAMERA_COLUMNS, IR_FULL_SCALE, OBS_NAMES, PIXELS, SimParams, default_params
+from .params import (
+    CAMERA_COLUMNS,
+    IR_FULL_SCALE,
+    IR_TABLE_VALUE,
+    OBS_NAMES,
+    PIXELS,
+    SimParams,
+    default_params,
+)
 from .sim import Observation, State
 from .sim import observe as sim_observe
 from .sim import reset as sim_reset
 from .sim import step as sim_step
-from .struct import pytree_dataclass
+from .struct import ArgumentTypeError, check_type, pytree_dataclass
 from .world import BUILTIN_WORLDS, World, load_world
 
 PAPER_TIME_CAP = 4000.0
@@ -68,44 +78,99 @@ class EnvParams:
     finish_streak: int = 3
 
 
-# field: (low, high, integer): every value finite.
+# field: (low, high, integer): every value finite. A penalty or bonus of the wrong sign rewards
+# collisions or punishes finding the goal.
 _RANGES = {
     "max_steps_in_episode": (1, np.inf, True),
     "progress_scale": (-np.inf, np.inf, False),
-    "collision_penalty": (-np.inf, np.inf, False),
-    "finish_bonus": (-np.inf, np.inf, False),
+    "collision_penalty": (0, np.inf, False),
+    "finish_bonus": (0, np.inf, False),
     "collision_level": (0, IR_FULL_SCALE, False),
     "clear_level": (0, IR_FULL_SCALE, False),
     "finish_pixels": (0, PIXELS, True),
     "finish_streak": (1, np.inf, True),
 }
+IR_FLOOR = float(IR_TABLE_VALUE[-1])  # the IR reading with nothing in range (SPEC 2)
 
 
 def check_params(params: Any) -> EnvParams:
-    """``params``, or a one-line ``ValueError`` naming a concrete field out of range."""
+    """``params``, or a one-line ``ValueError`` naming a concrete field of the wrong type (a bool
+    or a string is no number), out of range, or levels out of order (a contact needs
+    ``IR_FLOOR < clear_level <= collision_level``: else no second one is ever counted)."""
     if not isinstance(params, EnvParams):
-        raise ValueError(
+        raise ArgumentTypeError(
             f"params must be an EnvParams (env.default_params.replace(...)), "
             f"got {type(params).__name__}"
         )
+    concrete = {}
     for name, (low, high, integer) in _RANGES.items():
         value = getattr(params, name)
         if isinstance(value, jax.core.Tracer):
             continue
-        try:
-            x = np.asarray(value, np.float64)
-        except (TypeError, ValueError):
-            x = np.asarray(np.nan)
+        kind = "an integer" if integer else "a number"
+        x = np.asarray(value) if isinstance(value, np.ndarray | jax.Array) else value
+        if not isinstance(x, np.ndarray):
+            check_type(x, int | float | np.integer | np.floating, f"EnvParams.{name}", kind)
+            x = np.asarray(x)
+        elif x.dtype.kind not in "iuf":
+            raise ArgumentTypeError(f"EnvParams.{name} must be {kind}, got {x.dtype} {value!r:.40}")
+        x = x.astype(np.float64)
         ok = np.isfinite(x) & (x >= low) & (x <= high)
         if not np.all(ok & (x == np.round(x)) if integer else ok):
-            kind = "an integer" if integer else "a number"
             what = (
                 f"{kind} in [{low:g}, {high:g}]" if high < np.inf
                 else f"{kind} >= {low:g}" if low > -np.inf
                 else "a finite number"
             )  # fmt: skip
             raise ValueError(f"EnvParams.{name} must be {what}, got {value!r}")
+        concrete[name] = x
+    if "clear_level" in concrete and np.any(concrete["clear_level"] <= IR_FLOOR):
+        raise ValueError(
+            f"EnvParams.clear_level must exceed {IR_FLOOR:g}, the IR reading with nothing in range"
+            f" (levels are raw readings 0..4095, not the observation's), got {params.clear_level!r}"
+        )
+    if {"clear_level", "collision_level"} <= concrete.keys() and np.any(
+        concrete["clear_level"] > concrete["collision_level"]
+    ):
+        raise ValueError(
+            f"EnvParams.clear_level ({params.clear_level!r}) must be <= collision_level "
+            f"({params.collision_level!r}): a contact counts at collision_level, the next once "
+            "the reading falls below clear_level"
+        )
     return params
+
+
+def check_key(key: Any) -> None:
+    """A one-line ValueError unless ``key`` is a PRNG key (``jax.random.key(0)``) or an array."""
+    if not isinstance(key, jax.Array | np.ndarray):
+        got = type(key).__name__
+        raise ArgumentTypeError(f"key must be a PRNG key (jax.random.key(0)), got {got}")
+
+
+def check_action(action: Any, eager: bool = True) -> None:
+    """A one-line ValueError unless ``action`` has shape (2,) (a traced one too: its shape is
+    static) and, concrete and ``eager``, is finite."""
+    traced = isinstance(action, jax.core.Tracer)
+    try:
+        a = action if traced else np.asarray(action, np.float64)
+        bad = np.shape(a) != (2,) or (eager and not traced and not np.all(np.isfinite(a)))
+    except (TypeError, ValueError):  # not numbers, or a ragged list
+        a, bad = action, True
+    if bad:
+        shape = f"shape {np.shape(a)}" if traced else " ".join(f"{action!r:.80}".split())
+        raise ValueError(
+            f"action must be 2 finite wheel speeds (left, right) in [-1, 1], shape (2,), got "
+            f"{shape}"
+        )
+
+
+def check_env_args(params: Any, auto_reset: Any, reset_pool: Any) -> None:
+    """The environment's constructor arguments: types first, then ranges (one line each)."""
+    check_type(auto_reset, bool | np.bool_, "auto_reset", "True or False")
+    check_type(reset_pool, int | np.integer, "reset_pool", "a positive integer")
+    if reset_pool < 1:
+        raise ValueError(f"reset_pool must be a positive integer, got {reset_pool!r}")
+    check_params(params)
 
 
 @pytree_dataclass
@@ -146,6 +211,7 @@ class EpuckEnv(environment.Environment):
     means ``default_params``."""
 
     def __init__(self, params: EnvParams, auto_reset: bool = True, reset_pool: int = RESET_POOL):
+        check_env_args(params, auto_reset, reset_pool)
         self._params = params
         self.auto_reset = auto_reset
         self.reset_pool = reset_pool
@@ -177,6 +243,7 @@ class EpuckEnv(environment.Environment):
 
     def reset(self, key: jax.Array, params: EnvParams | None = None) -> tuple[jax.Array, EnvState]:
         """A fresh episode: ``(obs [11], state)``; placements and sensor noise from ``key``."""
+        check_key(key)
         return self._reset(key, self._checked(params))
 
     @functools.partial(jax.jit, static_argnames="self")
@@ -191,13 +258,11 @@ class EpuckEnv(environment.Environment):
         params: EnvParams | None = None,
     ) -> tuple[jax.Array, EnvState, jax.Array, jax.Array, jax.Array, dict[str, jax.Array]]:
         """One 32 ms step of wheel speeds ``action`` [2], a new episode after the last (with
-        auto-reset): ``(obs [11], state, reward, terminated, truncated, info)``."""
-        if not isinstance(action, jax.core.Tracer):
-            a = np.asarray(action)
-            if a.shape != (2,) or not np.all(np.isfinite(a)):
-                raise ValueError(
-                    f"action must be 2 finite wheel speeds (left, right) in [-1, 1], got {a!r}"
-                )
+        auto-reset): ``(obs [11], state, reward, terminated, truncated, info)``. A wrong action
+        shape is refused, under jit too (when traced); a non-finite action eagerly, and under jit
+        it leaves the state as it was (``info["invalid_action"]``)."""
+        check_key(key)
+        check_action(action)
         return self._step(key, state, action, self._checked(params))
 
     @functools.partial(jax.jit, static_argnames="self")
@@ -240,8 +305,15 @@ class EpuckEnv(environment.Environment):
     def step_env(
         self, key: jax.Array, state: EnvState, action: jax.Array, params: EnvParams
     ) -> tuple[jax.Array, EnvState, jax.Array, jax.Array, dict[str, jax.Array]]:
-        """One step, no reset, no checks: ``(obs, state, reward, terminated, info)`` (gymnax's)."""
-        wheels = jnp.clip(jnp.asarray(action, jnp.float32), -1.0, 1.0) * params.sim.max_speed
+        """One step, no reset: ``(obs, state, reward, terminated, info)`` (gymnax's). The action's
+        shape is checked as it is traced; a non-finite action keeps ``state`` (reward 0, not
+        terminated) and sets ``info["invalid_action"]``."""
+        check_action(action, eager=False)
+        action = jnp.asarray(action, jnp.float32)
+        invalid = ~jnp.all(jnp.isfinite(action))
+        # The step runs on a safe action, then is dropped: NaN must not reach the state.
+        action = jnp.where(invalid, 0.0, action)
+        wheels = jnp.clip(action, -1.0, 1.0) * params.sim.max_speed
         sim, ob = sim_step(key, state.sim, wheels, params.world, params.sim)
         before, after = goal_distance(state.sim), goal_distance(sim)
         # One collision per contact episode (SPEC 9): a contact counts when the robot has been
@@ -259,12 +331,19 @@ class EpuckEnv(environment.Environment):
         new = state.replace(
             sim=sim, collisions=collisions, free=free, streak=streak.astype(jnp.int32)
         )
+        # The step is dropped for a non-finite action (the pool of starts is not touched).
+        keep = lambda old, now: jnp.where(invalid, old, now)
+        new = new.replace(**{k: jax.tree.map(keep, getattr(state, k), getattr(new, k))
+                             for k in ("sim", "collisions", "free", "streak")})  # fmt: skip
+        reward = jnp.where(invalid, 0.0, reward).astype(jnp.float32)
+        terminated = terminated & ~invalid
         info = {
-            "collisions": collisions,
-            "distance": after,
+            "collisions": new.collisions,
+            "distance": jnp.where(invalid, before, after),
             "goal_pixels": ob.goal_pixels,
             "max_ir": ob.vm,
             "discount": jnp.where(terminated, 0.0, 1.0).astype(jnp.float32),
+            "invalid_action": invalid,
         }
         return features(ob), new, reward, terminated, info
 
@@ -317,7 +396,11 @@ def make(
             f"sim_params must be a SimParams (envs.default_params(...)), "
             f"got {type(sim_params).__name__}"
         )
-    if not isinstance(reset_pool, int | np.integer) or reset_pool < 1:
+    check_type(world, str | Path | World, "world", "a world's name, a TOML path or a World")
+    check_type(legacy_step, bool | np.bool_, "legacy_step", "True or False")
+    check_type(auto_reset, bool | np.bool_, "auto_reset", "True or False")
+    check_type(reset_pool, int | np.integer, "reset_pool", "a positive integer")
+    if reset_pool < 1:
         raise ValueError(f"reset_pool must be a positive integer, got {reset_pool!r}")
     w = world if isinstance(world, World) else load_world(world)
     sim = default_params() if sim_params is None else sim_params
@@ -325,7 +408,7 @@ def make(
     params = check_params(EnvParams(world=w, sim=sim, **fields))
     params = params.replace(**{k: int(getattr(params, k)) for k, r in _RANGES.items() if r[2]})
     env = LegacyEpuckEnv if legacy_step else EpuckEnv
-    return env(params, auto_reset=auto_reset, reset_pool=int(reset_pool))
+    return env(params, auto_reset=bool(auto_reset), reset_pool=int(reset_pool))
 
 
 def register_gymnax() -> tuple[str, ...]:

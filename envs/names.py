@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import difflib
 import os
+import re
 from pathlib import Path
 
 ENV_VAR = "JAXAIS_WORLDS"
@@ -32,6 +33,16 @@ BUILTIN_DIR = Path(__file__).resolve().parent / "worlds"
 
 class WorldError(ValueError):
     """A world file is missing, malformed or physically impossible (the message is one line)."""
+
+
+NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_-]{0,63}")
+"""A world's name: letters, digits, ``_`` and ``-``, at most 64 (it names files and report
+rows: no folder, no newline, nothing empty)."""
+
+
+def is_plain_name(name: str) -> bool:
+    """Whether ``name`` is a world's name as :data:`NAME_PATTERN` says (ASCII only)."""
+    return name.isascii() and NAME_PATTERN.fullmatch(name) is not None
 
 
 def scan(folder: str | os.PathLike[str]) -> tuple[str, ...]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import typing
 from typing import Any
 
 import jax
@@ -30,3 +31,22 @@ def pytree_dataclass(cls: type) -> type:
     jax.tree_util.register_dataclass(cls, data_fields=data, meta_fields=meta)
     cls.replace = lambda self, **kw: dataclasses.replace(self, **kw)
     return cls
+
+
+class ArgumentTypeError(ValueError, TypeError):
+    """An argument of the wrong type (one line): a ValueError and a TypeError, as
+    ``jaxais.io.ArgumentTypeError`` is (envs imports nothing from jaxais, hence its own)."""
+
+
+def check_type(value: Any, kind: Any, name: str, what: str) -> None:
+    """:class:`ArgumentTypeError` "``name`` must be ``what``, got <type> <value>" unless ``value``
+    is a ``kind``; a bool is no number unless ``kind`` is bool (``jaxais.io.check_type``'s rule)."""
+    ok = isinstance(value, kind)
+    if ok and isinstance(value, bool | np.bool_):
+        kinds = typing.get_args(kind) or (kind if isinstance(kind, tuple) else (kind,))
+        ok = any(k in (bool, np.bool_, object) for k in kinds)
+    if not ok:
+        got = type(value).__name__
+        if isinstance(value, str | int | float):
+            got += f" {value!r:.40}"
+        raise ArgumentTypeError(f"{name} must be {what}, got {got}")

@@ -20,7 +20,7 @@ import numpy as np
 
 from . import geometry
 from .names import BUILTIN_WORLDS as BUILTIN_WORLDS  # re-exported: envs.BUILTIN_WORLDS
-from .names import WorldError, find_world, resolve
+from .names import WorldError, find_world, is_plain_name, resolve
 from .params import MATERIALS
 from .struct import device_array, pytree_dataclass, static_field
 
@@ -262,6 +262,35 @@ def _region_has_room(region, radius, segs, pillars, boxes, n: int = 24) -> bool:
     return bool(np.any(gap >= radius))
 
 
+def _goal_crowds(start, goal_region, half, shape, radius, n: int = 8) -> list[float] | None:
+    """A goal centre on an n x n grid over ``goal_region`` that leaves no point of ``start``
+    (:func:`_region_has_room`'s grid) ``radius`` clear of the goal, or None."""
+    for gx in np.linspace(goal_region[0], goal_region[2], n):
+        for gy in np.linspace(goal_region[1], goal_region[3], n):
+            goal = [(gx, gy, half[0])] if shape == "ball" else []
+            box = [(gx, gy, half)] if shape == "box" else []
+            if not _region_has_room(start, radius, [], goal, box):
+                return [round(float(gx), 4), round(float(gy), 4)]
+    return None
+
+
+def _segment_meets(seg: list[float], region: list[float]) -> bool:
+    """Whether the segment (x1, y1, x2, y2) touches the closed region [xmin, ymin, xmax, ymax]
+    (Liang-Barsky clipping)."""
+    x1, y1, x2, y2 = seg
+    lo, hi = 0.0, 1.0
+    for p, q in ((x1 - x2, x1 - region[0]), (x2 - x1, region[2] - x1),
+                 (y1 - y2, y1 - region[1]), (y2 - y1, region[3] - y1)):  # fmt: skip
+        if p == 0.0:
+            if q < 0.0:
+                return False
+        elif p < 0.0:
+            lo = max(lo, q / p)
+        else:
+            hi = min(hi, q / p)
+    return lo <= hi
+
+
 def _check_surface_count(src, name, segs, boxes, pillars, wanderers, padded: int) -> None:
     """Refuse a world whose rays would meet more than :data:`MAX_SURFACES` surfaces: ``padded``
     segments, boxes and pillars, the goal and the wanderers."""
@@ -292,6 +321,8 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
     rd = _Reader(src)
     rd.known(doc, "")
     name = rd.get(doc, "name", "", "str")
+    if not is_plain_name(name):
+        raise _fail(src, "name", f"{_show(name)} is not a plain name (letters, digits, _ and -)")
     arena_t = rd.get(doc, "arena", "", "table")
     rd.known(arena_t, "arena")
     width = rd.positive(arena_t, "width", "arena", hi=MAX_ARENA_SIDE)
@@ -372,6 +403,15 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
     robot_t = rd.get(doc, "robot", "", "table")
     rd.known(robot_t, "robot")
     start_region = rd.region(robot_t, "start_region", "robot", arena, body_radius)
+    # As a box is (below): the robot is placed clear of the goal, so wherever the goal lands
+    # some start must keep the robot clear of it (a start region inside the goal's has none).
+    crowded = _goal_crowds(start_region, goal_region, goal_half, goal_shape, body_radius)
+    if crowded is not None:
+        raise _fail(
+            src, "robot.start_region", f"no point of {start_region} keeps {body_radius:g} m "
+            f"clear of a goal at {crowded} (in goal.region {goal_region}): a robot would start "
+            "on the goal; move or enlarge the start region",
+        )  # fmt: skip
     heading = rd.get(robot_t, "start_heading", "robot", "vec2", [-math.pi, math.pi])
     if heading[0] > heading[1]:
         raise _fail(src, "robot.start_heading", f"needs min <= max, got {heading}")
@@ -405,6 +445,13 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
     n_b = max(len(box_half), capacity.boxes, 1)
     n_c = max(len(pillars), capacity.pillars, 1)
     _check_surface_count(src, name, segs, box_half, pillars, wander_regions, n_s + n_b + n_c)
+
+    for k, seg in enumerate(segs[4:]):  # the outer walls keep the region's margin
+        if _segment_meets(seg, goal_region):
+            raise _fail(
+                src, f"walls[{k}]", f"the wall {seg[:2]} -> {seg[2:]} crosses goal.region "
+                f"{goal_region}: the goal would be placed on it; move the wall or the region",
+            )  # fmt: skip
 
     fixed_boxes = [
         (r[0], r[1], h) for r, h in zip(box_region, box_half, strict=True) if r[:2] == r[2:]
@@ -468,7 +515,7 @@ def load_world(name_or_path: str | Path, capacity: Capacity = Capacity()) -> Wor
     ``name`` field (a world's name is its file's)."""
     path, by_name = resolve(name_or_path)
     try:
-        doc = tomllib.loads(path.read_text())
+        doc = tomllib.loads(path.read_text(encoding="utf-8-sig"))  # a byte-order mark is read
     except tomllib.TOMLDecodeError as err:
         raise WorldError(f"{path}: not valid TOML: {err}") from None
     except (OSError, UnicodeDecodeError) as err:

@@ -9,6 +9,7 @@ import dataclasses
 import json
 import os
 import tempfile
+import typing
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -26,12 +27,60 @@ class ArgumentTypeError(UserError, TypeError):
 
 def check_type(value: Any, kind: Any, name: str, what: str, hint: str = "") -> None:
     """:class:`ArgumentTypeError` "``name`` must be ``what``, got <type> <value>``hint``" unless
-    ``value`` is a ``kind``."""
-    if not isinstance(value, kind):
+    ``value`` is a ``kind``. A bool is a bool: it is no int or float unless ``kind`` names bool.
+    The one type check of the public calls: made before any range check, any work."""
+    ok = isinstance(value, kind)
+    if ok and isinstance(value, bool | np.bool_):
+        kinds = typing.get_args(kind) or (kind if isinstance(kind, tuple) else (kind,))
+        ok = any(k in (bool, np.bool_, object) for k in kinds)
+    if not ok:
         got = type(value).__name__
         if isinstance(value, str | int | float):
             got += f" {value!r:.40}"
         raise ArgumentTypeError(f"{name} must be {what}, got {got}{hint}")
+
+
+INTEGER = int | np.integer
+NUMBER = int | float | np.integer | np.floating
+PATH = str | os.PathLike
+
+
+def check_int(value: Any, name: str, low: int | None = None, high: int | None = None) -> int:
+    """``value`` as an int (NumPy ints are ints; bools and 2.0 are not), in [low, high]."""
+    check_type(value, INTEGER, name, "an integer")
+    if (low is not None and value < low) or (high is not None and value > high):
+        rule = f"in [{low}, {high}]" if low is not None and high is not None else (
+            f">= {low}" if low is not None else f"<= {high}")  # fmt: skip
+        raise UserError(f"{name} must be {rule}, got {value}")
+    return int(value)
+
+
+def check_number(value: Any, name: str) -> float:
+    """``value`` as a float (an int, a float or a NumPy scalar; not a bool or a string)."""
+    check_type(value, NUMBER, name, "a number")
+    return float(value)
+
+
+def check_bool(value: Any, name: str) -> bool:
+    """``value`` unless it is not a bool (NumPy's too): "no" and 1 are not switches."""
+    check_type(value, bool | np.bool_, name, "True or False")
+    return bool(value)
+
+
+def check_path(value: Any, name: str, what: str = "a path") -> None:
+    """ArgumentTypeError unless ``value`` is a path (a str or an os.PathLike)."""
+    check_type(value, PATH, name, what)
+
+
+def check_names(value: Any, name: str, items: Any = str) -> list[Any]:
+    """A list of names given as a sequence of ``items`` (strings) or one comma-separated string
+    (``"world1,world2"``: two; ``"real"``: one; empty parts dropped)."""
+    if isinstance(value, str):
+        return [part.strip() for part in value.split(",") if part.strip()]
+    check_type(value, list | tuple, name, "a list of names or one comma-separated string")
+    for item in value:
+        check_type(item, items, f"each of {name}", "a name (a string)")
+    return list(value)
 
 
 def load_module_file(name: str, path: str | os.PathLike[str]) -> Any:

@@ -113,9 +113,7 @@ class TrialsConfig:
 
 def _integer(value: Any, name: str, high: int | None = None) -> int:
     """``value`` as an int >= 1, or in [0, high) (NumPy ints are; 2.0 and True are not)."""
-    _check(value, int | np.integer, name, "an integer")
-    if isinstance(value, bool):
-        raise ArgumentTypeError(f"{name} must be an integer, got {value!r}")
+    _check(value, int | np.integer, name, "an integer")  # a bool is not one
     if value < 1 if high is None else not 0 <= value < high:
         rule = ">= 1" if high is None else f"in [0, 2**{high.bit_length() - 1})"
         raise ValueError(f"{name} must be {rule}, got {value!r}")
@@ -214,6 +212,8 @@ def run_trials(
     trials; ``timings`` collects ``run_s``. A bad argument: one-line ValueError before any run.
     """
     counts = _check_run(world, systems, n_trials, seed, config, sim_params, progress, controller)
+    _integer(slots, "slots")
+    _check(timings, dict | None, "timings", "a dict or None")
     sim_params = envs.default_params() if sim_params is None else sim_params
     reset_keys, run_keys = batch_keys(seed, tuple((name, counts[name]) for name in systems))
     # Each system's parameters repeated for its trials, assembled on the host (no device work).

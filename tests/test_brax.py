@@ -8,6 +8,7 @@ their cost.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import subprocess
 import sys
@@ -39,9 +40,9 @@ def wrapped():
     step = jax.jit(w.step)
     ahead = jnp.ones((ENVS, 2))  # full speed ahead: into a wall, then pressed against it
 
-    def run(state, n):
+    def run(state, n, action=ahead):
         for _ in range(n):
-            state = step(state, ahead)
+            state = step(state, action)
         return state
 
     return env, jax.jit(w.reset), run
@@ -76,6 +77,27 @@ def test_episode_sums_are_true_and_auto_reset_replaces(wrapped):
     np.testing.assert_array_equal(
         again.info["episode_metrics"]["collision"], again.metrics["collision"]
     )
+
+
+def test_a_bad_action_is_refused_or_flagged(wrapped):
+    # Under brax's wrappers (vmapped, jitted): a non-finite action is flagged for its env alone,
+    # whose state stays put; a 3-number action is refused, eagerly and as it is traced.
+    env, reset, run = wrapped
+    state = run(reset(jax.random.split(jax.random.PRNGKey(3), ENVS)), 1)
+    bad = jnp.ones((ENVS, 2)).at[1, 0].set(jnp.nan)
+    out = run(state, 1, bad)
+    flags = np.zeros(ENVS, bool)
+    flags[1] = True
+    np.testing.assert_array_equal(out.info["invalid_action"], flags)
+    sim, was = out.pipeline_state.sim, state.pipeline_state.sim
+    np.testing.assert_array_equal(sim.pose[1], was.pose[1])
+    np.testing.assert_array_equal(sim.t, np.where(flags, was.t, was.t + 1))
+    one = jax.eval_shape(env.reset, jax.random.PRNGKey(1))  # shapes only: nothing compiles
+    for step in (env.step, functools.partial(jax.eval_shape, env.step)):
+        with pytest.raises(ValueError, match=r"shape \(2,\)"):
+            step(one, jnp.zeros(3))
+    with pytest.raises(ValueError, match="backend='mjx' is an argument of brax's get_environment"):
+        BraxEnv(WORLD, backend="mjx")
 
 
 def test_step_keeps_metrics_it_did_not_create():

@@ -39,6 +39,12 @@ def env_no_reset() -> genv.EpuckEnv:
     return envs.make("world1", auto_reset=False)
 
 
+@pytest.fixture(scope="module")
+def vstep(env_no_reset):
+    """``env_no_reset.step`` jitted over a batch (keys, states, actions; shared params)."""
+    return jax.jit(jax.vmap(env_no_reset.step, in_axes=(0, 0, 0, None)))
+
+
 def _placed(env, key, pose, goal=None) -> genv.EnvState:
     """A fresh episode with the robot at ``pose`` (and the goal at ``goal``), wanderer parked."""
     _, state = env.reset(key)
@@ -108,7 +114,7 @@ def test_same_key_same_result_and_keys_matter(env):
 
 
 @pytest.mark.slow
-def test_jit_vmap_step_equals_loop(env, env_no_reset):
+def test_jit_vmap_step_equals_loop(env, env_no_reset, vstep):
     n = 3
     keys = jax.random.split(jax.random.key(7), n)
     states = [env.reset(k)[1] for k in keys]
@@ -116,13 +122,33 @@ def test_jit_vmap_step_equals_loop(env, env_no_reset):
     step_keys = jax.random.split(jax.random.key(9), n)
     params = env_no_reset.default_params
     loop = [env_no_reset.step(step_keys[i], states[i], actions[i], params) for i in range(n)]
-    batched = jax.jit(jax.vmap(env_no_reset.step, in_axes=(0, 0, 0, None)))(
-        step_keys, jax.tree.map(lambda *x: jnp.stack(x), *states), actions, params
-    )
+    batched = vstep(step_keys, jax.tree.map(lambda *x: jnp.stack(x), *states), actions, params)
     for i in range(n):
         one = jax.tree.map(lambda x, i=i: x[i], batched)
         for x, y in zip(jax.tree.leaves(loop[i]), jax.tree.leaves(one), strict=True):
             np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-5, atol=1e-5)
+
+
+def test_bad_actions_under_jit_and_vmap(env_no_reset, vstep):
+    # A wrong shape is refused as the step is traced (eval_shape or jit: nothing compiles); a
+    # non-finite action under jit and vmap is flagged for its env alone, whose state stays put.
+    key, state = jax.random.key(0), env_no_reset.reset(jax.random.key(0))[1]
+    for trace in (functools.partial(jax.eval_shape, env_no_reset.step), jax.jit(env_no_reset.step)):
+        with pytest.raises(ValueError, match=r"shape \(2,\), got shape \(3,\)"):
+            trace(key, state, jnp.zeros(3))
+    keys = jax.random.split(jax.random.key(7), 3)
+    # Stacked on the host: eager jnp ops would compile a program per leaf.
+    states = jax.tree.map(lambda *x: np.stack(x), *[env_no_reset.reset(k)[1] for k in keys])
+    actions = np.array([[0.5, 0.5], [np.nan, 0.0], [0.2, np.inf]], np.float32)
+    out = jax.device_get(vstep(keys, states, actions, env_no_reset.default_params))
+    obs, new, reward, terminated, _, info = out
+    np.testing.assert_array_equal(info["invalid_action"], [False, True, True])
+    np.testing.assert_array_equal(new.sim.t, [1, 0, 0])
+    for leaf, was in zip(jax.tree.leaves(new), jax.tree.leaves(states), strict=True):
+        np.testing.assert_array_equal(leaf[1:], was[1:])  # the flagged envs: as they were
+    assert not np.array_equal(new.sim.pose[0], states.sim.pose[0])  # the valid one moved
+    np.testing.assert_array_equal(reward[1:], 0.0)
+    assert np.all(np.isfinite(obs)) and not np.any(terminated)
 
 
 def _expected_rewards(d0, distance, max_ir, params):
@@ -283,6 +309,8 @@ def test_bad_input_is_one_line_naming_it_outside_jit(env):
             finish_pixels=-1)  # fmt: skip
     refused(r"EnvParams.collision_level .* in \[0, 4095\], got -5", envs.make, collision_level=-5)
     refused("reset_pool must be a positive integer", envs.make, reset_pool=0)
+    refused("reset_pool must be a positive integer, got bool", envs.make, reset_pool=True)
+    refused("legacy_step must be True or False", envs.make, legacy_step="yes")
     key, params = jax.random.key(0), env.default_params
     refused("params must be an EnvParams", env.reset, key, {"max_steps_in_episode": 3})
     refused("EnvParams.finish_streak must be an integer >= 1", env.reset, key,

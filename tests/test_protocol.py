@@ -12,6 +12,7 @@ import ast
 import importlib.util
 from pathlib import Path
 
+import numpy as np
 import pytest
 from _python import run_python
 from _records import trial
@@ -77,7 +78,7 @@ def test_the_shared_argument_checks():
     assert protocol.check_worlds(None) == list(protocol.WORLDS)
     assert protocol.check_worlds("world2,,real") == ["world2", "real"]
     assert protocol.check_caps(None, None) == (4000.0, 100)
-    assert [type(c) for c in protocol.check_caps(10, 5.0)] == [float, int]
+    assert [type(c) for c in protocol.check_caps(10, np.int64(5))] == [float, int]
     protocol.check_seed(2**32 - 1)
     bad = [
         (lambda: protocol.check_worlds("world1,mars"), r"--worlds: unknown world\(s\) \['mars'\]"),
@@ -91,6 +92,12 @@ def test_the_shared_argument_checks():
         (lambda: protocol.check_caps(1e6 + 1, None), r"--tau-cap must be in \(0, 1e6\]"),
         (lambda: protocol.check_caps(0, None), "--tau-cap must be in"),
         (lambda: protocol.check_caps(None, 0), "--collision-cap >= 1"),
+        # Types before ranges: 1.5 collisions is no cap of 1, True no cap of 1, "30" no time.
+        (lambda: protocol.check_caps(None, 1.5), "--collision-cap must be an integer, got float"),
+        (lambda: protocol.check_caps(None, True), "--collision-cap must be an integer, got bool"),
+        (lambda: protocol.check_caps("30", None), "--tau-cap must be a number, got str '30'"),
+        (lambda: protocol.check_seed("0"), "--seed must be an integer, got str '0'"),
+        (lambda: protocol.check_worlds(123), "--worlds must be a list of names"),
     ]
     for call, message in bad:
         with pytest.raises(ValueError, match=message):

@@ -256,6 +256,18 @@ def test_valid_tiny_world_loads(tmp_path) -> None:
             "center = [0.25, 0.25]\nradius = 0.3",
             "robot.start_region",
         ),
+        # A wall through the goal region: the goal could be placed on it.
+        (
+            "to = [0.5, 0.3]",
+            "to = [0.5, 0.3]\n[[walls]]\nfrom = [0.75, 0.5]\nto = [0.75, 0.95]",
+            "walls[1]",
+        ),  # fmt: skip
+        # A start region inside the goal's: wherever the goal lands, the robot starts on it.
+        ("[0.1, 0.1, 0.4, 0.4]", "[0.74, 0.74, 0.76, 0.76]", "robot.start_region"),
+        # A world's name names files and report rows: a plain name only.
+        ('name = "tiny"', 'name = "../../etc/evil"', "name"),
+        ('name = "tiny"', 'name = ""', "name"),
+        ('name = "tiny"', 'name = "a\\nb"', "name"),
     ],
 )
 def test_malformed_world_fails_naming_file_and_field(tmp_path, old, new, field) -> None:
@@ -267,6 +279,15 @@ def test_malformed_world_fails_naming_file_and_field(tmp_path, old, new, field) 
     message = str(err.value)
     assert "\n" not in message
     assert str(path) in message and f"'{field}'" in message, message
+
+
+def test_a_byte_order_mark_is_read_and_the_regions_may_share_room(tmp_path) -> None:
+    path = tmp_path / "bom.toml"
+    path.write_bytes(b"\xef\xbb\xbf" + VALID.encode())  # as Windows' Notepad saves UTF-8
+    assert envs.load_world(path).name == "tiny"
+    # A start region inside the goal's with room beside any goal (the real world's are one).
+    path.write_text(VALID.replace("[0.1, 0.1, 0.4, 0.4]", "[0.6, 0.6, 0.9, 0.9]"))
+    assert envs.load_world(path).name == "tiny"
 
 
 def test_bad_toml_fails_naming_the_file(tmp_path) -> None:

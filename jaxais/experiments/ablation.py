@@ -33,6 +33,8 @@ from jaxais.io import (
     atomic_write_json,
     atomic_write_text,
     check_memory,
+    check_names,
+    check_path,
     open_run,
     read_json_object,
 )
@@ -500,8 +502,8 @@ def figure(doc: Mapping[str, Any]) -> Any:
 def ablate(
     out: str | Path,
     *,
-    worlds: Sequence[str] = protocol.WORLDS,
-    variants: Sequence[str] | None = None,
+    worlds: str | Sequence[str] = protocol.WORLDS,
+    variants: str | Sequence[str] | None = None,
     trials: int | None = None,
     seed: int = 0,
     seeds: str | Path | None = None,
@@ -511,7 +513,8 @@ def ablate(
     resume: bool = False,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Run the ablation and write ablation.json/.md/.png and run.json into ``out`` (missing or
-    empty; ``resume`` finishes an interrupted run). Returns (ablation.json, run.json) documents;
+    empty; ``resume`` finishes an interrupted run); ``worlds`` and ``variants`` are lists of
+    names or comma-separated strings. Returns (ablation.json, run.json) documents;
     ValueError (one line) on a bad argument, before anything runs.
     """
     import os
@@ -520,11 +523,15 @@ def ablate(
 
     from tqdm import tqdm
 
-    from jaxais.experiments.one_system import command_line
+    from jaxais.experiments.one_system import check_types, command_line
     from jaxais.experiments.plotting import save_figure
     from jaxais.experiments.records import load_ltl_seed, versions
 
+    check_path(out, "--out", "a folder's path")
+    check_types(trials=trials, seed=seed, seeds=seeds, share=share, resume=resume)
     worlds = protocol.check_worlds(worlds)
+    if variants is not None:  # "ours,hold=1" is two
+        variants = check_names(variants, "--variants")
     protocol.check_seed(seed)
     if trials is not None and trials < 2:
         raise ValueError(f"--trials must be >= 2 (t-tests need two per group), got {trials}")

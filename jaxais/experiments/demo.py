@@ -12,6 +12,8 @@ import numpy as np
 
 from jaxais import envs
 from jaxais.experiments import plotting, protocol
+from jaxais.experiments.one_system import check_types
+from jaxais.io import check_memory, check_number, check_output_file, check_path
 
 # Demo controller constants (speed units; IR readings are 0..4095, ~120 at 5 cm from the rim).
 CRUISE = 500.0  # forward speed with nothing nearby
@@ -20,6 +22,7 @@ AVOID_MAX_TURN = 600.0
 BLOCKED_IR = 800.0  # a front reading that stops forward motion (the robot turns on the spot)
 TRACK_GAIN = 60.0  # turn per column of blue-centroid offset
 TRACK_QUIET_IR = 200.0  # blue is tracked only below this front reading (obstacles come first)
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg")  # the figures render draws
 MAX_GIF_FRAMES = 1000  # Pillow holds every frame (0.6 MB each) until the GIF is written
 
 
@@ -85,14 +88,20 @@ def render(
 ) -> tuple[str, int | None]:
     """Draw ``robots`` demo runs of ``steps`` iterations in ``world`` into the figure ``out`` (and
     ``gif``, every ``every``-th iteration); returns (world name, GIF frames or None). One-line
-    ValueError on a bad argument, before anything runs."""
+    ValueError on a bad argument (types first, then ranges, then the memory the poses need),
+    before anything runs."""
+    check_path(out, "--out", f"a figure's path ({', '.join(FIGURE_SUFFIXES)})")
+    check_types(world=world, steps=steps, robots=robots, seed=seed, gif=gif, every=every)
+    check_number(fps, "--fps")
     for name, value in (("steps", steps), ("robots", robots), ("every", every)):
         if value <= 0:
             raise ValueError(f"--{name} must be a positive integer, got {value}")
     protocol.check_seed(seed)
     if not fps > 0:
         raise ValueError(f"--fps must be positive, got {fps}")
+    check_output_file(out, FIGURE_SUFFIXES)
     if gif is not None:
+        check_output_file(gif, (".gif",))
         if steps // every + 1 > MAX_GIF_FRAMES:
             raise ValueError(
                 f"--gif would have {steps // every + 1} frames (at most {MAX_GIF_FRAMES}): "
@@ -101,6 +110,9 @@ def render(
         if Path(gif).resolve() == Path(out).resolve():
             raise ValueError("--gif and --out name the same file")
     w = envs.load_world(world)
+    # Every pose of every robot and wanderer is kept (3 float32), on the device and the host,
+    # and copied: 48 bytes each.
+    check_memory(robots * (steps + 1), 48 * (1 + w.n_wanderers), "--robots x --steps")
     params = envs.default_params()
     state0, poses, wanderers = jax.device_get(
         make_run(w, params, robots, steps)(jax.random.key(seed))

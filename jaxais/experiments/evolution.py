@@ -23,7 +23,15 @@ from jaxais.experiments.records import portable_path
 from jaxais.ga import driver
 from jaxais.ga.config import CROSSING_STARTS, MAX_SEED, ConfigError, GAConfig
 from jaxais.ga.operators import Operators, default_operators
-from jaxais.io import RUN_BYTES, atomic_write_json, check_memory, check_type
+from jaxais.io import (
+    INTEGER,
+    RUN_BYTES,
+    atomic_write_json,
+    check_bool,
+    check_memory,
+    check_path,
+    check_type,
+)
 from jaxais.seed import Seed, load_seed, save_seed
 
 __all__ = ["check_seed", "evolve", "measure_crossing", "report"]
@@ -51,6 +59,9 @@ def _compile_clock():
 
 
 def _check(seed: int, crossing_starts: int, config: GAConfig) -> None:
+    check_type(seed, INTEGER, "seed", "an integer")
+    check_type(crossing_starts, INTEGER, "crossing_starts", "an integer")
+    check_type(config, GAConfig, "config", "a GAConfig or None")
     if not 0 <= seed <= MAX_SEED:
         raise ConfigError("seed", f"must be in [0, {MAX_SEED}], got {seed}")
     if crossing_starts < 1:
@@ -173,6 +184,13 @@ def evolve(
     and the summary. Raises ConfigError (out of range) or ValueError (nothing to resume,
     another run's or a corrupt checkpoint, other operators than the run's, a bad world).
     """
+    check_path(out, "evolve's out", "a folder's path")
+    check_path(world, "world", "a world's name or TOML path")
+    check_bool(resume, "resume")
+    if diversity_seeds is not None:
+        check_type(diversity_seeds, INTEGER, "diversity_seeds", "an integer or None")
+    if argv is not None:
+        check_type(argv, list | tuple, "argv", "a list of strings (the command's words)")
     config = GAConfig() if config is None else config
     _check(seed, crossing_starts, config)
     if operators is not None:
@@ -309,6 +327,8 @@ def check_seed(
 ) -> dict[str, Any]:
     """The crossing rates of the seed in ``seed_dir`` as :func:`evolve` measures them, and those
     recorded in its seed.json (writes nothing)."""
+    check_path(seed_dir, "seed_dir", "a seed directory's path")
+    check_path(world, "world", "a world's name or TOML path")
     config = GAConfig() if config is None else config
     _check(seed, crossing_starts, config)
     ltl_seed, meta = load_seed(seed_dir)

@@ -6,15 +6,26 @@ from __future__ import annotations
 import os
 import sys
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 from jaxais.experiments import protocol
 from jaxais.experiments.contenders import check_label, check_specs
-from jaxais.io import RUN_BYTES, atomic_write_json, check_memory, check_output_file
+from jaxais.io import (
+    INTEGER,
+    PATH,
+    RUN_BYTES,
+    atomic_write_json,
+    check_bool,
+    check_memory,
+    check_output_file,
+    check_path,
+    check_type,
+)
 from jaxais.labels import RANDOM_SETS, SYSTEMS
 from jaxais.labels import label as label_of
 
-__all__ = ["check_trials", "command_line", "trials"]
+__all__ = ["check_trials", "check_types", "command_line", "plot_path", "trials"]
 
 
 def command_line(prog: str, flags: Mapping[str, Any]) -> str:
@@ -46,12 +57,14 @@ def check_trials(
     seeds: str | os.PathLike[str] | None = None,
     tau_cap: float | None = None,
     collision_cap: int | None = None,
-    plot: str | os.PathLike[str] | None = None,
+    plot: bool | str | os.PathLike[str] | None = None,
     label: str | None = None,
 ) -> tuple[str | os.PathLike[str], int, float, int]:
     """Check :func:`trials`'s arguments without loading JAX (one-line ``ValueError``\\ s naming
-    the script's flags; a contender's spec by form, label and file); returns the world, the trial
-    count and the two caps, defaults filled in."""
+    the script's flags, every type before any range; a contender's spec by form, label and
+    file); returns the world, the trial count and the two caps, defaults filled in."""
+    check_types(out=out, world=world, trials=trials, seed=seed, random_set=random_set,
+                seeds=seeds, plot=plot, label=label)  # fmt: skip
     world = protocol.WORLDS[0] if world is None else world
     n = protocol.SIMULATED_TRIALS if trials is None else trials
     if _is_contender(system):
@@ -79,13 +92,44 @@ def check_trials(
         raise ValueError(f"unknown random set {random_set!r} (one of {', '.join(RANDOM_SETS)})")
     if seeds and system not in ("SIE", "SRL"):
         raise ValueError(f"--seeds applies to the seeded systems SIE and SRL, not {system}")
+    if plot is True and out is None:
+        raise ValueError("--plot True draws beside out (OUT.png): give out, or a PNG path")
     # A plot keeps every trajectory: a pose (3 float32) per 0.8 s, to 4000 s, held thrice.
     check_memory(n, RUN_BYTES + (180_000 if plot else 0), "--trials")
     if out is not None:
         check_output_file(out, (".json",))
     if plot:
-        check_output_file(plot, (".png",))
+        check_output_file(plot_path(out, plot), (".png",))
     return world, n, tau_cap, collision_cap
+
+
+def check_types(**args: Any) -> None:
+    """ArgumentTypeError (one line, naming the flag) for the first of the drivers' common
+    arguments (by keyword) of the wrong type; None is each one's default."""
+    for name, value in args.items():
+        if value is None:
+            continue
+        flag = f"--{name.replace('_', '-')}"
+        if name in _INTEGERS:
+            check_type(value, INTEGER, flag, "an integer")
+        elif name in _SWITCHES:
+            check_bool(value, flag)
+        elif name == "plot":
+            check_type(value, bool | PATH, flag, "True, False or a PNG path")
+        elif name in _STRINGS:
+            check_type(value, str, flag, "a string")
+        else:  # a path
+            check_path(value, flag, "a path")
+
+
+_INTEGERS = {"trials", "seed", "generations", "slots", "steps", "robots", "every"}
+_SWITCHES = {"progress", "resume", "evolve", "records", "share"}
+_STRINGS = {"random_set", "label", "command", "system"}
+
+
+def plot_path(out: str | os.PathLike[str] | None, plot: Any) -> Any:
+    """Where :func:`trials` draws: ``plot`` itself, or for ``plot=True`` beside ``out``."""
+    return Path(out).with_suffix(".png") if plot is True else plot
 
 
 def trials(
@@ -99,7 +143,7 @@ def trials(
     seeds: str | os.PathLike[str] | None = None,
     tau_cap: float | None = None,
     collision_cap: int | None = None,
-    plot: str | os.PathLike[str] | None = None,
+    plot: bool | str | os.PathLike[str] | None = None,
     progress: bool = True,
     command: str | None = None,
     label: str | None = None,
@@ -111,21 +155,26 @@ def trials(
     ``system`` is a paper system (``"SIE"``; UIE and URL with ``random_set``) or a contender
     (:mod:`jaxais.experiments.contenders`): a spec ``[LABEL=]FILE.py:NAME``, a ``(controller,
     params)`` tuple or a ``Contender``; ``label`` names a tuple's trials (default
-    ``contender``). ``plot`` also draws every trajectory to a PNG (the trials then run as one
-    batch); ``command`` is recorded (default: the ``trials.py`` line these arguments stand for).
-    Defaults are the paper's.
+    ``contender``). ``plot`` (a bool or a path) also draws every trajectory to a PNG (the
+    trials then run as one batch): True draws beside ``out`` (``r.json`` -> ``r.png``), a path
+    draws there; ``command`` is recorded (default: the ``trials.py`` line these arguments
+    stand for). Defaults are the paper's.
     """
+    given = {"--world": world, "--tau-cap": tau_cap, "--collision-cap": collision_cap}
+    world, n, tau_cap, collision_cap = check_trials(
+        system, out, world=world, trials=trials, seed=seed, random_set=random_set, seeds=seeds,
+        tau_cap=tau_cap, collision_cap=collision_cap, plot=plot, label=label)  # fmt: skip
+    check_types(progress=progress, command=command)
+    plot = plot_path(out, plot) if plot else None
     contender = _is_contender(system)
     if command is None:
         spec = system if isinstance(system, str) else None
         flags = {"--system": None if contender else system, "--contender": spec if contender
-                 else None, "--world": world, "--trials": trials, "--seed": seed or None,
-                 "--random-set": random_set, "--seeds": seeds, "--tau-cap": tau_cap,
-                 "--collision-cap": collision_cap, "--out": out, "--plot": plot}  # fmt: skip
+                 else None, "--world": given["--world"], "--trials": trials, "--seed": seed
+                 or None, "--random-set": random_set, "--seeds": seeds, "--tau-cap":
+                 given["--tau-cap"], "--collision-cap": given["--collision-cap"], "--out": out,
+                 "--plot": plot}  # fmt: skip
         command = command_line("trials.py", flags)
-    world, n, tau_cap, collision_cap = check_trials(
-        system, out, world=world, trials=trials, seed=seed, random_set=random_set, seeds=seeds,
-        tau_cap=tau_cap, collision_cap=collision_cap, plot=plot, label=label)  # fmt: skip
     # Imported after the arguments are checked: a bad one answers at once, without loading JAX.
     import jax
     from tqdm import tqdm

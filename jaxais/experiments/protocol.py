@@ -6,10 +6,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from collections.abc import Sequence
 from importlib import resources
+from os import PathLike
 from pathlib import Path
 
+from jaxais.io import INTEGER, check_names, check_number, check_type
 from jaxais.labels import LABELS, parse_label, world_names_module
 
 __all__ = [
@@ -109,15 +112,20 @@ def add_cap_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def check_seed(seed: int, flag: str = "--seed") -> None:
-    """Refuse a PRNG seed outside [0, 2**32) in one line (``jax.random.key`` truncates it)."""
+    """Refuse a PRNG seed that is no integer, or outside [0, 2**32) (``jax.random.key``
+    truncates it), in one line."""
+    check_type(seed, INTEGER, flag, "an integer")
     if not 0 <= seed < 2**32:
         raise ValueError(f"{flag} must be in [0, 2**32), got {seed}")
 
 
 def check_caps(tau_cap: float | None, collision_cap: int | None) -> tuple[float, int]:
     """The two caps, the paper's where None, checked in one line naming the flags; τ's as a float
-    (10 and 10.0 give one record). Iteration counters are int32, hence τ's 1e6 s."""
-    tau_cap = float(TAU_CAP if tau_cap is None else tau_cap)
+    (10 and 10.0 give one record). Iteration counters are int32, hence τ's 1e6 s. Types first:
+    a cap of 1.5 collisions is refused, not read as 1."""
+    tau_cap = TAU_CAP if tau_cap is None else check_number(tau_cap, "--tau-cap")
+    if collision_cap is not None:
+        check_type(collision_cap, INTEGER, "--collision-cap", "an integer")
     collision_cap = int(COLLISION_CAP if collision_cap is None else collision_cap)
     if not 0 < tau_cap <= 1e6 or collision_cap < 1:
         raise ValueError("--tau-cap must be in (0, 1e6] and --collision-cap >= 1")
@@ -129,9 +137,8 @@ def check_worlds(worlds: str | Sequence[str] | None) -> list[str]:
     paper's worlds, other worlds by name (``envs.world_names()``: built-in or on
     ``JAXAIS_WORLDS``) or world files (``PATH.toml``), the others run with the simulated worlds'
     protocol; each named once (one-line ValueError otherwise)."""
-    names = WORLDS if worlds is None else worlds
-    names = [w for w in names.split(",") if w] if isinstance(names, str) else list(names)
-    names = [str(w) for w in names]
+    names = list(WORLDS) if worlds is None else check_names(worlds, "--worlds", str | PathLike)
+    names = [os.fspath(w) for w in names]
     known = set(WORLDS) | set(world_names_module().world_names())
     unknown = sorted(w for w in names if w not in known and not is_world_file(w))
     if unknown or not names:

@@ -26,8 +26,18 @@ from jaxais.experiments.contenders import (
     neural,
     resolve,
 )
-from jaxais.experiments.one_system import command_line
-from jaxais.io import RUN_BYTES, Run, atomic_write, atomic_write_json, check_memory, open_run
+from jaxais.experiments.one_system import check_types, command_line
+from jaxais.io import (
+    PATH,
+    RUN_BYTES,
+    Run,
+    atomic_write,
+    atomic_write_json,
+    check_memory,
+    check_path,
+    check_type,
+    open_run,
+)
 from jaxais.lock import scoped
 
 __all__ = ["LTLRunError", "check_reproduce", "headline", "reproduce", "run_ltl"]
@@ -68,8 +78,10 @@ def check_reproduce(
     tau_cap: float | None = None, collision_cap: int | None = None, contenders: Any = None,
 ) -> tuple[Path, list[str], float, int]:  # fmt: skip
     """:func:`reproduce`'s arguments checked without JAX (one-line ValueErrors naming the
-    flags; ``contenders``' specs by form, label and file) -> (out, worlds, tau_cap,
-    collision_cap), defaults filled in."""
+    flags, every type before any range; ``contenders``' specs by form, label and file) ->
+    (out, worlds, tau_cap, collision_cap), defaults filled in."""
+    check_path(out, "--out", "a folder's path")
+    check_types(trials=trials, seed=seed, seeds=seeds, evolve=evolve, generations=generations)
     names = protocol.check_worlds(worlds)
     if isinstance(contenders, str | list | tuple) and all(isinstance(c, str) for c in contenders):
         check_specs(contenders)
@@ -118,18 +130,21 @@ def reproduce(
         ValueError: a bad argument, folder, seed or weights (before any trial).
         LTLRunError: the LTL run failed.
     """
+    checked = check_reproduce(
+        out, trials=trials, seed=seed, seeds=seeds, evolve=evolve, generations=generations,
+        worlds=worlds, tau_cap=tau_cap, collision_cap=collision_cap,
+        contenders=contenders)  # fmt: skip
+    check_type(baseline, bool | PATH, "--baseline", "True, False or a folder of weights")
+    check_types(progress=progress, command=command, resume=resume)
     if command is None:
         flags = {"--out": out, "--trials": trials, "--seeds": seeds, "--evolve": evolve,
                  "--seed": seed or None, "--baseline": None if isinstance(baseline, bool)
                  else baseline, "--no-baseline": baseline is False,
-                 "--worlds": worlds if isinstance(worlds, str | None) else ",".join(worlds),
-                 "--tau-cap": tau_cap, "--collision-cap": collision_cap,
+                 "--worlds": worlds if isinstance(worlds, str | None) else ",".join(
+                 map(str, worlds)), "--tau-cap": tau_cap, "--collision-cap": collision_cap,
                  "--generations": generations}  # fmt: skip
         command = command_line("reproduce.py", flags) + _contender_flags(contenders)
-    out, names, tau_cap, collision_cap = check_reproduce(
-        out, trials=trials, seed=seed, seeds=seeds, evolve=evolve, generations=generations,
-        worlds=worlds, tau_cap=tau_cap, collision_cap=collision_cap,
-        contenders=contenders)  # fmt: skip
+    out, names, tau_cap, collision_cap = checked
     import jax
 
     # Process 0 of a multi-process run writes (and checks the folder); the others read it.

@@ -26,11 +26,22 @@ from tqdm import tqdm
 from jaxais import envs
 from jaxais.controllers import System, stl_for
 from jaxais.experiments import protocol
+from jaxais.experiments.one_system import check_types
 from jaxais.experiments.records import FORMATS, build_systems, portable_command, run_config
 from jaxais.experiments.stats import CI_LEVEL
 from jaxais.immune.network import BOUNDS, NetworkParams
 from jaxais.immune.readings import readings as make_readings
-from jaxais.io import RUN_BYTES, Run, atomic_write_json, check_memory, open_run
+from jaxais.io import (
+    RUN_BYTES,
+    Run,
+    atomic_write_json,
+    check_memory,
+    check_names,
+    check_number,
+    check_path,
+    check_type,
+    open_run,
+)
 from jaxais.labels import SYSTEMS, label, parse_label
 from jaxais.lock import scoped
 from jaxais.loop import EpisodeConfig
@@ -410,11 +421,27 @@ def sweep(
     """
     from jaxais.experiments.sweep_plots import save_noise_figure, save_sweep_figures  # imports us
 
+    check_path(out, "--out", "a folder's path")
+    check_types(world=world, trials=trials, seed=seed, seeds=seeds, slots=slots,
+                random_set=random_set, command=command, resume=resume, records=records)  # fmt: skip
+    if grid is not None:  # one string is one axis
+        grid = [grid] if isinstance(grid, str) else grid
+        check_type(grid, list | tuple, "--grid", "axis specs NAME=START:STOP:COUNT (a list)")
+        for spec in grid:
+            check_type(spec, str, "--grid", "axis specs NAME=START:STOP:COUNT (strings)")
     if isinstance(noise, str):  # scripts/sweep.py's --noise
         try:
             noise = [float(v) for v in noise.split(",")]
         except ValueError:
             raise ValueError(f"--noise must be comma-separated numbers, got {noise!r}") from None
+    elif noise is not None:
+        check_type(noise, list | tuple | np.ndarray, "--noise", "scales (a list of numbers)")
+        noise = [check_number(v, "--noise") for v in noise]
+    kinds_given = noise_kinds  # as given, for the manifest (a resume compares it)
+    if noise_kinds is not None:
+        noise_kinds = check_names(noise_kinds, "--noise-kinds")
+    if system is not None:
+        system = ",".join(check_names(system, "--system"))
     if (grid is None) == (noise is None):
         raise ValueError("give one of grid (parameter axes) and noise (noise scales)")
     if world is None:  # "" is a world the loader refuses, not the default
@@ -462,8 +489,7 @@ def sweep(
         raise ValueError(f"--noise names a scale twice: {list(noise)}")
     if grid is not None and noise_kinds is not None:
         raise ValueError("--noise-kinds applies to --noise only")
-    kinds = noise_kinds.split(",") if isinstance(noise_kinds, str) else noise_kinds
-    kinds = tuple(NOISE_KINDS if kinds is None else kinds)
+    kinds = tuple(NOISE_KINDS if noise_kinds is None else noise_kinds)
     if not kinds or len(set(kinds)) < len(kinds) or set(kinds) - set(NOISE_KINDS):
         raise ValueError(f"--noise-kinds: one or more of {', '.join(NOISE_KINDS)}, each once")
     pool = points if grid is not None else len(names)  # runs per trial index in one pool
@@ -485,7 +511,7 @@ def sweep(
         total, unit = len(noise), "level"
     # Every process runs every step (and computes the same numbers); process 0 reports and writes.
     lead = jax.process_index() == 0
-    settings = dict(grid=grid, noise=noise, noise_kinds=noise_kinds, system=names, world=world,
+    settings = dict(grid=grid, noise=noise, noise_kinds=kinds_given, system=names, world=world,
                     trials=trials, seed=seed, seeds=None if seeds is None else str(seeds),
                     tau_cap=tau_cap, collision_cap=collision_cap, slots=slots)  # fmt: skip
     if entrant is not None:  # recorded only when given: earlier runs' manifests stay valid

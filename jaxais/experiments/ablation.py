@@ -516,7 +516,7 @@ def ablate(
     import sys
     import time
 
-    from tqdm import tqdm
+    from tqdm.auto import tqdm
 
     from jaxais.experiments.one_system import command_line
     from jaxais.experiments.plotting import save_figure

@@ -83,9 +83,14 @@ def check_trials(
     check_memory(n, RUN_BYTES + (180_000 if plot else 0), "--trials")
     if out is not None:
         check_output_file(out, (".json",))
-    if plot:
+    if plot and plot is not True:
         check_output_file(plot, (".png",))
     return world, n, tau_cap, collision_cap
+
+
+def _ipython() -> Any:
+    """The running IPython shell (a notebook's kernel), or None (IPython is not imported)."""
+    return getattr(sys.modules.get("IPython"), "get_ipython", lambda: None)()
 
 
 def trials(
@@ -111,8 +116,9 @@ def trials(
     ``system`` is a paper system (``"SIE"``; UIE and URL with ``random_set``) or a contender
     (:mod:`jaxais.experiments.contenders`): a spec ``[LABEL=]FILE.py:NAME``, a ``(controller,
     params)`` tuple or a ``Contender``; ``label`` names a tuple's trials (default
-    ``contender``). ``plot`` also draws every trajectory to a PNG (the trials then run as one
-    batch); ``command`` is recorded (default: the ``trials.py`` line these arguments stand for).
+    ``contender``). ``plot`` also draws every trajectory to a PNG file, or with ``plot=True``
+    shows it in the notebook (IPython) that runs this (the trials then run as one batch);
+    ``command`` is recorded (default: the ``trials.py`` line these arguments stand for).
     Defaults are the paper's.
     """
     contender = _is_contender(system)
@@ -121,14 +127,20 @@ def trials(
         flags = {"--system": None if contender else system, "--contender": spec if contender
                  else None, "--world": world, "--trials": trials, "--seed": seed or None,
                  "--random-set": random_set, "--seeds": seeds, "--tau-cap": tau_cap,
-                 "--collision-cap": collision_cap, "--out": out, "--plot": plot}  # fmt: skip
+                 "--collision-cap": collision_cap, "--out": out,
+                 "--plot": None if plot is True else plot}  # fmt: skip
         command = command_line("trials.py", flags)
     world, n, tau_cap, collision_cap = check_trials(
         system, out, world=world, trials=trials, seed=seed, random_set=random_set, seeds=seeds,
         tau_cap=tau_cap, collision_cap=collision_cap, plot=plot, label=label)  # fmt: skip
+    if plot is True and _ipython() is None:
+        raise ValueError(
+            "plot=True shows the plot in a notebook (IPython), and none runs here: give plot a "
+            ".png path"
+        )
     # Imported after the arguments are checked: a bad one answers at once, without loading JAX.
     import jax
-    from tqdm import tqdm
+    from tqdm.auto import tqdm
 
     from jaxais import envs
     from jaxais.experiments.contenders import contender_config, one
@@ -163,7 +175,7 @@ def trials(
     if out is not None:
         atomic_write_json(out, doc)
     if plot:
-        from jaxais.experiments.plotting import save_figure, world_figure
+        from jaxais.experiments.plotting import save_figure, show, world_figure
 
         trajs = results[name].trajectories
         # Each trial's boxes and goal where its world placed them (outlined in its colour).
@@ -174,5 +186,5 @@ def trials(
             title=f"{name} in {loaded.name}",
             labels=[f"trial {i}" for i in range(len(trajs))],
         )
-        save_figure(fig, plot)
+        show(fig) if plot is True else save_figure(fig, plot)
     return doc

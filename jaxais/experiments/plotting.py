@@ -219,11 +219,10 @@ def new_figure(figsize: tuple[float, float], layout: str | None = "constrained")
 def show(fig: Figure) -> None:
     """Display ``fig`` in the running IPython (a notebook's cell output); a one-line
     ``ValueError`` outside one."""
-    if getattr(sys.modules.get("IPython"), "get_ipython", lambda: None)() is None:
+    ipython = sys.modules.get("IPython")  # not a dependency: the running one, if any
+    if getattr(ipython, "get_ipython", lambda: None)() is None:
         raise ValueError("no notebook (IPython) runs here to show the figure: save it instead")
-    from IPython.display import display
-
-    display(fig)
+    ipython.display.display(fig)
 
 
 def world_figure(

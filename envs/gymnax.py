@@ -3,8 +3,8 @@
 Drive an e-puck to the blue goal without crashing (README "gymnax"). ``register_gymnax()`` adds
 the built-in worlds to gymnax's registry (evosax's ``GymnaxProblem`` finds them); gymnax's
 wrappers take the env as it is. Tools written for gymnax before 1.0, whose ``step`` returned five
-values (rejax 0.1), take ``make(..., legacy_step=True)``: gymnax's ``LegacyStepAPIWrapper`` does
-the same but cannot be deep-copied, which rejax does to its config.
+values (rejax 0.1), take ``make(..., legacy_step=True)`` (an :class:`EpuckEnv` itself) or
+gymnax's ``LegacyStepAPIWrapper``.
 
 - obs [11] float32 (``OBS_NAMES``): IR ps0..ps7 / 4095; blue pixels / 45; blue centroid column
   in [-1, 1] (0 when none seen); goal pixels / 45.
@@ -18,7 +18,13 @@ the same but cannot be deep-copied, which rejax does to its config.
 
 Auto-reset is cheap: ``reset`` also draws ``reset_pool`` starts into the state and an ended
 episode restarts from one (a gather and a select), where gymnax's ``step`` runs ``reset_env``
-every step (10-15x a step under ``vmap``). ``auto_reset=False``: ``step`` never resets.
+every step (10-15x a step under ``vmap``). ``refresh_pool=True`` redraws the start an ended
+episode took, so a loop that resets once meets fresh placements (a ``cond``: free unbatched, a
+fresh start every step under ``vmap``). ``auto_reset=False``: ``step`` never resets.
+
+Environments are equal (and hash alike) when their class, settings and ``default_params``
+are, so a deep copy shares its original's compiled ``reset`` and ``step``; gymnax's wrappers
+around one deep-copy and pickle as themselves.
 Outside jit, ``make``, ``reset`` and ``step`` reject ``EnvParams`` fields of the wrong type, out
 of range or out of order, and bad keys and actions, with a one-line ``ValueError``; traced values
 are not checked, but an action's shape is (it is static) and a non-finite action is flagged.
@@ -26,7 +32,9 @@ are not checked, but an action's shape is (it is static) and a non-finite action
 
 from __future__ import annotations
 
+import copyreg
 import functools
+import hashlib
 from pathlib import Path
 from typing import Any
 
@@ -210,11 +218,20 @@ class EpuckEnv(environment.Environment):
     """The STL task as a gymnax 1.0 environment (build it with :func:`make`); ``params=None``
     means ``default_params``."""
 
-    def __init__(self, params: EnvParams, auto_reset: bool = True, reset_pool: int = RESET_POOL):
+    def __init__(
+        self,
+        params: EnvParams,
+        auto_reset: bool = True,
+        reset_pool: int = RESET_POOL,
+        refresh_pool: bool = False,
+    ):
         check_env_args(params, auto_reset, reset_pool)
+        check_type(refresh_pool, bool | np.bool_, "refresh_pool", "True or False")
         self._params = params
         self.auto_reset = auto_reset
         self.reset_pool = reset_pool
+        self.refresh_pool = refresh_pool
+        self._digest: bytes | None = None
 
     @property
     def default_params(self) -> EnvParams:
@@ -281,8 +298,21 @@ class EpuckEnv(environment.Environment):
                 (start_obs, _fresh(start)),
                 (obs, new.replace(starts=None)),
             )
-            new = new.replace(starts=state.starts)
+            starts = state.starts
+            if self.refresh_pool:
+                # From a key of its own: the episodes are refresh_pool=False's until a slot is
+                # taken a second time.
+                k_fresh = jax.random.fold_in(k_reset, 1)
+                starts = jax.lax.cond(
+                    done, lambda: self._redraw(k_fresh, starts, i, params), lambda: starts
+                )
+            new = new.replace(starts=starts)
         return obs, new, reward, terminated, truncated, info
+
+    def _redraw(self, key, starts, i, params):
+        """``starts`` with slot ``i`` replaced by a fresh start from ``key``."""
+        fresh_obs, fresh = self._start(key, params)
+        return jax.tree.map(lambda pool, x: pool.at[i].set(x), starts, (fresh_obs, fresh.sim))
 
     def reset_env(self, key: jax.Array, params: EnvParams) -> tuple[jax.Array, EnvState]:
         """:meth:`reset` without jit, defaults or checks (gymnax's name)."""
@@ -355,10 +385,31 @@ class EpuckEnv(environment.Environment):
         """Whether ``max_steps_in_episode`` steps ran without finding the target."""
         return (state.sim.t >= params.max_steps_in_episode) & ~self.is_terminated(state, params)
 
-    def __deepcopy__(self, memo: dict) -> EpuckEnv:
-        # Immutable; a copy (gymnax's GymnaxToGymWrapper makes one) would only compile reset and
-        # step again, its identity being part of their compiled programs' keys.
-        return self
+    def _key(self) -> tuple:
+        """What decides the environment: class, settings and a digest of ``default_params``
+        (its tree structure, static fields included, and every leaf's bytes)."""
+        if self._digest is None:
+            leaves, tree = jax.tree.flatten(self._params)
+            if any(isinstance(x, jax.core.Tracer) for x in leaves):
+                return (type(self), id(self))  # params traced: only itself is equal
+            h = hashlib.sha256(repr(tree).encode())
+            for x in map(np.asarray, leaves):
+                h.update(f"{x.dtype.str}{x.shape}".encode())
+                h.update(np.ascontiguousarray(x).tobytes())
+            self._digest = h.digest()
+        settings = (self.auto_reset, self.reset_pool, self.refresh_pool)
+        return (type(self), settings, self._digest)
+
+    # Equal environments share compiled programs: reset and step are jitted with the
+    # environment static, so a copy (gymnax's GymnaxToGymWrapper and rejax deep-copy theirs)
+    # hits its original's cache.
+    def __eq__(self, other: object) -> bool:
+        if self is other:
+            return True
+        return isinstance(other, EpuckEnv) and self._key() == other._key()
+
+    def __hash__(self) -> int:
+        return hash(self._key())
 
     def __repr__(self) -> str:
         name = type(self).__name__
@@ -380,12 +431,14 @@ def make(
     sim_params: SimParams | None = None,
     auto_reset: bool = True,
     reset_pool: int = RESET_POOL,
+    refresh_pool: bool = False,
     legacy_step: bool = False,
     **overrides: float,
 ) -> EpuckEnv:
     """The environment of a world (built-in name, file path or :class:`World`); ``overrides``
-    are :class:`EnvParams` fields; ``legacy_step``: a :class:`LegacyEpuckEnv`. Raises
-    ``WorldError``/``ValueError`` (one line) on bad input."""
+    are :class:`EnvParams` fields; ``refresh_pool``: each auto-reset redraws the start it took;
+    ``legacy_step``: a :class:`LegacyEpuckEnv`. Raises ``WorldError``/``ValueError`` (one line)
+    on bad input."""
     unknown = sorted(set(overrides) - set(_RANGES))
     if unknown:
         raise ValueError(
@@ -402,13 +455,19 @@ def make(
     check_type(reset_pool, int | np.integer, "reset_pool", "a positive integer")
     if reset_pool < 1:
         raise ValueError(f"reset_pool must be a positive integer, got {reset_pool!r}")
+    check_type(refresh_pool, bool | np.bool_, "refresh_pool", "True or False")
     w = world if isinstance(world, World) else load_world(world)
     sim = default_params() if sim_params is None else sim_params
     fields = {"max_steps_in_episode": round(PAPER_TIME_CAP / sim.dt), **overrides}
     params = check_params(EnvParams(world=w, sim=sim, **fields))
     params = params.replace(**{k: int(getattr(params, k)) for k, r in _RANGES.items() if r[2]})
     env = LegacyEpuckEnv if legacy_step else EpuckEnv
-    return env(params, auto_reset=bool(auto_reset), reset_pool=int(reset_pool))
+    return env(
+        params,
+        auto_reset=bool(auto_reset),
+        reset_pool=int(reset_pool),
+        refresh_pool=bool(refresh_pool),
+    )
 
 
 def register_gymnax() -> tuple[str, ...]:
@@ -419,3 +478,44 @@ def register_gymnax() -> tuple[str, ...]:
         if name not in gymnax.registered_envs:
             gymnax.register(name, functools.partial(make, world))
     return names
+
+
+def _wraps_env(wrapper: Any) -> bool:
+    """Whether ``wrapper``'s chain of ``_env`` attributes ends at an :class:`EpuckEnv`."""
+    inner = vars(wrapper).get("_env")
+    while inner is not None and not isinstance(inner, EpuckEnv):
+        inner = getattr(inner, "__dict__", {}).get("_env")
+    return inner is not None
+
+
+def _rebuilt(cls: type, attributes: dict[str, Any]) -> Any:
+    """A ``cls`` instance holding ``attributes`` (its ``__init__`` not run)."""
+    obj = object.__new__(cls)
+    obj.__dict__.update(attributes)
+    return obj
+
+
+def _reduce_wrapper(wrapper: Any) -> Any:
+    # gymnax's wrappers forward every missing attribute to their env, so copy and pickle, which
+    # look up __setstate__ on an empty instance before its _env is set, recurse without end.
+    # Around this env they are rebuilt from their attributes (deep-copied first) instead; around
+    # any other, gymnax's own behaviour is kept.
+    if _wraps_env(wrapper):
+        return _rebuilt, (type(wrapper), vars(wrapper))
+    return wrapper.__reduce_ex__(4)
+
+
+def _register_wrappers() -> None:
+    """Register :func:`_reduce_wrapper` for gymnax's attribute-forwarding wrapper classes."""
+    from gymnax.wrappers import compat, purerl
+
+    classes, todo = [], [purerl.GymnaxWrapper, compat.LegacyStepAPIWrapper]
+    while todo:
+        cls = todo.pop()
+        classes.append(cls)
+        todo += cls.__subclasses__()
+    for cls in classes:
+        copyreg.pickle(cls, _reduce_wrapper)
+
+
+_register_wrappers()

@@ -29,18 +29,94 @@ MAX_ARENA_SIDE = 100.0  # m [ours]: float32 positions still resolve 8 um there
 MAX_HEIGHT = 10.0  # of a wall, box, pillar or goal, m
 MAX_HEADING = 2.0 * math.pi  # magnitude of a start heading bound, rad
 
-_KEYS: dict[str, tuple[str, ...]] = {
-    "": ("name", "arena", "robot", "goal", "walls", "boxes", "pillars", "wanderers", "noise"),
-    "arena": ("width", "height", "wall_height"),
-    "robot": ("start_region", "start_heading"),
-    "goal": ("shape", "half_size", "radius", "height", "region"),
-    "walls": ("from", "to", "material", "height"),
-    "boxes": ("half_size", "center", "region", "material", "height"),
-    "pillars": ("center", "radius", "material", "height"),
-    "wanderers": ("region",),
-    "noise": ("ir_relative_std", "camera_miss_prob", "camera_shift_prob", "wheel_relative_std"),
-}
-"""The world format's keys, by table path (``""`` the top level)."""
+MAX_NOISE_STD = 10.0  # of a relative noise (IR, wheels)
+
+
+@dataclass(frozen=True)
+class Field:
+    """One key of the world format: its TOML kind (``str``, ``number``, ``vec2``, ``vec4``,
+    ``table``, ``tables``: an array of tables), whether a file must give it, the range it keeps
+    alone (a number's, or each of a list's; ``low`` exclusive when ``open_low``), the strings it
+    takes, and what it is. The rules that involve other fields (regions inside the arena, sizes
+    within half of it, a box's one of ``center`` or ``region``, the goal sized by its shape, the
+    count of surfaces) are :func:`parse_world`'s."""
+
+    kind: str
+    doc: str
+    required: bool = False
+    low: float | None = None
+    high: float | None = None
+    open_low: bool = False
+    choices: tuple[str, ...] | None = None
+
+
+_SIZE: dict[str, Any] = {"low": 0.0, "open_low": True}  # a length, m: > 0
+_HEIGHT = Field("number", "m (default: the arena's wall_height)", **_SIZE, high=MAX_HEIGHT)
+_MATERIAL = Field("str", "default wall", choices=tuple(m for m in MATERIALS if m != "none"))
+_REGION = "[xmin, ymin, xmax, ymax], m, inside the arena"
+FIELDS: dict[str, dict[str, Field]] = {
+    "": {
+        "name": Field("str", "the world's name (a world found by name carries its file's)", True),
+        "arena": Field("table", "the arena and its 4 outer walls", True),
+        "robot": Field("table", "where the robot starts", True),
+        "goal": Field("table", "the blue goal", True),
+        "walls": Field("tables", "inner walls"),
+        "boxes": Field("tables", "boxes, fixed or placed at random each run"),
+        "pillars": Field("tables", "round pillars"),
+        "wanderers": Field("tables", "wandering e-pucks"),
+        "noise": Field("table", "noise beyond the IR noise every world has"),
+    },
+    "arena": {
+        "width": Field("number", "m", True, **_SIZE, high=MAX_ARENA_SIDE),
+        "height": Field("number", "m", True, **_SIZE, high=MAX_ARENA_SIDE),
+        "wall_height": Field("number", "m", True, **_SIZE, high=MAX_HEIGHT),
+    },
+    "robot": {
+        "start_region": Field("vec4", f"where its centre is drawn: {_REGION}", True),
+        "start_heading": Field("vec2", "[min, max] of the heading drawn, rad (default [-pi, pi])",
+                               low=-MAX_HEADING, high=MAX_HEADING),
+    },
+    "goal": {
+        "shape": Field("str", "box (sized by half_size) or ball (by radius)", True,
+                       choices=("box", "ball")),
+        "half_size": Field("vec2", "a box's [hx, hy], m", **_SIZE),
+        "radius": Field("number", "a ball's radius, m", **_SIZE),
+        "height": Field("number", "m", True, **_SIZE, high=MAX_HEIGHT),
+        "region": Field("vec4", f"where its centre is drawn: {_REGION}", True),
+    },
+    "walls": {
+        "from": Field("vec2", "one end [x, y], m", True),
+        "to": Field("vec2", "the other end [x, y], m", True),
+        "material": _MATERIAL,
+        "height": _HEIGHT,
+    },
+    "boxes": {
+        "half_size": Field("vec2", "[hx, hy], m", True, **_SIZE),
+        "center": Field("vec2", "a fixed box's centre [x, y], m (or region)"),
+        "region": Field("vec4", f"where a random box's centre is drawn: {_REGION}"),
+        "material": _MATERIAL,
+        "height": _HEIGHT,
+    },
+    "pillars": {
+        "center": Field("vec2", "[x, y], m", True),
+        "radius": Field("number", "m", True, **_SIZE),
+        "material": _MATERIAL,
+        "height": _HEIGHT,
+    },
+    "wanderers": {"region": Field("vec4", f"where it starts: {_REGION}", True)},
+    "noise": {
+        "ir_relative_std": Field("number", "relative (default 0)", low=0.0, high=MAX_NOISE_STD),
+        "camera_miss_prob": Field("number", "chance per iteration that the camera misses what it "
+                                  "sees (default 0)", low=0.0, high=1.0),
+        "camera_shift_prob": Field("number", "chance per iteration that a detection shifts "
+                                   "(default 0)", low=0.0, high=1.0),
+        "wheel_relative_std": Field("number", "relative (default 0)", low=0.0,
+                                    high=MAX_NOISE_STD),
+    },
+}  # fmt: skip
+"""The world format by table path (``""`` the top level): what the loader reads, and what its
+JSON Schema (:func:`jaxais.experiments.schema.world_schema`) is generated from."""
+_KEYS: dict[str, tuple[str, ...]] = {path: tuple(keys) for path, keys in FIELDS.items()}
 
 
 @pytree_dataclass
@@ -115,8 +191,10 @@ class _Reader:
     def __init__(self, src: str):
         self.src = src
 
-    def get(self, table: dict, key: str, path: str, kind: str, default: Any = ...) -> Any:
+    def get(self, table: dict, key: str, path: str, default: Any = ..., kind: str = "") -> Any:
+        """``table[key]`` of its kind in :data:`FIELDS` (or ``kind``), else ``default``."""
         field = f"{path}.{key}" if path else key
+        kind = kind or FIELDS[path.split("[", 1)[0]][key].kind
         if key not in table:
             if default is ...:
                 raise _fail(self.src, field, "missing")
@@ -180,14 +258,14 @@ class _Reader:
         why: str = "",
     ) -> float:
         """A number in (0, hi] m (``why`` says where ``hi`` comes from)."""
-        value = self.get(table, key, path, "number", default)
+        value = self.get(table, key, path, default)
         if not 0 < value <= hi:
             raise _fail(self.src, f"{path}.{key}", f"must lie in (0, {hi:g}] m{why}, got {value:g}")
         return value
 
     def half_size(self, table: dict, path: str, hi: float) -> list[float]:
         """A [hx, hy] pair, each in (0, hi] m."""
-        half = self.get(table, "half_size", path, "vec2")
+        half = self.get(table, "half_size", path)
         if not all(0 < h <= hi for h in half):
             raise _fail(
                 self.src,
@@ -197,7 +275,7 @@ class _Reader:
         return half
 
     def material(self, table: dict, path: str, default: str) -> int:
-        name = self.get(table, "material", path, "str", default)
+        name = self.get(table, "material", path, default)
         if name not in MATERIALS or name == "none":
             allowed = ", ".join(m for m in MATERIALS if m != "none")
             raise _fail(self.src, f"{path}.material", f"unknown material {name!r} ({allowed})")
@@ -205,7 +283,7 @@ class _Reader:
 
     def region(self, table: dict, key: str, path: str, arena: list[float], margin: float):
         """A region [xmin, ymin, xmax, ymax] inside the arena, ``margin`` away from its walls."""
-        r = self.get(table, key, path, "vec4")
+        r = self.get(table, key, path, kind="vec4")
         field = f"{path}.{key}"
         if r[0] > r[2] or r[1] > r[3]:
             raise _fail(self.src, field, f"needs xmin <= xmax and ymin <= ymax, got {r}")
@@ -320,10 +398,10 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
     (missing, unknown or mistyped, out of range, off the arena, or too many surfaces)."""
     rd = _Reader(src)
     rd.known(doc, "")
-    name = rd.get(doc, "name", "", "str")
+    name = rd.get(doc, "name", "")
     if not is_plain_name(name):
         raise _fail(src, "name", f"{_show(name)} is not a plain name (letters, digits, _ and -)")
-    arena_t = rd.get(doc, "arena", "", "table")
+    arena_t = rd.get(doc, "arena", "")
     rd.known(arena_t, "arena")
     width = rd.positive(arena_t, "width", "arena", hi=MAX_ARENA_SIDE)
     height = rd.positive(arena_t, "height", "arena", hi=MAX_ARENA_SIDE)
@@ -336,11 +414,11 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
     segs.append([0, height, 0, 0])
     seg_mat = [MATERIALS["wall"]] * 4
     seg_h = [wall_h] * 4
-    for k, w in enumerate(rd.get(doc, "walls", "", "tables", [])):
+    for k, w in enumerate(rd.get(doc, "walls", "", [])):
         path = f"walls[{k}]"
         rd.known(w, path)
-        a = rd.get(w, "from", path, "vec2")
-        b = rd.get(w, "to", path, "vec2")
+        a = rd.get(w, "from", path)
+        b = rd.get(w, "to", path)
         for p, key in ((a, "from"), (b, "to")):
             if not (0 <= p[0] <= width and 0 <= p[1] <= height):
                 raise _fail(src, f"{path}.{key}", f"{p} is outside the arena")
@@ -351,7 +429,7 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
         seg_h.append(rd.positive(w, "height", path, wall_h))
 
     box_half, box_region, box_mat, box_h = [], [], [], []
-    for k, bx in enumerate(rd.get(doc, "boxes", "", "tables", [])):
+    for k, bx in enumerate(rd.get(doc, "boxes", "", [])):
         path = f"boxes[{k}]"
         rd.known(bx, path)
         half = rd.half_size(bx, path, max_half)
@@ -359,7 +437,7 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
             raise _fail(src, path, "give exactly one of 'center' (fixed) or 'region' (random)")
         margin = max(half)
         if "center" in bx:
-            c = rd.get(bx, "center", path, "vec2")
+            c = rd.get(bx, "center", path)
             region = rd.region({"center": c + c}, "center", path, arena, 0.0)
             if not (half[0] <= c[0] <= width - half[0] and half[1] <= c[1] <= height - half[1]):
                 raise _fail(src, f"{path}.center", f"box at {c} pokes out of the arena")
@@ -371,10 +449,10 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
         box_h.append(rd.positive(bx, "height", path, wall_h))
 
     pillars, pil_mat, pil_h = [], [], []
-    for k, p in enumerate(rd.get(doc, "pillars", "", "tables", [])):
+    for k, p in enumerate(rd.get(doc, "pillars", "", [])):
         path = f"pillars[{k}]"
         rd.known(p, path)
-        c = rd.get(p, "center", path, "vec2")
+        c = rd.get(p, "center", path)
         r = rd.positive(p, "radius", path, hi=max_half, why=_HALF_ARENA)
         if not (0 <= c[0] <= width and 0 <= c[1] <= height):
             raise _fail(src, f"{path}.center", f"{c} is outside the arena")
@@ -382,10 +460,10 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
         pil_mat.append(rd.material(p, path, "wall"))
         pil_h.append(rd.positive(p, "height", path, wall_h))
 
-    goal_t = rd.get(doc, "goal", "", "table")
+    goal_t = rd.get(doc, "goal", "")
     rd.known(goal_t, "goal")
-    goal_shape = rd.get(goal_t, "shape", "goal", "str")
-    if goal_shape not in ("box", "ball"):
+    goal_shape = rd.get(goal_t, "shape", "goal")
+    if goal_shape not in FIELDS["goal"]["shape"].choices:
         raise _fail(src, "goal.shape", f"expected 'box' or 'ball', got {goal_shape!r}")
     size_key, other = ("half_size", "radius") if goal_shape == "box" else ("radius", "half_size")
     if other in goal_t:
@@ -400,7 +478,7 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
     goal_h = rd.positive(goal_t, "height", "goal")
     goal_region = rd.region(goal_t, "region", "goal", arena, max(goal_half))
 
-    robot_t = rd.get(doc, "robot", "", "table")
+    robot_t = rd.get(doc, "robot", "")
     rd.known(robot_t, "robot")
     start_region = rd.region(robot_t, "start_region", "robot", arena, body_radius)
     # As a box is (below): the robot is placed clear of the goal, so wherever the goal lands
@@ -412,7 +490,7 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
             f"clear of a goal at {crowded} (in goal.region {goal_region}): a robot would start "
             "on the goal; move or enlarge the start region",
         )  # fmt: skip
-    heading = rd.get(robot_t, "start_heading", "robot", "vec2", [-math.pi, math.pi])
+    heading = rd.get(robot_t, "start_heading", "robot", [-math.pi, math.pi])
     if heading[0] > heading[1]:
         raise _fail(src, "robot.start_heading", f"needs min <= max, got {heading}")
     if max(abs(h) for h in heading) > MAX_HEADING:
@@ -423,11 +501,11 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
         )
 
     wander_regions = []
-    for k, wd in enumerate(rd.get(doc, "wanderers", "", "tables", [])):
+    for k, wd in enumerate(rd.get(doc, "wanderers", "", [])):
         rd.known(wd, f"wanderers[{k}]")
         wander_regions.append(rd.region(wd, "region", f"wanderers[{k}]", arena, body_radius))
 
-    noise_t = rd.get(doc, "noise", "", "table", {})
+    noise_t = rd.get(doc, "noise", "", {})
     if "pixel_flip_prob" in noise_t:
         raise _fail(
             src,
@@ -435,9 +513,9 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
             "per-pixel flips invent targets; use camera_miss_prob and camera_shift_prob",
         )
     rd.known(noise_t, "noise")
-    noise = {key: rd.get(noise_t, key, "noise", "number", 0.0) for key in _KEYS["noise"]}
+    noise = {key: rd.get(noise_t, key, "noise", 0.0) for key in _KEYS["noise"]}
     for key, value in noise.items():
-        hi = 1.0 if key in ("camera_miss_prob", "camera_shift_prob") else 10.0
+        hi = FIELDS["noise"][key].high
         if not 0.0 <= value <= hi:
             raise _fail(src, f"noise.{key}", f"must lie in [0, {hi:g}], got {value}")
 

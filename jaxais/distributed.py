@@ -1,12 +1,13 @@
 """Runs across processes and machines with JAX's multi-process runtime (``jax.distributed``).
 
 Every process runs the same script and flags (:func:`add_arguments`, or ``JAXAIS_*`` variables;
-``--coordinator auto`` under SLURM or Open MPI; gloo on CPUs); :func:`initialize` joins them, and
-a batch of runs is sharded over a 1-D mesh of every device (:func:`batch_sharding`) with the
-readouts replicated, so every process writes the same results, bit for bit those of one process.
-Joining fails fast with one line (a ``ValueError``) naming the cause and the fix: a process
-missing after the timeout, an id taken twice, or flags that differ between processes; waiting is
-reported on stderr. A process that stops responding mid-run ends the others with one line.
+``--coordinator auto``: JAX's own cluster detection, :func:`detect`; gloo on CPUs);
+:func:`initialize` joins them, and a batch of runs is sharded over a 1-D mesh of every device
+(:func:`batch_sharding`) with the readouts replicated, so every process writes the same results,
+bit for bit those of one process. Joining fails fast with one line (a ``ValueError``) naming the
+cause and the fix: a process missing after the timeout, an id taken twice, or flags that differ
+between processes; waiting is reported on stderr. A process that stops responding mid-run ends the
+others with one line.
 """
 
 from __future__ import annotations
@@ -16,11 +17,14 @@ import atexit
 import contextlib
 import json
 import os
+import re
 import select
 import socket
 import sys
 import threading
 import time
+import warnings
+from unittest import mock
 
 from jaxais import io
 
@@ -29,7 +33,8 @@ ENV = {
 }
 TIMEOUT_S = 60.0  # seconds a process waits for the others by default
 PER_PROCESS = ("process_id", "timeout_s", "out", "plot")  # may differ (the others write nothing)
-AUTO = ("SLURM_STEP_NODELIST", "OMPI_MCA_orte_hnp_uri")  # what JAX's cluster detection reads
+LAUNCHERS = {"slurm": "srun (inside an sbatch script too)", "ompi": "mpirun"}
+"""What starts each process, by JAX's detector name (a hint in :func:`detect`'s errors)."""
 ABANDONED: list = []
 """Runtimes of joins that timed out mid-way, or of runs that lost a process: :func:`jaxais.cli.fail`
 then ends with ``os._exit``, as the teardown at exit would wait on them or abort."""
@@ -43,8 +48,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     # fmt: off
     group.add_argument("--coordinator", default=os.environ.get(ENV["coordinator"]),
                        metavar="HOST:PORT", help="process 0's address: join a multi-process run "
-                       f"(or 'auto' under SLURM/Open MPI; default ${ENV['coordinator']}, unset: "
-                       "one process)")
+                       "(or 'auto': JAX's cluster detection, as under srun; default "
+                       f"${ENV['coordinator']}, unset: one process)")
     group.add_argument("--num-processes", type=int, default=_env("num_processes", int),
                        help=f"processes in the run (default ${ENV['num_processes']})")
     group.add_argument("--process-id", type=int, default=_env("process_id", int),
@@ -71,12 +76,7 @@ def check(args: argparse.Namespace) -> None:
     if not args.timeout_s > 0:
         raise ValueError(f"--timeout-s must be > 0, got {args.timeout_s}")
     if args.coordinator == "auto":
-        if not any(name in os.environ for name in AUTO):
-            raise ValueError(
-                f"--coordinator auto reads SLURM's or Open MPI's variables (${' or $'.join(AUTO)})"
-                ", and neither is set: start the processes with srun or mpirun, or give "
-                "--coordinator HOST:PORT --num-processes N --process-id I"
-            )
+        detect()
         return
     if not args.coordinator:
         if args.num_processes or args.process_id is not None:
@@ -93,6 +93,82 @@ def check(args: argparse.Namespace) -> None:
         raise ValueError(
             f"--process-id must be in [0, {args.num_processes}), got {args.process_id}"
         )
+
+
+def _detectors() -> list[type]:
+    """The cluster environments ``jax.distributed.initialize()`` tries, in its order (abstract
+    bases and opt-in ones left out)."""
+    from jax._src import clusters
+
+    kinds = [c for c in clusters.ClusterEnv._cluster_types if not c.opt_in_only_method]
+    return [c for c in kinds if not any(o is not c and issubclass(o, c) for o in kinds)]
+
+
+def _names(detector: type) -> list[str]:
+    """The environment variables ``detector``'s module names in its constants (SLURM_*, ...)."""
+    module = sys.modules[detector.__module__]
+    return sorted(
+        {v for k, v in vars(module).items()
+         if k.startswith("_") and isinstance(v, str) and re.fullmatch(r"[A-Z]+_\w+", v)}
+    )  # fmt: skip
+
+
+def variables(detector: type) -> tuple[str, ...]:
+    """The environment variables ``detector.is_env_present()`` needs, every one: of the names
+    its module defines (SLURM's, Open MPI's), those without which it answers False; () for a
+    detector that reads no variables alone (Kubernetes, Cloud TPU)."""
+    names = _names(detector)
+
+    def present(*unset: str) -> bool:
+        with mock.patch.dict(os.environ, {name: "0" for name in names}):
+            for name in unset:
+                del os.environ[name]
+            return detector.is_env_present()
+
+    if not names or not present():
+        return ()
+    return tuple(name for name in names if not present(name))
+
+
+def _label(detector: type) -> str:
+    need = variables(detector)
+    return detector.__name__ + (f" (${', $'.join(need)})" if need else "")
+
+
+def detect() -> type:
+    """JAX's cluster environment that ``--coordinator auto`` joins with (the first whose
+    ``is_env_present()`` holds, as ``jax.distributed.initialize()`` picks it); otherwise a
+    one-line ``ValueError`` naming the variables a partly set one lacks, or every detector."""
+    fix = "or give --coordinator HOST:PORT --num-processes N --process-id I"
+    with warnings.catch_warnings(record=True) as said:  # K8s warns over several lines
+        warnings.simplefilter("always")
+        detectors = _detectors()
+        found = next((d for d in detectors if d.is_env_present()), None)
+    if found is not None:
+        return found
+
+    def share(detector: type) -> float:  # of the variables its module names, those set
+        names = _names(detector)
+        return sum(name in os.environ for name in names) / max(len(names), 1)
+
+    partial = [d for d in detectors if variables(d) and share(d) > 0]
+    if partial:  # the most nearly set one: the variables it lacks
+        detector = max(partial, key=share)
+        need = variables(detector)
+        missing = [name for name in need if name not in os.environ]
+        launcher = LAUNCHERS.get(getattr(detector, "name", ""), "its launcher")
+        raise ValueError(
+            f"--coordinator auto: JAX's {detector.__name__} needs each of ${', $'.join(need)}; "
+            f"${', $'.join(missing)} {'is' if len(missing) == 1 else 'are'} not set: start "
+            f"each process with {launcher}, {fix}"
+        )
+    hint = " ".join(str(said[0].message).split()).split(". ")[0] if said else ""
+    raise ValueError(
+        "--coordinator auto: none of JAX's clusters is detected ("
+        + ", ".join(map(_label, detectors))
+        + (f") ({hint}" if hint else "")
+        + f"): start the processes with srun or mpirun, {fix}"
+    )
 
 
 def initialize(args: argparse.Namespace) -> bool:
@@ -117,8 +193,8 @@ def initialize(args: argparse.Namespace) -> bool:
     jax.config.update("jax_enable_preemption_service", False)
     auto, n, where = args.coordinator == "auto", args.num_processes, args.coordinator
     spec = {"coordinator_address": where, "num_processes": n, "process_id": args.process_id}
-    if auto:
-        spec, where = {}, "the cluster's coordinator"
+    if auto:  # JAX detects the cluster again, as detect() did
+        spec, where = {}, f"{detect().__name__}'s coordinator"
     elif args.process_id == 0:  # a second process 0 would take the port over, and XLA abort
         try:
             server = socket.create_server(("", int(where.rpartition(":")[2])))
@@ -154,14 +230,16 @@ def initialize(args: argparse.Namespace) -> bool:
             waited = f"{time.monotonic() - start:.0f} s of {args.timeout_s:g}"
             print(f"waiting for {others} at {where} ({waited})", file=sys.stderr, flush=True)
     if failed:
-        if isinstance(failed[0], ValueError):
+        if isinstance(failed[0], ValueError) and not auto:
             raise failed[0]
-        raise ValueError(f"could not join the run at {where}: {failed[0]}")
+        why = (str(failed[0]).strip().splitlines() or [type(failed[0]).__name__])[0]
+        raise ValueError(f"could not join the run at {where}: {why}")
     if joining.is_alive():
         ABANDONED.append((state.global_state.client, state.global_state.service))
         state.global_state.client = state.global_state.service = None
         raise ValueError(_why_not_joined(args, where))
     runtime = state.global_state
+    where = getattr(runtime, "coordinator_address", None) or where
     _agree(args, runtime)
     threading.Thread(target=_watch, args=(runtime, silence), daemon=True).start()
     print(f"joined the run at {where} as process {runtime.process_id} of "

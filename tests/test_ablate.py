@@ -19,7 +19,7 @@ import jax
 import numpy as np
 import pytest
 from _python import call_main
-from tqdm import tqdm
+from tqdm.auto import tqdm
 
 from jaxais import envs
 from jaxais.experiments import ablation, protocol

@@ -237,7 +237,7 @@ def test_error_while_a_progress_bar_is_open_starts_its_own_line():
     code = textwrap.dedent(
         """
         import sys
-        from tqdm import tqdm
+        from tqdm.auto import tqdm
         from jaxais import cli
         import os
         assert cli._error_line("demo.py", "interrupted") == "demo.py: error: interrupted\\n"

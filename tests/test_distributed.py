@@ -30,6 +30,7 @@ from jaxais import distributed
 ROOT = Path(__file__).resolve().parent.parent
 TRIALS = ["--system", "HDC", "--trials", "3", "--tau-cap", "8"]
 LONG = ("--timeout-s", "60")  # for processes that must not time out (the others wait 4 s)
+CLUSTER_VARS = ("SLURM_", "OMPI_", "JAX_COORDINATOR_PORT")
 
 
 def _free_ports(n: int) -> list[int]:
@@ -41,10 +42,13 @@ def _free_ports(n: int) -> list[int]:
     return ports
 
 
-def _python(*args: str) -> subprocess.Popen:
+def _python(*args: str, cluster: dict[str, str] | None = None) -> subprocess.Popen:
+    """``python ARGS`` in the repository, with ``cluster``'s variables in place of any
+    SLURM or Open MPI ones."""
     env = {**os.environ, "JAXAIS_DEBUG": "", "JAXAIS_CACHE_DIR": "off"}
-    for name in distributed.ENV.values():
+    for name in [*distributed.ENV.values(), *(v for v in env if v.startswith(CLUSTER_VARS))]:
         env.pop(name, None)
+    env.update(cluster or {})
     return subprocess.Popen([sys.executable, *args], cwd=ROOT, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)  # fmt: skip
 
@@ -86,6 +90,21 @@ def _join(port: int, n: int, pid: int, then: str, timeout: str = "60") -> subpro
                    timeout)  # fmt: skip
 
 
+def _srun(port: int, tasks: int, task: int, **only: str) -> subprocess.Popen:
+    """A JOIN process with ``--coordinator auto`` and the variables srun gives task ``task`` of
+    ``tasks`` on one node (or ``only`` those), JAX's coordinator at ``port``."""
+    env = dict(
+        SLURM_JOB_ID="4242",
+        SLURM_STEP_NODELIST="localhost",
+        SLURM_NTASKS=str(tasks),
+        SLURM_PROCID=str(task),
+        SLURM_LOCALID=str(task),
+        JAX_COORDINATOR_PORT=str(port),
+    )
+    return _python("-c", JOIN, "--then", "end", "--coordinator", "auto", *LONG,
+                   cluster=only or env)  # fmt: skip
+
+
 def _joined(tmp: Path, name: str, port: int, n: int, pid: int, *more: str) -> subprocess.Popen:
     where = ["--coordinator", f"127.0.0.1:{port}", "--num-processes", str(n)]
     return _start(tmp / f"{name}.json", *where, "--process-id", str(pid), "--timeout-s", "4",
@@ -106,7 +125,7 @@ def _read_until(proc: subprocess.Popen, text: str) -> str:
 def runs(tmp_path_factory):
     """Every process of the file at once: ``(tmp, {name: (returncode, stderr)})``."""
     tmp = tmp_path_factory.mktemp("dist")
-    pair, late, quiet, gloo, nobody, alone, mismatch, taken, twice, stop = _free_ports(10)
+    pair, late, quiet, gloo, nobody, alone, mismatch, taken, twice, stop, srun = _free_ports(11)
     holder = socket.create_server(("", taken))  # another program holds process 0's port
     procs = {
         "alone": _start(tmp / "alone.json"),
@@ -118,6 +137,9 @@ def runs(tmp_path_factory):
         "late1": _join(late, 2, 1, "end"),
         **{f"quiet{i}": _join(quiet, 3, i, "sleep", "8" if i == 0 else "60") for i in range(3)},
         **{f"gloo{i}": _join(gloo, 2, i, "gather") for i in range(2)},
+        # Two tasks of one srun step, and a process with the job's id alone (no srun).
+        **{f"srun{i}": _srun(srun, 2, i) for i in range(2)},
+        "no_srun": _srun(srun, 2, 0, SLURM_JOB_ID="4242"),
         "unreachable": _joined(tmp, "unreachable", nobody, 2, 1),
         "alone0": _joined(tmp, "alone0", alone, 2, 0),
         "mismatch0": _joined(tmp, "mismatch0", mismatch, 2, 0, "--trials", "4", *LONG),
@@ -191,6 +213,18 @@ def test_a_process_that_ends_first_waits_for_the_others_without_a_loss(runs):
 
 
 @pytest.mark.slow
+def test_srun_tasks_join_with_coordinator_auto(runs):
+    # Two tasks on one node as srun starts them: JAX's SlurmCluster gives the address
+    # (the first node, JAX_COORDINATOR_PORT), the count and the ids.
+    for i in range(2):
+        code, err = runs[1][f"srun{i}"]
+        assert code == 0 and "Check failure" not in err, (i, err)
+        assert re.search(rf"^joined the run at localhost:\d+ as process {i} of 2$", err, re.M), err
+    line = _one_line(runs, "no_srun")
+    assert "SlurmCluster needs each of" in line and "$SLURM_STEP_NODELIST are not set" in line
+
+
+@pytest.mark.slow
 def test_only_process_0_writes(runs):
     assert (runs[0] / "p0.json").is_file()
     assert not (runs[0] / "p1.json").exists()
@@ -218,16 +252,61 @@ def test_only_process_0_writes(runs):
             ],
             "--timeout-s must be > 0",
         ),
-        (["--coordinator", "auto"], "neither is set: start the processes with srun or mpirun"),
+        (["--coordinator", "auto"], "none of JAX's clusters is detected"),
     ],
 )
 def test_inconsistent_flags_are_rejected(flags, message, monkeypatch):
-    for name in [v for v in os.environ if v.startswith(("SLURM_", "OMPI_"))]:
+    for name in [v for v in os.environ if v.startswith(CLUSTER_VARS)]:
         monkeypatch.delenv(name)
     parser = argparse.ArgumentParser()
     distributed.add_arguments(parser)
     with pytest.raises(ValueError, match=message.replace("[", r"\[").replace(")", r"\)")):
         distributed.check(parser.parse_args(flags))
+
+
+SLURM = ("SLURM_JOB_ID", "SLURM_LOCALID", "SLURM_NTASKS", "SLURM_PROCID", "SLURM_STEP_NODELIST")
+"""What JAX's SlurmCluster.is_env_present reads (jax/_src/clusters/slurm_cluster.py)."""
+
+
+def test_coordinator_auto_is_jaxs_own_detection(monkeypatch):
+    from jax._src import clusters
+
+    for name in [v for v in os.environ if v.startswith(CLUSTER_VARS)]:
+        monkeypatch.delenv(name)
+    assert distributed.variables(clusters.SlurmCluster) == SLURM
+    assert distributed.variables(clusters.OmpiCluster) == ("OMPI_MCA_orte_hnp_uri",)
+    assert distributed.variables(clusters.K8sCluster) == ()  # it asks Kubernetes' API
+    assert not any(v in os.environ for v in SLURM)  # the probe left the environment as it was
+    args = argparse.Namespace(coordinator="auto", timeout_s=60.0)
+    # Only the job's id (a script run by sbatch without srun): JAX would wait, then fail with
+    # "coordinator_address should be defined."; here one line names what is missing, at once.
+    monkeypatch.setenv("SLURM_JOB_ID", "7")
+    with pytest.raises(ValueError) as info:
+        distributed.check(args)
+    assert str(info.value) == (
+        "--coordinator auto: JAX's SlurmCluster needs each of $SLURM_JOB_ID, $SLURM_LOCALID, "
+        "$SLURM_NTASKS, $SLURM_PROCID, $SLURM_STEP_NODELIST; $SLURM_LOCALID, $SLURM_NTASKS, "
+        "$SLURM_PROCID, $SLURM_STEP_NODELIST are not set: start each process with srun (inside "
+        "an sbatch script too), or give --coordinator HOST:PORT --num-processes N --process-id I"
+    )
+    for name in SLURM:
+        monkeypatch.setenv(name, "0")
+    assert distributed.detect() is clusters.SlurmCluster and clusters.SlurmCluster.is_env_present()
+    distributed.check(args)
+    monkeypatch.delenv("SLURM_JOB_ID")
+    monkeypatch.setenv("OMPI_COMM_WORLD_SIZE", "2")  # the more nearly set cluster is named
+    with pytest.raises(ValueError, match=r"SlurmCluster .*; \$SLURM_JOB_ID is not set"):
+        distributed.check(args)
+    # Kubernetes without the kubernetes package: JAX's multi-line warning, as one clause.
+    for name in SLURM[1:]:
+        monkeypatch.delenv(name)
+    monkeypatch.setenv("KUBERNETES_SERVICE_HOST", "10.0.0.1")
+    with pytest.raises(ValueError, match="OmpiCluster needs each of") as info:
+        distributed.check(args)
+    monkeypatch.delenv("OMPI_COMM_WORLD_SIZE")
+    with pytest.raises(ValueError, match=r"\(Kubernetes environment detected, but the") as info:
+        distributed.check(args)
+    assert "\n" not in str(info.value)
 
 
 def test_environment_variables_give_the_defaults(monkeypatch):

@@ -9,7 +9,9 @@ a test changes (``max_steps_in_episode``) are traced leaves: they reuse the same
 
 from __future__ import annotations
 
+import copy
 import functools
+import pickle
 from pathlib import Path
 
 import gymnax
@@ -19,7 +21,12 @@ import numpy as np
 import pytest
 from _python import run_python
 from gymnax.environments import environment, spaces
-from gymnax.wrappers import GymnaxToGymWrapper, LegacyStepAPIWrapper
+from gymnax.wrappers import (
+    FlattenObservationWrapper,
+    GymnaxToGymWrapper,
+    LegacyStepAPIWrapper,
+    LogWrapper,
+)
 
 from jaxais import envs
 from jaxais.envs import gymnax as genv
@@ -257,6 +264,29 @@ def test_first_episode_does_not_depend_on_the_pool(env, env_no_reset):
     assert len(np.unique(np.asarray(pool.pose), axis=0)) == genv.RESET_POOL  # distinct starts
 
 
+@pytest.mark.slow  # compiles a step with a reset in it
+def test_refresh_pool_redraws_the_start_each_auto_reset_took(env):
+    refreshing = envs.make("world1", refresh_pool=True)
+    params = env.default_params.replace(max_steps_in_episode=1)  # every step ends an episode
+    _, state = env.reset(jax.random.key(41), params)  # reset is the same with or without it
+    region = np.asarray(params.world.start_region)
+    for t in range(3):
+        key, action = jax.random.key(410 + t), jnp.array([0.3, 0.5])
+        obs, new, *_ = refreshing.step(key, state, action, params)
+        kept_obs, kept, *_ = env.step(key, state, action, params)
+        # The episodes are those without refreshing; only the slot just taken is redrawn.
+        np.testing.assert_array_equal(obs, kept_obs)
+        jax.tree.map(np.testing.assert_array_equal, new.sim, kept.sim)
+        jax.tree.map(np.testing.assert_array_equal, kept.starts, state.starts)
+        before, after = np.asarray(state.starts[1].pose), np.asarray(new.starts[1].pose)
+        (i,) = np.flatnonzero(np.any(before != after, axis=1))
+        np.testing.assert_array_equal(before[i], new.sim.pose)  # the start taken ...
+        x, y, _ = after[i]  # ... replaced by a fresh one in the start region
+        assert region[0] <= x <= region[2] and region[1] <= y <= region[3]
+        assert np.all(np.isfinite(new.starts[0][i])) and int(new.starts[1].t[i]) == 0
+        state = new
+
+
 def test_auto_reset_costs_about_nothing_under_vmap(env, env_no_reset):
     # Under vmap no reset is skipped: gymnax's own step (a fresh reset_env every step, as this
     # environment's step ran one before) costs several steps; ours picks a start reset drew.
@@ -281,8 +311,8 @@ def test_gymnax_registry_and_wrappers_run_unmodified(env):
     made, made_params = gymnax.make("jaxais/world2", max_steps_in_episode=7, reset_pool=2)
     assert isinstance(made, envs.EpuckEnv) and made.name == "jaxais/world2"
     assert made_params.max_steps_in_episode == 7 and made.reset_pool == 2
-    # gymnasium's API through gymnax's wrapper (whose deep copy is the environment itself:
-    # it is immutable, and a copy would compile reset and step again).
+    # gymnasium's API through gymnax's wrapper (which deep-copies the env: an equal one, sharing
+    # its compiled reset and step).
     gym_env = GymnaxToGymWrapper(env, env.default_params.replace(max_steps_in_episode=3))
     obs, _ = gym_env.reset(seed=1)
     assert gym_env.observation_space.shape == (11,) and gym_env.action_space.shape == (2,)
@@ -294,6 +324,50 @@ def test_gymnax_registry_and_wrappers_run_unmodified(env):
     legacy = LegacyStepAPIWrapper(env)
     out = jax.eval_shape(legacy.step, jax.random.key(3), state, jnp.zeros(2), env.default_params)
     assert len(out) == 5 and out[3].dtype == jnp.bool_ and out[0].shape == (11,)
+
+
+def test_copies_are_equal_and_share_compiled_programs(env):
+    key = jax.random.key(31)
+    env.reset(key)
+    size = genv.EpuckEnv._reset._cache_size()
+    for twin in (copy.deepcopy(env), pickle.loads(pickle.dumps(env))):
+        assert twin == env and hash(twin) == hash(env) and twin is not env
+        jax.tree.map(np.testing.assert_array_equal, twin.reset(key), env.reset(key))
+    assert genv.EpuckEnv._reset._cache_size() == size  # the copies ran the original's program
+    # Another world, parameter, setting or step API is another environment.
+    others = [
+        envs.make("world2"),
+        envs.make("world1", max_steps_in_episode=3),
+        envs.make("world1", refresh_pool=True),
+        envs.make("world1", legacy_step=True),
+    ]
+    assert all(other != env for other in others) and len({env, *others}) == 5
+
+
+def test_gymnax_wrappers_deep_copy_as_themselves(env):
+    # gymnax's wrappers forward unknown attributes to the env: the env's own __deepcopy__ used
+    # to answer for them with the bare env (logging lost, six values where five were wanted).
+    key, action = jax.random.key(32), jnp.array([0.4, 0.1])
+    params = env.default_params.replace(max_steps_in_episode=1)  # the step ends the episode
+    obs, state = env.reset(key, params)
+    ref = env.step(key, state, action, params)
+    for wrap in (LogWrapper, FlattenObservationWrapper, LegacyStepAPIWrapper):
+        twin = copy.deepcopy(wrap(env))
+        assert type(twin) is wrap and twin._env == env and twin._env is not env, wrap
+        # The wrappers' own code, outside their jit (which would compile each anew); inside it
+        # the env's reset and step run as compiled for `env`.
+        twin_obs, twin_state = wrap.reset.__wrapped__(twin, key, params)
+        np.testing.assert_array_equal(twin_obs, obs)
+        out = wrap.step.__wrapped__(twin, key, twin_state, action, params)
+        np.testing.assert_array_equal(out[0], ref[0])
+        np.testing.assert_array_equal(out[2], ref[2])
+        if wrap is LegacyStepAPIWrapper:
+            assert len(out) == 5 and bool(out[3]) and bool(ref[4])  # done = truncated
+        else:
+            assert len(out) == 6 and bool(out[4])
+        if wrap is LogWrapper:  # its episode statistics, kept
+            assert int(out[5]["returned_episode"]) == 1
+            np.testing.assert_allclose(out[5]["returned_episode_returns"], ref[2])
 
 
 def test_bad_input_is_one_line_naming_it_outside_jit(env):
@@ -311,6 +385,7 @@ def test_bad_input_is_one_line_naming_it_outside_jit(env):
     refused("reset_pool must be a positive integer", envs.make, reset_pool=0)
     refused("reset_pool must be a positive integer, got bool", envs.make, reset_pool=True)
     refused("legacy_step must be True or False", envs.make, legacy_step="yes")
+    refused("refresh_pool must be True or False, got 1", envs.make, refresh_pool=1)
     key, params = jax.random.key(0), env.default_params
     refused("params must be an EnvParams", env.reset, key, {"max_steps_in_episode": 3})
     refused("EnvParams.finish_streak must be an integer >= 1", env.reset, key,

@@ -377,6 +377,40 @@ def test_world_figure_without_state(tmp_path):
     assert [t.get_text() for t in ax.get_legend().get_texts()][-1] == "robot 0"
 
 
+def test_figures_show_in_a_notebook_as_png(monkeypatch, tmp_path):
+    from IPython.core.formatters import DisplayFormatter
+    from IPython.core.interactiveshell import InteractiveShell
+    from IPython.utils.capture import capture_output
+    from matplotlib.figure import Figure
+    from traitlets.config import Config
+
+    import jaxais.experiments as x
+    from jaxais import envs
+    from jaxais.experiments import plotting
+
+    # IPython's own formatter: a PNG for ours, only text for a plain pyplot-free Figure.
+    fig = plotting.world_figure(envs.load_world("world1"))
+    assert DisplayFormatter().format(fig)[0]["image/png"][:8] == PNG_MAGIC
+    assert "image/png" not in DisplayFormatter().format(Figure())[0]
+    # plot=True shows the plot in a notebook: outside one it is refused before anything runs.
+    with pytest.raises(ValueError, match="^plot=True shows the plot in a notebook") as info:
+        x.trials("HDC", plot=True, trials=1)
+    assert "\n" not in str(info.value)
+    with pytest.raises(ValueError, match="no notebook"):
+        plotting.show(fig)
+    # Inside one (a running IPython shell), the figure is the cell's PNG output.
+    monkeypatch.setenv("IPYTHONDIR", str(tmp_path))
+    config = Config()
+    config.HistoryManager.enabled = False
+    InteractiveShell.instance(config=config)
+    try:
+        with capture_output() as cell:
+            plotting.show(fig)
+    finally:
+        InteractiveShell.clear_instance()
+    assert [o.data["image/png"][:8] for o in cell.outputs] == [PNG_MAGIC]
+
+
 def _patch_centres(ax) -> dict[str, list[tuple[float, float]]]:
     """Centres of the drawn rectangles and circles, by kind."""
     from matplotlib.patches import Circle, Rectangle

@@ -370,6 +370,19 @@ def test_the_contender_example_runs_as_a_user_runs_it(runs):
 
 
 @pytest.mark.slow
+def test_trials_files_fit_the_shipped_schema(runs):
+    import jsonschema
+
+    from jaxais.experiments.schema import SCHEMAS
+
+    shipped = json.loads((ROOT / "docs" / "schema" / SCHEMAS["trials"]).read_text())
+    validator = jsonschema.Draft202012Validator(shipped)
+    for name in ("results.json", "contender.json"):
+        doc = json.loads((runs["trials_dir"] / name).read_text())
+        assert not [e.message for e in validator.iter_errors(doc)], name
+
+
+@pytest.mark.slow
 def test_trials_script_runs_a_contender(runs):
     _ok(runs["contender"])
     doc = json.loads((runs["trials_dir"] / "contender.json").read_text())

@@ -11,7 +11,8 @@ Submodules: ``protocol`` (the paper's worlds, systems, trial counts and comparis
 once), ``records`` (what a run writes), ``stats`` (Tables 3-5, robustness tests, H1-H4),
 ``claims`` (the paper's 32 claims), ``report``, ``ablation``, ``sweeps`` and ``sweep_plots``,
 ``seeds`` (the protocol on N fresh LTL seeds), ``diversity``, ``plotting``, ``bench`` (the
-benchmarks) and the drivers' modules ``reproduction``, ``evolution``, ``one_system``, ``demo``.
+benchmarks), ``schema`` (the formats' JSON Schemas) and the drivers' modules ``reproduction``,
+``evolution``, ``one_system``, ``demo``.
 
 This layer sits on top of the engine; nothing below imports from it. Importing the package does
 not start JAX: each call loads what it needs.

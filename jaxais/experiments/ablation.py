@@ -521,7 +521,7 @@ def ablate(
     import sys
     import time
 
-    from tqdm import tqdm
+    from tqdm.auto import tqdm
 
     from jaxais.experiments.one_system import check_types, command_line
     from jaxais.experiments.plotting import save_figure

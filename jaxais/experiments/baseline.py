@@ -165,7 +165,7 @@ def evaluate_baseline(
     protocol.check_seed(seed, "--eval-seed")
     _check_weights(weights)
     out = _output_dir(out, into_checkpoints)
-    from tqdm import tqdm
+    from tqdm.auto import tqdm
 
     from jaxais import envs
     from jaxais.baselines.neural import NEURAL, load_params

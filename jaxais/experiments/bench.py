@@ -562,7 +562,7 @@ def bench_scripts(b: Bench) -> None:
     processes with ``JAXAIS_CACHE_DIR=off``; ``within_target`` counts runs <= ``target_s``."""
     if not b.config.scripts:
         return
-    from tqdm import tqdm
+    from tqdm.auto import tqdm
 
     env = {**b.environ, "JAXAIS_CACHE_DIR": "off"}
     times: dict[str, list[float]] = {run.name: [] for run in SCRIPT_RUNS}
@@ -689,7 +689,7 @@ def run_bench(
 ) -> Bench:
     """Run :data:`BENCHMARKS`, write ``results`` as JSON to ``out`` and return the :class:`Bench`;
     timed scripts run in ``environ`` (default: this process's)."""
-    from tqdm import tqdm
+    from tqdm.auto import tqdm
 
     from jaxais import envs
 

@@ -241,7 +241,7 @@ def evolve(
 
         comparison = None
         if diversity_seeds is not None:
-            from tqdm import tqdm
+            from tqdm.auto import tqdm
 
             seeds = list(range(seed, seed + diversity_seeds))
             with tqdm(total=2 * len(seeds) - 1, desc="diversity runs") as bar:

@@ -92,13 +92,16 @@ def check_trials(
         raise ValueError(f"unknown random set {random_set!r} (one of {', '.join(RANDOM_SETS)})")
     if seeds and system not in ("SIE", "SRL"):
         raise ValueError(f"--seeds applies to the seeded systems SIE and SRL, not {system}")
-    if plot is True and out is None:
-        raise ValueError("--plot True draws beside out (OUT.png): give out, or a PNG path")
+    if plot is True and out is None and _ipython() is None:
+        raise ValueError(
+            "plot=True shows the plot in a notebook (IPython), and none runs here, or draws "
+            "beside out (OUT.png): give out, or a PNG path"
+        )
     # A plot keeps every trajectory: a pose (3 float32) per 0.8 s, to 4000 s, held thrice.
     check_memory(n, RUN_BYTES + (180_000 if plot else 0), "--trials")
     if out is not None:
         check_output_file(out, (".json",))
-    if plot:
+    if plot_path(out, plot) is not None:
         check_output_file(plot_path(out, plot), (".png",))
     return world, n, tau_cap, collision_cap
 
@@ -128,8 +131,16 @@ _STRINGS = {"random_set", "label", "command", "system"}
 
 
 def plot_path(out: str | os.PathLike[str] | None, plot: Any) -> Any:
-    """Where :func:`trials` draws: ``plot`` itself, or for ``plot=True`` beside ``out``."""
-    return Path(out).with_suffix(".png") if plot is True else plot
+    """Where :func:`trials` draws: ``plot`` itself, or for ``plot=True`` beside ``out`` (None
+    without ``out``: then it only shows in the notebook)."""
+    if plot is True:
+        return None if out is None else Path(out).with_suffix(".png")
+    return plot or None
+
+
+def _ipython() -> Any:
+    """The running IPython shell (a notebook's kernel), or None (IPython is not imported)."""
+    return getattr(sys.modules.get("IPython"), "get_ipython", lambda: None)()
 
 
 def trials(
@@ -155,17 +166,19 @@ def trials(
     ``system`` is a paper system (``"SIE"``; UIE and URL with ``random_set``) or a contender
     (:mod:`jaxais.experiments.contenders`): a spec ``[LABEL=]FILE.py:NAME``, a ``(controller,
     params)`` tuple or a ``Contender``; ``label`` names a tuple's trials (default
-    ``contender``). ``plot`` (a bool or a path) also draws every trajectory to a PNG (the
-    trials then run as one batch): True draws beside ``out`` (``r.json`` -> ``r.png``), a path
-    draws there; ``command`` is recorded (default: the ``trials.py`` line these arguments
-    stand for). Defaults are the paper's.
+    ``contender``). ``plot`` (a bool or a path) also draws every trajectory (the trials then
+    run as one batch): a path draws a PNG there; True shows it in the notebook (IPython) that
+    runs this and, given ``out``, draws it beside it (``r.json`` -> ``r.png``); ``command`` is
+    recorded (default: the ``trials.py`` line these arguments stand for). Defaults are the
+    paper's.
     """
     given = {"--world": world, "--tau-cap": tau_cap, "--collision-cap": collision_cap}
     world, n, tau_cap, collision_cap = check_trials(
         system, out, world=world, trials=trials, seed=seed, random_set=random_set, seeds=seeds,
         tau_cap=tau_cap, collision_cap=collision_cap, plot=plot, label=label)  # fmt: skip
     check_types(progress=progress, command=command)
-    plot = plot_path(out, plot) if plot else None
+    shown = plot is True and _ipython() is not None  # in a notebook: shown there too
+    plot = plot_path(out, plot)
     contender = _is_contender(system)
     if command is None:
         spec = system if isinstance(system, str) else None
@@ -177,7 +190,7 @@ def trials(
         command = command_line("trials.py", flags)
     # Imported after the arguments are checked: a bad one answers at once, without loading JAX.
     import jax
-    from tqdm import tqdm
+    from tqdm.auto import tqdm
 
     from jaxais import envs
     from jaxais.experiments.contenders import contender_config, one
@@ -188,7 +201,8 @@ def trials(
 
     lead = jax.process_index() == 0  # every process runs its share; process 0 writes
     loaded = envs.load_world(world)
-    config = EpisodeConfig(tau_cap=tau_cap, collision_cap=collision_cap, record=bool(plot))
+    drawn = shown or plot is not None
+    config = EpisodeConfig(tau_cap=tau_cap, collision_cap=collision_cap, record=drawn)
     network = NetworkParams()
     params = envs.default_params()
     if contender:  # read before any run: a bad spec fails first
@@ -197,7 +211,7 @@ def trials(
     else:
         name, controller = label_of(system, random_set or "R1"), None
         systems, seed_info = build_systems([name], seeds, network)
-    total, unit = (config.max_iterations(params.dt), "it") if plot else (n, "run")
+    total, unit = (config.max_iterations(params.dt), "it") if drawn else (n, "run")
     with tqdm(total=total, desc=f"{name} in {loaded.name}", unit=unit, file=sys.stderr,
               disable=not (lead and progress)) as bar:  # fmt: skip
         results = run_trials(loaded, systems, n, seed, config, params, bar, controller=controller)
@@ -211,8 +225,8 @@ def trials(
         return None
     if out is not None:
         atomic_write_json(out, doc)
-    if plot:
-        from jaxais.experiments.plotting import save_figure, world_figure
+    if drawn:
+        from jaxais.experiments.plotting import save_figure, show, world_figure
 
         trajs = results[name].trajectories
         # Each trial's boxes and goal where its world placed them (outlined in its colour).
@@ -223,5 +237,8 @@ def trials(
             title=f"{name} in {loaded.name}",
             labels=[f"trial {i}" for i in range(len(trajs))],
         )
-        save_figure(fig, plot)
+        if plot is not None:
+            save_figure(fig, plot)
+        if shown:
+            show(fig)
     return doc

@@ -1,5 +1,5 @@
 """Pictures of worlds and runs: a world's map, trajectories and GIFs (matplotlib, Agg canvas, no
-pyplot state, NumPy values outside jit).
+pyplot state, NumPy values outside jit). A figure shows in a notebook as a PNG (:class:`PngFigure`).
 
 Boxes and the goal are drawn where a run had them: pass its ``State`` or a placement (any object
 with ``boxes`` [B, 2] and ``goal`` [2], e.g. ``jaxais.trials.Placement``); without either they
@@ -9,7 +9,9 @@ sit at their regions' centres.
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Sequence
+from io import BytesIO
 from types import SimpleNamespace
 from typing import Any
 
@@ -27,11 +29,13 @@ from jaxais.io import atomic_write
 
 __all__ = [
     "MATERIAL_COLOURS",
+    "PngFigure",
     "animate",
     "draw_trajectory",
     "draw_world",
     "new_figure",
     "save_figure",
+    "show",
     "world_figure",
 ]
 
@@ -195,11 +199,30 @@ def draw_trajectory(ax: Axes, xy: Any, label: str | None = None, **kw: Any) -> L
     return line
 
 
-def new_figure(figsize: tuple[float, float], layout: str | None = "constrained") -> Figure:
-    """A ``Figure`` on its own Agg canvas (no pyplot)."""
-    fig = Figure(figsize=figsize, layout=layout)
+class PngFigure(Figure):
+    """A ``Figure`` that IPython shows as a PNG: without pyplot (whose inline backend registers
+    one for every figure) a notebook would print ``<Figure size ... with 1 Axes>``."""
+
+    def _repr_png_(self) -> bytes:
+        buffer = BytesIO()
+        self.savefig(buffer, format="png")
+        return buffer.getvalue()
+
+
+def new_figure(figsize: tuple[float, float], layout: str | None = "constrained") -> PngFigure:
+    """A :class:`PngFigure` on its own Agg canvas (no pyplot)."""
+    fig = PngFigure(figsize=figsize, layout=layout)
     FigureCanvasAgg(fig)
     return fig
+
+
+def show(fig: Figure) -> None:
+    """Display ``fig`` in the running IPython (a notebook's cell output); a one-line
+    ``ValueError`` outside one."""
+    ipython = sys.modules.get("IPython")  # not a dependency: the running one, if any
+    if getattr(ipython, "get_ipython", lambda: None)() is None:
+        raise ValueError("no notebook (IPython) runs here to show the figure: save it instead")
+    ipython.display.display(fig)
 
 
 def world_figure(

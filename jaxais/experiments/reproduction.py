@@ -228,7 +228,7 @@ def _run(run: Run, worlds: dict[str, tuple[str, Any]], n_trials: int | None, see
     """:func:`reproduce` once checked and read (``worlds``: key -> (source, World); the
     contenders): every world not finished in ``run``, then the tables, claims and report."""
     import numpy as np
-    from tqdm import tqdm
+    from tqdm.auto import tqdm
 
     from jaxais import envs
     from jaxais.experiments import claims, report, stats

@@ -21,7 +21,7 @@ from typing import Any
 import jax
 import numpy as np
 from scipy import stats as sps
-from tqdm import tqdm
+from tqdm.auto import tqdm
 
 from jaxais import envs
 from jaxais.controllers import System, stl_for

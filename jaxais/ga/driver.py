@@ -256,7 +256,7 @@ def run(
     after every generation; ``progress``: a tqdm bar's description (None: no bar);
     ``operators``: the breeding operators (default: ``config``'s, see
     :func:`jaxais.ga.operators.default_operators`)."""
-    from tqdm import tqdm
+    from tqdm.auto import tqdm
 
     sim_params = envs.default_params() if sim_params is None else sim_params
     state = key_or_state if isinstance(key_or_state, GAState) else core.init(key_or_state, config)

@@ -195,7 +195,7 @@ def test_evosax_cma_es_and_simple_ga_search_the_network_through_network_problem(
             f, _, _ = problem.eval(k_eval, xs, state0)
             return xs, f
 
-        first, _ = problem.eval(jax.random.key(4), population, state0)
+        first, _, _ = problem.eval(jax.random.key(4), population, state0)
         xs, f = generation(jax.random.key(5), population, first)
         assert f.shape == (4,) and np.all(np.isfinite(f)), es
         # A candidate's cost is make_trials' mean f of that candidate, common random numbers.

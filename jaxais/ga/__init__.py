@@ -17,7 +17,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-_SUBMODULES = ("config", "core", "operators", "driver")
+_SUBMODULES = ("config", "core", "operators", "evaluation", "driver")
 
 
 def __getattr__(name: str) -> Any:

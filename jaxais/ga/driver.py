@@ -13,15 +13,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxais import envs
-from jaxais.controllers import LTL
 from jaxais.ga import core
 from jaxais.ga.config import GAConfig
 from jaxais.ga.core import Evaluation, GAState
+from jaxais.ga.evaluation import raw_jit, start_keys, summarise_jit
 from jaxais.ga.operators import Operators
 from jaxais.immune.antibodies import Antibodies
 from jaxais.immune.antigens import N_ANTIGENS
-from jaxais.loop import FINISHED, fitness, outcome
-from jaxais.runner import rollout as run_batch
 from jaxais.seed import Seed
 
 __all__ = [
@@ -44,70 +42,32 @@ __all__ = [
 _CROSSING_STREAM = 0x63726F73  # "cros", folded into a run's key by crossing_key
 
 
-@jax.jit
-def _rollout_inputs(keys: jax.Array, population: Antibodies):
-    """(reset keys, run keys, sets) [S·n] of S starts of the P × R = n robots, ordered (start,
-    population, robot); start s's keys are split from ``keys[s]`` alone."""
-    S, n = keys.shape[0], population.shape[0] * population.shape[1]
-
-    def one_start(key):
-        k_reset, k_run = jax.random.split(key)
-        return jax.random.split(k_reset, n), jax.random.split(k_run, n)
-
-    reset, run = jax.vmap(one_start)(keys)
-    flat = jax.tree.map(lambda x: jnp.concatenate([x.reshape(n, *x.shape[2:])] * S), population)
-    return reset.reshape(S * n), run.reshape(S * n), flat
-
-
 def rollout(
     keys: jax.Array,
     population: Antibodies,
     world: envs.World,
     sim_params: envs.SimParams,
     config: GAConfig,
-    progress: Callable[[int], None] | None = None,
 ) -> dict[str, np.ndarray]:
     """Every robot of ``population`` [P, R, 8] from every start key [S], in one batch of the task
-    loop with the LTL controller: NumPy [S, P, R] tau, collisions (float32, capped), finished
-    (bool) and L [S, P, R, 8]."""
-    S, (P, R) = keys.shape[0], population.shape[:2]
+    loop with the LTL controller (:func:`jaxais.ga.evaluation.raw_runs`, one program): NumPy
+    [S, P, R] tau, collisions (float32, capped), finished (bool) and L [S, P, R, 8]."""
     episode = config.episode_config()
-    reset_keys, run_keys, flat = _rollout_inputs(keys, population)
-    # The world compiled in as constants runs several times faster in ga_maze, with numbers of
-    # its own in the last bits: the GA always runs this way.
-    args = (reset_keys, run_keys, world, sim_params, LTL, flat, episode, progress)
-    batch = run_batch(*args, constant_world=True)
-    out = outcome(batch.runs, episode, float(sim_params.dt))
+    raw = _raw(keys, population, world, sim_params, config)
+    # Each start as a mean of one: the GA's τ and capped c, run by run.
+    ev, _ = summarise_jit(jax.tree.map(lambda x: x[None], raw), episode, float(sim_params.dt))
     return {
-        "tau": out["tau"].astype(np.float32).reshape(S, P, R),
-        "collisions": out["collisions_capped"].astype(np.float32).reshape(S, P, R),
-        "finished": (out["status"] == FINISHED).reshape(S, P, R),
-        "L": np.asarray(batch.runs.ctrl.L, np.float32).reshape(S, P, R, N_ANTIGENS),
+        "tau": np.asarray(ev.tau),
+        "collisions": np.asarray(ev.collisions),
+        "finished": np.asarray(ev.crossings) > 0,
+        "L": np.asarray(ev.L),
     }
 
 
-def _summarise(runs: dict[str, np.ndarray]) -> Evaluation:
-    """The :class:`Evaluation` of :func:`rollout`'s arrays: means over the starts (axis 0)."""
-
-    def mean(x: np.ndarray) -> np.ndarray:
-        return x.mean(axis=0, dtype=np.float64).astype(np.float32)
-
-    tau, collisions = mean(runs["tau"]), mean(runs["collisions"])
-    # f from exactly the stored τ and c, so (f, τ, c) agree wherever they are read back; f is
-    # linear, so it is also the mean f.
-    return Evaluation(
-        fitness=np.asarray(fitness(tau, collisions), np.float32),
-        tau=tau,
-        collisions=collisions,
-        L=mean(runs["L"]),
-        crossings=runs["finished"].sum(axis=0).astype(np.int32),
-        starts=int(runs["tau"].shape[0]),
-    )
-
-
-def start_keys(key: jax.Array, starts: int) -> jax.Array:
-    """[starts] keys: start s of every robot from key s alone (a mean of one-start runs)."""
-    return jax.random.split(key, starts)
+def _raw(keys, sets, world, sim_params, config) -> dict[str, jax.Array]:
+    """:func:`jaxais.ga.evaluation.raw_runs` of ``sets`` from the start ``keys`` [S], the world
+    compiled in as constants (the GA's program, one per world, caps and batch shape)."""
+    return raw_jit(keys, sets, world, sim_params, config.episode_config())
 
 
 def evaluate(
@@ -116,12 +76,13 @@ def evaluate(
     world: envs.World,
     sim_params: envs.SimParams,
     config: GAConfig,
-    progress: Callable[[int], None] | None = None,
 ) -> Evaluation:
     """Every robot of ``population`` [P, R, 8] from ``config.starts`` starts split from ``key``
-    (or from the start keys [S] given), as means."""
+    (or from the start keys [S] given), as means: ``make_evaluator(world, sim_params,
+    config)(key, population)``'s numbers (:mod:`jaxais.ga.evaluation`)."""
     keys = start_keys(key, config.starts) if jnp.ndim(key) == 0 else key
-    return _summarise(rollout(keys, population, world, sim_params, config, progress))
+    raw = _raw(keys, population, world, sim_params, config)
+    return summarise_jit(raw, config.episode_config(), float(sim_params.dt))[0]
 
 
 def measure(
@@ -134,7 +95,8 @@ def measure(
     batch_starts: int | None = None,
 ) -> Evaluation:
     """The :class:`Evaluation` [K] of sets [K, 8] from ``n_starts`` fresh starts (``config``'s
-    caps), in rollouts of at most ``batch_starts`` starts (the results do not depend on it)."""
+    caps), in rollouts of at most ``batch_starts`` starts (the results do not depend on it):
+    ``make_evaluator(world, sim_params, config, n_starts)(key, sets)``'s numbers."""
     if not (isinstance(n_starts, int | np.integer) and n_starts >= 1):
         raise ValueError(f"n_starts must be an integer >= 1, got {n_starts!r}")
     if len(sets.shape) != 2 or sets.shape[1] != N_ANTIGENS:
@@ -145,10 +107,11 @@ def measure(
     keys = start_keys(key, n_starts)
     population = jax.tree.map(lambda x: jnp.asarray(x)[:, None], sets)  # [K, 1, 8]
     parts = [
-        rollout(keys[i : i + chunk], population, world, sim_params, config)
+        jax.device_get(_raw(keys[i : i + chunk], population, world, sim_params, config))
         for i in range(0, n_starts, chunk)
     ]
-    ev = _summarise({k: np.concatenate([p[k] for p in parts]) for k in parts[0]})
+    raw = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    ev, _ = summarise_jit(raw, config.episode_config(), float(sim_params.dt))
     return jax.tree.map(lambda x: x[:, 0], ev)
 
 
@@ -194,7 +157,6 @@ def step(
     config: GAConfig,
     world: envs.World,
     sim_params: envs.SimParams,
-    progress: Callable[[int], None] | None = None,
     operators: Operators | None = None,
 ) -> tuple[GAState, Evaluation]:
     """One generation: evaluate, tell (breeding with ``operators``; default: ``config``'s, see
@@ -203,7 +165,7 @@ def step(
     evaluation)."""
     key, k_eval, k_tell, k_check, k_confirm = jax.random.split(state.key, 5)
     population, state = core.ask(k_eval, state.replace(key=key), config)  # (ask draws nothing)
-    evaluation = evaluate(k_eval, population, world, sim_params, config, progress)
+    evaluation = evaluate(k_eval, population, world, sim_params, config)
     state = core.tell(k_tell, population, evaluation, state, config, operators)
     if config.success_starts:
         state = verify(k_check, state, world, sim_params, config)

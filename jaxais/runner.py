@@ -86,10 +86,7 @@ def advance(
     (:func:`one_kernel`)."""
     n = batch.runs.t.shape[0]
     g = GROUP if n > GROUP and n % GROUP == 0 else n
-    # Unrecorded poses stay out of the kernel (a bitcast of the start poses, which XLA's
-    # one-kernel emitter refuses beside them).
-    poses = batch.poses if config.record else None
-    groups = (batch.runs, poses, ctrl_params)
+    groups = (batch.runs, batch.poses, ctrl_params)
 
     def each(groups, chunks, world, sim_params):
         split = lambda a: a.reshape(n // g, g, *a.shape[1:])
@@ -100,16 +97,8 @@ def advance(
         merge = lambda a: a.reshape(n, *a.shape[2:])
         return jax.tree.map(merge, (runs, poses)), jnp.max(chunks)
 
-    if _traced(world):
-        (runs, poses), chunks = one_kernel(each)(groups, batch.chunks, world, sim_params)
-    else:  # a world compiled in as constants (the GA's) stays constants inside the kernel
-        kernel = one_kernel(lambda *a: each(*a, world, sim_params))
-        (runs, poses), chunks = kernel(groups, batch.chunks)
-    return Batch(runs=runs, poses=batch.poses if poses is None else poses, chunks=chunks)
-
-
-def _traced(tree) -> bool:
-    return any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(tree))
+    (runs, poses), chunks = one_kernel(each)(groups, batch.chunks, world, sim_params)
+    return Batch(runs=runs, poses=poses, chunks=chunks)
 
 
 def _segment(runs, poses, ctrl_params, chunks, world, sim_params, controller, config):
@@ -154,15 +143,29 @@ def one_kernel(f: Callable) -> Callable:
     controller that sorts, say) runs as XLA compiles it by default."""
     if jax.default_backend() != "cpu":
         return f
-    inner = jax.jit(f)
+    # XLA's one-kernel emitter fails on an argument its computation no longer reads (XLA drops
+    # the outputs a caller leaves unused, and with them the reads): a sum of every argument,
+    # which the caller keeps, reads each.
+    inner = jax.jit(lambda *args: (f(*args), _read_all(args)))
 
     def tagged(*args):
         if not _kernel_can_emit(jax.make_jaxpr(f)(*args).jaxpr):
             return f(*args)
-        out = inner(*args)
-        return set_xla_metadata(out, xla_cpu_small_call="true", inlineable="false")
+        out = set_xla_metadata(inner(*args), xla_cpu_small_call="true", inlineable="false")
+        return jax.lax.optimization_barrier(out)[0]
 
     return tagged
+
+
+def _read_all(tree) -> jax.Array:
+    """A float32 scalar read from every element of ``tree``'s arrays."""
+
+    def total(x):
+        if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key):
+            x = jax.random.key_data(x)
+        return jnp.sum(jnp.asarray(x), dtype=jnp.float32)
+
+    return sum((total(x) for x in jax.tree.leaves(tree)), jnp.float32(0))
 
 
 _NOT_IN_ONE_KERNEL = ("scatter", "sort", "top_k", "approx_top_k", "ffi_call", "pallas_call")

@@ -61,7 +61,7 @@ def users(maze, population):
 
 KEY_FOR_KEY = f"""
 from jaxais import _speed
-_speed.setup(one_kernel_loops=True)  # evolve.py's process settings: its one-kernel loops
+_speed.setup()  # evolve.py's process settings
 import jax, numpy as np
 from jaxais import envs, ga
 from jaxais.immune.antibodies import sample_antibodies, take

@@ -267,3 +267,23 @@ def test_the_map_refuses_bad_arguments_before_any_run(tmp_path, kw, message):
     with pytest.raises(ValueError, match=message):
         robustness.run(tmp_path, **{"seeds_": [0], "runner": FakeScripts(), "jobs": 1} | kw)
     assert not (tmp_path / "manifest.json").exists()
+
+
+def test_the_report_gives_the_per_reading_figures_beside_ours(tmp_path):
+    from jaxais.experiments import claims, report
+
+    results = {"world1": {"SIE": [record(100.0, 1, 150), record(120.0, 2, 20)],
+                          "SRL": [record(300.0, 0, 0), record(340.0, 1, 5)]}}  # fmt: skip
+    tables = stats.build_tables(results) | {"by_rule": stats.rule_tables(results)}
+    assert tables["by_rule"]["reading"]["table3"]["world1"]["SIE"]["c"] == 60.0  # (100 + 20) / 2
+    by_rule = claims.by_rule(results)
+    held = {c["id"]: c["held"] for c in by_rule["reading"]["claims"]}
+    assert held["world1/SIE-lowest-c"] is False  # SIE's 60 per reading against SRL's 2.5
+    rule_claims = {r: d["claims"] for r, d in by_rule.items()}
+    text = report.write_report(tmp_path, tables, results, report.load_paper_tables(), None, {},
+                               None, rule_claims=rule_claims).read_text()  # fmt: skip
+    k = claims.summary(by_rule["reading"]["claims"])
+    assert f"Counting c per reading (Vm ≥ 2400) instead: {k['reproduced']} of " in text
+    assert "| Claim | The paper says | Held | Held, c per reading (Vm ≥ 2400) | Why" in text
+    assert "| c per reading (Vm ≥ 2400), ours | f per reading (Vm ≥ 2400), ours |" in text
+    assert "| Ours | Ours, c per reading (Vm ≥ 2400) | Paper |" in text

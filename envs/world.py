@@ -580,17 +580,61 @@ def parse_world(doc: dict, src: str, capacity: Capacity = Capacity(), body_radiu
     )
 
 
+_SCALED: dict[str, tuple[str, ...]] = {
+    "arena": ("width", "height"),
+    "robot": ("start_region",),
+    "goal": ("region",),
+    "walls": ("from", "to"),
+    "boxes": ("center", "region", "half_size"),
+    "pillars": ("center", "radius"),
+    "wanderers": ("region",),
+}
+"""What :func:`scale_document` multiplies, by table: every coordinate, region and obstacle size;
+never a height, the goal's size or the robot (``SimParams``)."""
+
+
+def scale_document(doc: dict, scale: float) -> dict:
+    """A parsed world file with every field of :data:`_SCALED` times ``scale`` (a number, a
+    list of numbers; anything else is left for the parser to refuse): the same world, larger.
+    ``doc`` is not changed."""
+
+    def times(value: Any) -> Any:
+        if isinstance(value, bool) or not isinstance(value, int | float | list):
+            return value
+        if isinstance(value, list):
+            return [times(v) for v in value]
+        return value * scale
+
+    out = dict(doc)
+    for table, keys in _SCALED.items():
+        part = doc.get(table)
+        if isinstance(part, dict):
+            out[table] = {k: times(v) if k in keys else v for k, v in part.items()}
+        elif isinstance(part, list):
+            out[table] = [
+                {k: times(v) if k in keys else v for k, v in t.items()} if isinstance(t, dict)
+                else t
+                for t in part
+            ]  # fmt: skip
+    return out
+
+
 def world_path(name: str) -> Path:
     """The file of the world called ``name``: a built-in (``worlds/NAME.toml``) or one on the
     ``JAXAIS_WORLDS`` search path (WorldError, one line, when there is none)."""
     return find_world(name)
 
 
-def load_world(name_or_path: str | Path, capacity: Capacity = Capacity()) -> World:
+def load_world(
+    name_or_path: str | Path, capacity: Capacity = Capacity(), scale: float = 1.0
+) -> World:
     """A world by name (``world1``; a built-in or one on ``JAXAIS_WORLDS``, see :mod:`.names`)
-    or a world file by path (with a folder part or the ``.toml`` suffix). WorldError (one line)
-    when there is no such world, the file is malformed, or a file found by name has another
-    ``name`` field (a world's name is its file's)."""
+    or a world file by path (with a folder part or the ``.toml`` suffix), every coordinate,
+    region and obstacle size times ``scale`` (:func:`scale_document`; 1: the file as it is).
+    WorldError (one line) when there is no such world, the file is malformed (at that scale),
+    or a file found by name has another ``name`` field (a world's name is its file's)."""
+    if isinstance(scale, bool) or not isinstance(scale, int | float) or not 0 < scale < math.inf:
+        raise WorldError(f"scale must be a finite number > 0, got {scale!r}")
     path, by_name = resolve(name_or_path)
     try:
         doc = tomllib.loads(path.read_text(encoding="utf-8-sig"))  # a byte-order mark is read
@@ -598,7 +642,13 @@ def load_world(name_or_path: str | Path, capacity: Capacity = Capacity()) -> Wor
         raise WorldError(f"{path}: not valid TOML: {err}") from None
     except (OSError, UnicodeDecodeError) as err:
         raise WorldError(f"{path}: cannot read: {err}") from None
-    world = parse_world(doc, str(path), capacity)
+    if scale == 1:
+        world = parse_world(doc, str(path), capacity)
+    else:
+        try:
+            world = parse_world(scale_document(doc, scale), str(path), capacity)
+        except WorldError as err:
+            raise WorldError(f"{err} (at world scale {scale:g})") from None
     if by_name is not None and world.name != by_name:
         raise _fail(
             str(path),

@@ -22,6 +22,10 @@ from jaxais.immune.antigens import OBSTACLE_THRESHOLD, antigen, is_collision
 from jaxais.io import ArgumentTypeError, check_type, python_scalars
 
 RUNNING, FINISHED, FAILED_COLLISIONS, FAILED_TIME = 0, 1, 2, 3  # Run.status
+COLLISION_RULES = ("episode", "reading", "entry")
+"""How a run's collisions are counted, each kept apart (:class:`Run`): one per contact episode
+[ours, the default]; every iteration whose reading is a collision antigen, Vm >= 2400 (section
+4.1's "collision" antigen read literally); every entry into antigens 5-7."""
 
 
 @dataclass(frozen=True)
@@ -33,8 +37,10 @@ class EpisodeConfig:
         collision_cap: a run with more collisions has failed [paper: 100].
         stop_at_collision_cap: end a run at the cap: off for the STL (the paper's failures
             overlap, SPEC 9), on in the GA (SPEC 10).
-        collision_rule: "episode": one per contact episode, antigen 5-7 after Vm < 250 since the
-            last [ours, SPEC 9]; "entry": every entry into 5-7 (the earlier reading).
+        collision_rule: what ``collisions`` counts (and the GA's cap stops on): "episode": one
+            per contact episode, antigen 5-7 after Vm < 250 since the last [ours, SPEC 9];
+            "entry": every entry into 5-7 (the earlier reading). Every run also counts each
+            rule of :data:`COLLISION_RULES` apart; those counts never feed the dynamics.
         finish_pixels, finish_streak: the run ends after more than 40 goal pixels on 3
             consecutive iterations [paper].
         trap_radius, trap_window: trapped while within 0.1 m of one point for >= 10 s, the whole
@@ -58,7 +64,7 @@ class EpisodeConfig:
 
     def __post_init__(self):
         python_scalars(self)
-        if self.collision_rule not in ("episode", "entry"):
+        if self.collision_rule not in ("episode", "entry"):  # the GA's stop rules
             raise ValueError(
                 f"collision_rule must be 'episode' or 'entry', got {self.collision_rule!r}"
             )
@@ -93,7 +99,9 @@ class Run:
 
     Attributes:
         key: iteration t draws from ``fold_in(key, t)``. m_prev, v_prev: last antigen and Vm.
-        collisions: uncapped. free: Vm < 250 since the last counted collision (episode rule).
+        collisions: uncapped, by ``config.collision_rule``. by_episode, by_reading, by_entry:
+            uncapped, by each of :data:`COLLISION_RULES` (counted only). free: Vm < 250 since
+            the last contact episode counted.
         streak: iterations in a row past finish_pixels. anchor [2], still: the trap disc's
             centre and the iterations within it; unchanged: those with choices unchanged.
         trapped, locked: iterations counted so (:class:`EpisodeConfig`). status: RUNNING, ...
@@ -106,6 +114,9 @@ class Run:
     m_prev: jnp.ndarray
     v_prev: jnp.ndarray
     collisions: jnp.ndarray
+    by_episode: jnp.ndarray
+    by_reading: jnp.ndarray
+    by_entry: jnp.ndarray
     free: jnp.ndarray
     streak: jnp.ndarray
     anchor: jnp.ndarray
@@ -136,6 +147,7 @@ def start(
     obs = _carried(envs.observe(k_obs, sim, world, sim_params))
     ctrl = controller.init(k_ctrl, ctrl_params)
     counts = ("m_prev", "collisions", "streak", "still", "trapped", "unchanged", "locked", "t")
+    counts += tuple(f"by_{rule}" for rule in COLLISION_RULES)
     return Run(
         sim=sim,
         obs=obs,
@@ -177,13 +189,15 @@ def iterate(
     k_learn, k_act, sim_noise = rand
     obs = run.obs
     m = antigen(obs.ir, obs.blue_pixels)
-    if config.collision_rule == "episode":  # one per contact episode (EpisodeConfig)
-        counted_now = is_collision(m) & run.free
-        free = (run.free & ~counted_now) | (obs.vm < OBSTACLE_THRESHOLD)
-    else:  # every entry into 5-7
-        counted_now = is_collision(m) & ~is_collision(run.m_prev)
-        free = run.free
-    collisions = run.collisions + counted_now.astype(jnp.int32)
+    hit = is_collision(m)
+    now = {
+        "episode": hit & run.free,  # one per contact episode (EpisodeConfig)
+        "reading": hit,  # every reading of Vm >= 2400
+        "entry": hit & ~is_collision(run.m_prev),  # every entry into 5-7
+    }
+    free = (run.free & ~now["episode"]) | (obs.vm < OBSTACLE_THRESHOLD)
+    collisions = run.collisions + now[config.collision_rule].astype(jnp.int32)
+    by_rule = {f"by_{k}": getattr(run, f"by_{k}") + now[k].astype(jnp.int32) for k in now}
     streak = jnp.where(obs.goal_pixels > config.finish_pixels, run.streak + 1, 0)
     stop_c = collisions >= config.collision_cap
     status = jnp.select(
@@ -228,6 +242,7 @@ def iterate(
     live = run.status == RUNNING
     counted = run.replace(
         collisions=jnp.where(live, collisions, run.collisions),
+        **{k: jnp.where(live, v, getattr(run, k)) for k, v in by_rule.items()},
         streak=jnp.where(live, streak, run.streak),
         status=jnp.where(live, status, run.status),
     )
@@ -258,7 +273,8 @@ def outcome(runs: Run, config: EpisodeConfig, dt: float, xp: Any = np) -> dict[s
 
     ``xp``: ``numpy`` (on the host, τ in float64) or ``jax.numpy`` (traced). Returns arrays [n]:
     tau (s, capped), collisions (raw), collisions_capped, fitness (SPEC 9), failed_collisions
-    (c > cap), failed_time, trapped_s, locked_s, status, iterations.
+    (c > cap), failed_time, trapped_s, locked_s, status, iterations, and where ``runs`` has
+    them (a :class:`Run`) ``collisions_<rule>`` (raw) of each of :data:`COLLISION_RULES`.
     """
     status = xp.asarray(runs.status)
     t = xp.asarray(runs.t)
@@ -276,6 +292,10 @@ def outcome(runs: Run, config: EpisodeConfig, dt: float, xp: Any = np) -> dict[s
         "locked_s": xp.asarray(runs.locked) * dt,
         "status": status,
         "iterations": t,
+    } | {
+        f"collisions_{rule}": xp.asarray(getattr(runs, f"by_{rule}"))
+        for rule in COLLISION_RULES
+        if hasattr(runs, f"by_{rule}")
     }
 
 

@@ -32,7 +32,17 @@ from jax.extend.core import jaxprs_in_params
 from jaxais import distributed, envs
 from jaxais.controllers import Controller
 from jaxais.envs.struct import pytree_dataclass
-from jaxais.loop import FINISHED, RUNNING, EpisodeConfig, Run, draws, iterate, outcome, start
+from jaxais.loop import (
+    COLLISION_RULES,
+    FINISHED,
+    RUNNING,
+    EpisodeConfig,
+    Run,
+    draws,
+    iterate,
+    outcome,
+    start,
+)
 
 
 @pytree_dataclass
@@ -267,6 +277,7 @@ def _advance(batch, idx, world, sim_params, params, controller, config, sharding
     runs = batch.runs
     read = {"t": runs.t, "status": runs.status, "collisions": runs.collisions}
     read |= {"trapped": runs.trapped, "locked": runs.locked}
+    read |= {f"collisions_{k}": getattr(runs, f"by_{k}") for k in COLLISION_RULES}  # outcome's
     read |= {"boxes": runs.sim.boxes, "goal": runs.sim.goal}  # where the run's world put them
     if controller.stats is not None:
         read |= jax.vmap(controller.stats)(runs.ctrl, p)

@@ -26,12 +26,13 @@ from jaxais import envs
 from jaxais.controllers import STL, Controller, System, stl_for
 from jaxais.io import ArgumentTypeError
 from jaxais.io import check_type as _check
-from jaxais.loop import EpisodeConfig, outcome
+from jaxais.loop import COLLISION_RULES, EpisodeConfig, outcome
 from jaxais.runner import advance, rollout, run_pool, segment_length, start_batch
 from jaxais.systems import LABELS
 
 # [paper] SPEC 9: a run ends on the finish rule or at 4000 s; c > 100 fails it, Table 3 caps c.
 STL_CONFIG = EpisodeConfig(tau_cap=4000.0, collision_cap=100, stop_at_collision_cap=False)
+_RULE_KEYS = tuple(f"collisions_{rule}" for rule in COLLISION_RULES)  # a record's c by rule
 
 
 @dataclass(frozen=True)
@@ -265,8 +266,9 @@ def run_trials(
 
 def trial_records(res: Mapping[str, np.ndarray]) -> list[dict[str, Any]]:
     """One dict per trial of outcome arrays [n] (:func:`~jaxais.loop.outcome`'s, the stats'):
-    tau, collisions (raw), collisions_capped, fitness, failed, failed_collisions, failed_time,
-    failed_by, trapped_s, locked_s, iterations, then the stats (NaN -> None)."""
+    tau, collisions (raw), collisions_capped, collisions_<rule> (raw, each counting rule),
+    fitness, failed, failed_collisions, failed_time, failed_by, trapped_s, locked_s, iterations,
+    then the stats (NaN -> None)."""
     records = []
     for i in range(len(res["tau"])):
         by_c, by_t = bool(res["failed_collisions"][i]), bool(res["failed_time"][i])
@@ -274,6 +276,8 @@ def trial_records(res: Mapping[str, np.ndarray]) -> list[dict[str, Any]]:
             "tau": float(res["tau"][i]),
             "collisions": int(res["collisions"][i]),
             "collisions_capped": int(res["collisions_capped"][i]),
+            # c under each counting rule (jaxais.loop.COLLISION_RULES), where counted.
+            **{k: int(res[k][i]) for k in _RULE_KEYS if k in res},
             "fitness": float(res["fitness"][i]),
             "failed": by_c or by_t,
             "failed_collisions": by_c,

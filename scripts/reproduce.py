@@ -46,6 +46,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--worlds", default=",".join(protocol.WORLDS), help="comma-separated "
                    "worlds: the paper's, or world files PATH.toml (the simulated protocol)")
     protocol.add_cap_arguments(p)
+    protocol.add_world_scale_argument(p)
+    p.add_argument("--explain", action="append", metavar="PATH",
+                   help="what the report's 'why' column reads (repeat): a reproduce.py folder of "
+                   "more trials, a seeds.json ledger, a robustness.json map")
     distributed.add_arguments(p)
     p.add_argument("--generations", type=int, default=None,
                    help="LTL generation cap with --evolve (default: evolve.py's)")
@@ -58,7 +62,8 @@ def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     kw = dict(trials=args.trials, seed=args.seed, seeds=args.seeds, evolve=args.evolve,
               generations=args.generations, worlds=args.worlds, tau_cap=args.tau_cap,
-              collision_cap=args.collision_cap, contenders=args.contender)  # fmt: skip
+              collision_cap=args.collision_cap, contenders=args.contender,
+              world_scale=args.world_scale, explain=args.explain or ())  # fmt: skip
     check_reproduce(args.out, **kw)  # a bad flag answers before JAX loads
     distributed.check(args)
     if args.evolve and args.coordinator:

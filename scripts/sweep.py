@@ -37,6 +37,7 @@ def parse_args(argv: list[str] | None):
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--seeds", default=None, help="LTL seed directory (default: the shipped one)")
     protocol.add_cap_arguments(p)
+    protocol.add_world_scale_argument(p)
     p.add_argument("--slots", type=int, default=1024, help="runs live at once (default 1024)")
     p.add_argument("--records", action="store_true", help="keep every run's record (--grid)")
     p.add_argument("--out", required=True, help="output directory (missing or empty)")
@@ -64,7 +65,7 @@ def main(argv: list[str] | None = None) -> None:
         system=args.system, random_set=args.random_set, world=args.world, trials=args.trials,
         seed=args.seed, seeds=args.seeds, tau_cap=args.tau_cap, collision_cap=args.collision_cap,
         slots=args.slots, command=command, resume=args.resume, records=args.records,
-        contender=args.contender,
+        contender=args.contender, world_scale=args.world_scale,
     )  # fmt: skip
     if jax.process_index() != 0:  # process 0 reports
         return

@@ -41,6 +41,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--seeds", default=None,
                    help="LTL seed directory (default: the shipped checkpoints/default)")
     protocol.add_cap_arguments(p)
+    protocol.add_world_scale_argument(p)
     p.add_argument("--out", required=True, help="results JSON file")
     p.add_argument("--plot", default=None, help="also draw the trajectories to this PNG")
     distributed.add_arguments(p)
@@ -53,7 +54,7 @@ def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     kw = dict(world=args.world, trials=args.trials, seed=args.seed, random_set=args.random_set,
               seeds=args.seeds, tau_cap=args.tau_cap, collision_cap=args.collision_cap,
-              plot=args.plot)  # fmt: skip
+              plot=args.plot, world_scale=args.world_scale)  # fmt: skip
     system = args.system or contenders.check_specs([args.contender])[0][1]  # a spec: its form
     check_trials(system, args.out, **kw)  # a bad flag answers before JAX loads
     distributed.check(args)

@@ -122,12 +122,18 @@ def test_write_report_full(tmp_path, paper):
     assert lines[0].startswith("# ") and lines[1] == ""
     assert lines[2] == f"**{counts['reproduced']} of 32 of the paper's claims reproduced**"
     assert lines[4] == claims.ci_headline(claims.ci_summary(ledger))
+    # Then what does not reproduce, plainly: here (the fake tables) H3 alone.
     assert lines[6] == (
-        "| Claim | The paper says | Held | Evidence (ours) | With 95 % CIs (ours) |"
+        "**What does not reproduce.** H3 is not supported (the idiotypic network does not beat "
+        "the hand-designed controller in every world)."
     )
-    assert lines[8].startswith("| world1/SIE-lowest-c | In Simulated World 1, ")
+    assert lines[8] == (
+        "| Claim | The paper says | Held | Why (not held) | Evidence (ours) "
+        "| With 95 % CIs (ours) |"
+    )
+    assert lines[10].startswith("| world1/SIE-lowest-c | In Simulated World 1, ")
     first = ledger[0]
-    assert lines[8].endswith(f"| {first['ci_verdict']}: {first['ci_evidence']} |")
+    assert lines[10].endswith(f"| {first['ci_verdict']}: {first['ci_evidence']} |")
     assert "| H4 | H4 is supported: " in text
     assert "could not be evaluated" not in text
     for heading in (
@@ -198,7 +204,7 @@ def test_write_report_minimal(tmp_path, paper):
     assert counts["evaluated"] < counts["total"] == 32
     assert text.splitlines()[2] == claims.headline(counts)
     assert f"{32 - counts['evaluated']} of the paper's 32 claims could not be evaluated" in text
-    assert "| world1/SIE-lowest-c |" in text and "| – | No results for world1. |" in text
+    assert "| world1/SIE-lowest-c |" in text and "| – |  | No results for world1. |" in text
     assert "trapped (s)" in text  # the records carry trapped_s (0 here)
 
 
@@ -217,7 +223,10 @@ def test_write_report_uses_the_given_ledger(tmp_path, paper):
     )
     lines = path.read_text().splitlines()
     assert lines[2] == "**0 of 1 of the paper's claims reproduced**"
-    assert lines[6] == "| X | a claim | ✗ | a\\|b |"  # a pipe in the evidence is escaped
+    # What does not reproduce (SRL faster than the paper's), then the claims. A pipe in the
+    # evidence is escaped; no evidence given, a claim without a measured mechanism says so.
+    assert lines[4].startswith("**What does not reproduce.** The paper's slow RL-only system")
+    assert lines[8] == "| X | a claim | ✗ | not reproduced (no mechanism measured) | a\\|b |"
     assert sorted(p.name for p in (tmp_path / "figures").iterdir()) == ["box_world2.png"]
 
 

@@ -154,6 +154,26 @@ def test_collisions_count_one_per_contact_episode():
     assert all(status(r) == RUNNING for r in runs)
 
 
+def test_every_rule_is_counted_apart_and_never_stops_a_run():
+    """Whatever ``collision_rule`` says, every run counts c per contact episode, per reading of a
+    collision antigen (Vm >= 2400) and per entry into 5-7 (issue 41), each apart; the cap stops
+    on the rule's count only."""
+    readings = [1, 2, 3, 4, 4, 5, 5, 6, 7, 7, 7, 7, 8]  # COLLISION_SEQ's 8 collision readings
+    for config in (F.CONFIG, NO_STOP_ENTRY):
+        run, params = one_run(3)
+        runs = drive(run, params, [{"antigen": a} for a in COLLISION_SEQ], config)
+        assert [int(r.by_reading) for r in runs] == readings
+        assert [int(r.by_episode) for r in runs] == [1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 3]
+        assert [int(r.by_entry) for r in runs] == [1, 1, 1, 1, 1, 2, 2, 3, 3, 3, 3, 3, 4]
+        assert all(status(r) == RUNNING for r in runs)  # 8 readings, past the cap of 5
+        res = outcome(jax.tree.map(lambda a: a[None], runs[-1]), config, DT)
+        assert [int(res[f"collisions_{k}"][0]) for k in ("episode", "reading", "entry")] == [
+            3,
+            8,
+            4,
+        ]
+
+
 NO_STOP_ENTRY = dataclasses.replace(F.CONFIG, stop_at_collision_cap=False, collision_rule="entry")
 """The earlier collision count (every entry into 5-7), and runs that go on past the cap."""
 

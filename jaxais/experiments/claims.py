@@ -22,6 +22,7 @@ __all__ = [
     "HELD_SEPARATED",
     "HELD_ZERO_IN_CI",
     "HYPOTHESES",
+    "by_rule",
     "NOT_HELD_BY_TEST",
     "NOT_HELD_OVERLAP",
     "NOT_HELD_SEPARATED",
@@ -218,6 +219,21 @@ def claims(
         text = f"{h} is supported: {HYPOTHESES[h]}"
         out.append(_claim(h, None, text, held, verdict["summary"], reading))
     return out
+
+
+def by_rule(
+    results_by_world: stats.ResultsByWorld,
+    cap: int = protocol.COLLISION_CAP,
+    alpha: float = protocol.ALPHA,
+) -> dict[str, dict[str, Any]]:
+    """The claims under every counting rule but the default that the records carry
+    (:func:`stats.under_rule`; a run "failed on collisions" under a rule when its count under
+    that rule exceeds ``cap``): ``{rule: document(ledger)}``, ``claims.json``'s ``"by_rule"``."""
+    return {
+        rule: document(claims(stats.under_rule(results_by_world, rule, cap), alpha))
+        for rule in protocol.COUNTING_RULES[1:]
+        if stats.has_rule(results_by_world, rule)
+    }
 
 
 def summary(ledger: Sequence[Mapping[str, Any]]) -> dict[str, int]:

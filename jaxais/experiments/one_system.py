@@ -59,6 +59,7 @@ def check_trials(
     collision_cap: int | None = None,
     plot: bool | str | os.PathLike[str] | None = None,
     label: str | None = None,
+    world_scale: float = 1.0,
 ) -> tuple[str | os.PathLike[str], int, float, int]:
     """Check :func:`trials`'s arguments without loading JAX (one-line ``ValueError``\\ s naming
     the script's flags, every type before any range; a contender's spec by form, label and
@@ -83,6 +84,7 @@ def check_trials(
     elif label is not None:
         raise ValueError("label names a contender; a paper system keeps its label")
     protocol.check_seed(seed)
+    protocol.check_world_scale(world_scale, [str(world)])
     tau_cap, collision_cap = protocol.check_caps(tau_cap, collision_cap)
     if n < 1:
         raise ValueError(f"--trials must be >= 1, got {n}")
@@ -158,6 +160,7 @@ def trials(
     progress: bool = True,
     command: str | None = None,
     label: str | None = None,
+    world_scale: float = 1.0,
 ) -> dict[str, Any] | None:
     """Run ``trials`` STL trials of ``system`` in ``world`` (a name or ``.toml``) and return the
     results document (``config``, one record per trial, ``summary``), written to ``out`` if given;
@@ -169,13 +172,15 @@ def trials(
     ``contender``). ``plot`` (a bool or a path) also draws every trajectory (the trials then
     run as one batch): a path draws a PNG there; True shows it in the notebook (IPython) that
     runs this and, given ``out``, draws it beside it (``r.json`` -> ``r.png``); ``command`` is
-    recorded (default: the ``trials.py`` line these arguments stand for). Defaults are the
-    paper's.
+    recorded (default: the ``trials.py`` line these arguments stand for). ``world_scale``
+    scales the world and the camera's range (:func:`records.scaled_world`; not the real pen).
+    Defaults are the paper's.
     """
     given = {"--world": world, "--tau-cap": tau_cap, "--collision-cap": collision_cap}
     world, n, tau_cap, collision_cap = check_trials(
         system, out, world=world, trials=trials, seed=seed, random_set=random_set, seeds=seeds,
-        tau_cap=tau_cap, collision_cap=collision_cap, plot=plot, label=label)  # fmt: skip
+        tau_cap=tau_cap, collision_cap=collision_cap, plot=plot, label=label,
+        world_scale=world_scale)  # fmt: skip
     check_types(progress=progress, command=command)
     shown = plot is True and _ipython() is not None  # in a notebook: shown there too
     plot = plot_path(out, plot)
@@ -186,25 +191,29 @@ def trials(
                  else None, "--world": given["--world"], "--trials": trials, "--seed": seed
                  or None, "--random-set": random_set, "--seeds": seeds, "--tau-cap":
                  given["--tau-cap"], "--collision-cap": given["--collision-cap"], "--out": out,
-                 "--plot": plot}  # fmt: skip
+                 "--plot": plot,
+                 "--world-scale": None if world_scale == 1 else world_scale}  # fmt: skip
         command = command_line("trials.py", flags)
     # Imported after the arguments are checked: a bad one answers at once, without loading JAX.
     import jax
     from tqdm.auto import tqdm
 
-    from jaxais import envs
     from jaxais.experiments.contenders import contender_config, one
-    from jaxais.experiments.records import build_systems, results_document, run_config
+    from jaxais.experiments.records import (
+        build_systems,
+        results_document,
+        run_config,
+        scaled_world,
+    )
     from jaxais.immune.network import NetworkParams
     from jaxais.loop import EpisodeConfig
     from jaxais.trials import run_trials
 
     lead = jax.process_index() == 0  # every process runs its share; process 0 writes
-    loaded = envs.load_world(world)
+    loaded, params = scaled_world(world, world_scale)
     drawn = shown or plot is not None
     config = EpisodeConfig(tau_cap=tau_cap, collision_cap=collision_cap, record=drawn)
     network = NetworkParams()
-    params = envs.default_params()
     if contender:  # read before any run: a bad spec fails first
         c = one(system, label)
         name, systems, controller, seed_info = c.label, {c.label: c.params}, c.controller, None
@@ -216,7 +225,7 @@ def trials(
               disable=not (lead and progress)) as bar:  # fmt: skip
         results = run_trials(loaded, systems, n, seed, config, params, bar, controller=controller)
         bar.update(bar.total - bar.n)
-    cfg = run_config(loaded, str(world), config, network, params, seed_info)
+    cfg = run_config(loaded, str(world), config, network, params, seed_info, world_scale)
     if contender:
         cfg = contender_config(cfg, c.source)
     cfg["command"] = command

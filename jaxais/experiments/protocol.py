@@ -17,20 +17,26 @@ from jaxais.labels import LABELS, parse_label, world_names_module
 
 __all__ = [
     "add_cap_arguments",
+    "add_world_scale_argument",
     "check_caps",
     "check_seed",
+    "check_world_scale",
     "check_worlds",
     "is_world_file",
     "load_paper_tables",
     "ALPHA",
     "COLLISION_CAP",
     "COMPARISONS",
+    "COUNTING_RULES",
+    "DEFAULT_RULE",
     "REAL_TRIALS",
     "REAL_WORLD",
+    "RHO",
     "SEEDED",
     "SIMULATED_TRIALS",
     "SYSTEMS",
     "TAU_CAP",
+    "UNSCALED_WORLDS",
     "UNSEEDED",
     "WORLDS",
     "WORLD_NAMES",
@@ -83,6 +89,13 @@ COLLISION_CAP = 100
 averages the capped count."""
 TAU_CAP = 4000.0
 """τ is capped at this many seconds [paper, section 5]."""
+RHO = 8.0
+"""The weight of a collision against a second in f = (ρc + τ)/2 [paper, eq 11]: jaxais.loop.RHO."""
+COUNTING_RULES: tuple[str, ...] = ("episode", "reading")
+"""How c is counted in the tables, each from every trial's record (the text never defines c):
+one per contact episode [ours, the default], or every reading with Vm >= 2400, section 4.1's
+"collision" antigen. Neither feeds the dynamics (jaxais.loop.COLLISION_RULES)."""
+DEFAULT_RULE = COUNTING_RULES[0]
 
 
 def systems_for_world(world: str) -> tuple[str, ...]:
@@ -109,6 +122,48 @@ def add_cap_arguments(parser: argparse.ArgumentParser) -> None:
         default=COLLISION_CAP,
         help=f"collision cap [paper: {COLLISION_CAP}]",
     )
+
+
+UNSCALED_WORLDS: dict[str, str] = {
+    REAL_WORLD: "the paper gives the real pen's size",
+    "ga_maze": "the LTL's maze is the GA's, not a test world",
+}
+"""Worlds ``--world-scale`` never scales, and why."""
+CAMERA_RANGE = 2.0
+"""The camera's range at world scale 1, m [ours] (``envs.SimParams.camera_range``)."""
+
+
+def check_world_scale(scale: object, worlds: Sequence[str] = (), flag: str = "--world-scale"):
+    """``scale`` as a float: a finite number > 0 (one-line ValueError naming ``flag``
+    otherwise), refused unless 1 for a world of :data:`UNSCALED_WORLDS` in ``worlds``."""
+    if isinstance(scale, bool) or not isinstance(scale, int | float):
+        raise ValueError(f"{flag} must be a number, got {scale!r}")
+    if not 0 < scale < float("inf"):
+        raise ValueError(f"{flag} must be a finite number > 0, got {scale!r}")
+    for w in worlds if scale != 1 else ():
+        if str(w) in UNSCALED_WORLDS:
+            raise ValueError(f"{flag} does not apply to {w}: {UNSCALED_WORLDS[str(w)]}")
+    return float(scale)
+
+
+def add_world_scale_argument(parser: argparse.ArgumentParser) -> None:
+    """Add ``--world-scale K`` (default 1) to a script's flags (:func:`check_world_scale`)."""
+    parser.add_argument(
+        "--world-scale", type=_number, default=1.0, metavar="K",
+        help="scale every coordinate, region and obstacle size of the world, and the camera's "
+        "range, by K (the robot and the target block as they are; not the real pen) [ours: 1]",
+    )  # fmt: skip
+
+
+def _number(text: str) -> float:
+    """``--world-scale``'s value, checked where it is read (one line, not argparse's usage)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+    if not 0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return value
 
 
 def check_seed(seed: int, flag: str = "--seed") -> None:

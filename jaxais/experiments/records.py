@@ -16,6 +16,7 @@ import numpy as np
 import jaxais
 from jaxais import envs
 from jaxais.controllers import System
+from jaxais.experiments import protocol
 from jaxais.immune.network import NetworkParams
 from jaxais.immune.readings import DEFAULT
 from jaxais.io import UserError, check_type, read_json_object
@@ -88,6 +89,17 @@ def build_systems(
     return systems, seed_info
 
 
+def scaled_world(name: str | Path, scale: float = 1.0) -> tuple[envs.World, envs.SimParams]:
+    """(the world, the simulator's parameters) at world ``scale`` (checked by
+    :func:`protocol.check_world_scale`): every coordinate, region and obstacle size and the
+    camera's range [ours, 2 m] times ``scale``; the robot, the target block and the heights as
+    they are. Scale 1: ``envs.load_world(name)`` and ``envs.default_params()``."""
+    if scale == 1:
+        return envs.load_world(name), envs.default_params()
+    world = envs.load_world(name, scale=scale)
+    return world, envs.default_params(camera_range=protocol.CAMERA_RANGE * scale)
+
+
 def run_config(
     world: envs.World,
     world_source: str,
@@ -95,13 +107,18 @@ def run_config(
     network: NetworkParams,
     sim_params: envs.SimParams,
     seed_info: dict[str, Any] | None,
+    scale: float = 1.0,
 ) -> dict[str, Any]:
-    """Every parameter a run used, as plain JSON (with the versions that made it)."""
+    """Every parameter a run used, as plain JSON (with the versions that made it; ``scale``:
+    the world's, :func:`scaled_world`)."""
     plain = lambda x: np.asarray(x).tolist()
     fields = lambda obj: {f.name: plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
     source = world_source if world_source == world.name else portable_path(world_source)
+    where = {"name": world.name, "source": source}
+    if scale != 1:  # recorded only when scaled: a default run's config is as it was
+        where["scale"] = scale
     return {
-        "world": {"name": world.name, "source": source},
+        "world": where,
         "episode": dataclasses.asdict(config),
         "network": fields(network),
         "readings": fields(DEFAULT),

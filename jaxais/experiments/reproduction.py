@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from jaxais import children
-from jaxais.experiments import protocol
+from jaxais.experiments import explanations, protocol
 from jaxais.experiments.contenders import (
     Contender,
     check_specs,
@@ -76,6 +76,7 @@ def check_reproduce(
     seeds: str | os.PathLike[str] | None = None, evolve: bool = False,
     generations: int | None = None, worlds: str | Sequence[str] | None = None,
     tau_cap: float | None = None, collision_cap: int | None = None, contenders: Any = None,
+    world_scale: float = 1.0, explain: Sequence[str | os.PathLike[str]] = (),
 ) -> tuple[Path, list[str], float, int]:  # fmt: skip
     """:func:`reproduce`'s arguments checked without JAX (one-line ValueErrors naming the
     flags, every type before any range; ``contenders``' specs by form, label and file) ->
@@ -86,6 +87,8 @@ def check_reproduce(
     if isinstance(contenders, str | list | tuple) and all(isinstance(c, str) for c in contenders):
         check_specs(contenders)
     protocol.check_seed(seed)
+    protocol.check_world_scale(world_scale, [n for n in names if n != protocol.REAL_WORLD])
+    explanations.load(explain)  # each file read and checked, before any trial
     if trials is not None and trials < 2:
         raise ValueError(f"--trials must be >= 2 (t-tests need two per group), got {trials}")
     if trials is not None:  # a world's systems, SIE at hold=1 and the baseline: one pool
@@ -108,7 +111,8 @@ def reproduce(
     generations: int | None = None, baseline: str | os.PathLike[str] | bool = True,
     worlds: str | Sequence[str] | None = None, tau_cap: float | None = None,
     collision_cap: int | None = None, progress: bool = True, command: str | None = None,
-    resume: bool = False, contenders: Any = None,
+    resume: bool = False, contenders: Any = None, world_scale: float = 1.0,
+    explain: Sequence[str | os.PathLike[str]] = (),
 ) -> dict[str, Any] | None:  # fmt: skip
     """Run the paper's experiments into ``out`` (the flags of scripts/reproduce.py).
 
@@ -121,6 +125,11 @@ def reproduce(
             ``(controller, params)`` or spec ``FILE.py:NAME``, or a list of specs.
         worlds: the paper's worlds by name, or world files (``PATH.toml``), comma-separated.
         command: recorded in run.json (default: the reproduce.py line these arguments mean).
+        world_scale: every world but the real pen (whose size the paper gives) and the camera's
+            range scaled so (:func:`records.scaled_world`) [ours: 1].
+        explain: what the report's "why" column reads (:mod:`.explanations`): a run of more
+            trials (its folder), the seeds ledger (``seeds.json``), a robustness map
+            (``robustness.json``); not a setting of the run (a ``resume`` may add them).
         resume: finish the partial run in ``out``, giving the uninterrupted run's results.
 
     Returns:
@@ -133,7 +142,7 @@ def reproduce(
     checked = check_reproduce(
         out, trials=trials, seed=seed, seeds=seeds, evolve=evolve, generations=generations,
         worlds=worlds, tau_cap=tau_cap, collision_cap=collision_cap,
-        contenders=contenders)  # fmt: skip
+        contenders=contenders, world_scale=world_scale, explain=explain)  # fmt: skip
     check_type(baseline, bool | PATH, "--baseline", "True, False or a folder of weights")
     check_types(progress=progress, command=command, resume=resume)
     if command is None:
@@ -142,9 +151,12 @@ def reproduce(
                  else baseline, "--no-baseline": baseline is False,
                  "--worlds": worlds if isinstance(worlds, str | None) else ",".join(
                  map(str, worlds)), "--tau-cap": tau_cap, "--collision-cap": collision_cap,
-                 "--generations": generations}  # fmt: skip
+                 "--generations": generations,
+                 "--world-scale": None if world_scale == 1 else world_scale}  # fmt: skip
         command = command_line("reproduce.py", flags) + _contender_flags(contenders)
+        command += "".join(f" --explain {e}" for e in explain)
     out, names, tau_cap, collision_cap = checked
+    evidence = explanations.load(explain)
     import jax
 
     # Process 0 of a multi-process run writes (and checks the folder); the others read it.
@@ -155,7 +167,7 @@ def reproduce(
     # Read first: a missing or corrupt seed, world file, baseline or contender fails before
     # anything is written.
     loaded = None if evolve else load_ltl_seed(seeds)
-    worlds_by_key = _load_worlds(names, envs)
+    worlds_by_key = _load_worlds(names, envs, world_scale)
     given = resolve(contenders)
     entrants = given
     if baseline is not False:
@@ -172,6 +184,8 @@ def reproduce(
               "collision_cap": collision_cap}  # fmt: skip
     if given:  # recorded only when given: earlier runs' manifests stay valid
         config["contenders"] = {c.label: c.source for c in given}
+    if world_scale != 1:  # so too the world scale
+        config["world_scale"] = float(world_scale)
     run = open_run(out, "reproduce", config, resume=resume, write=lead)
 
     started = time.perf_counter()
@@ -192,22 +206,24 @@ def reproduce(
         loaded = load_ltl_seed(seeds)
     return _run(run, worlds_by_key, trials, seed, seeds, loaded, entrants, tau_cap,
                 collision_cap, progress=progress, command=command, started=started,
-                timings=timings, lead=lead)  # fmt: skip
+                timings=timings, lead=lead, evidence=evidence)  # fmt: skip
 
 
-def _load_worlds(names: list[str], envs: Any) -> dict[str, tuple[str, Any]]:
-    """key -> (what ``--worlds`` named, the World): the paper's worlds by name, a world file by
-    its world's name, which must be new (one-line error otherwise)."""
+def _load_worlds(names: list[str], envs: Any, scale: float = 1.0) -> dict[str, tuple]:
+    """key -> (what ``--worlds`` named, the World, its scale): the paper's worlds by name, a
+    world file by its world's name, which must be new (one-line error otherwise); every world
+    but the real pen at ``scale``."""
     out = {}
     for name in names:
-        world = envs.load_world(name)
+        at = 1.0 if name == protocol.REAL_WORLD else scale
+        world = envs.load_world(name, scale=at) if at != 1 else envs.load_world(name)
         key = name if name in protocol.WORLDS else world.name
         if key in out or (name not in protocol.WORLDS and key in protocol.WORLDS):
             raise ValueError(
                 f"--worlds: {name} names its world {key!r}, as another world of the run is "
                 "named: give the file's world another name"
             )
-        out[key] = (name, world)
+        out[key] = (name, world, at)
     return out
 
 
@@ -224,7 +240,8 @@ def _contender_flags(contenders: Any) -> str:
 def _run(run: Run, worlds: dict[str, tuple[str, Any]], n_trials: int | None, seed: int,
          seeds: str | os.PathLike[str] | None, loaded: tuple, entrants: list[Contender],
          tau_cap: float, collision_cap: int, *, progress: bool, command: str, started: float,
-         timings: dict[str, float], lead: bool) -> dict[str, Any] | None:  # fmt: skip
+         timings: dict[str, float], lead: bool,
+         evidence: Any = None) -> dict[str, Any] | None:  # fmt: skip
     """:func:`reproduce` once checked and read (``worlds``: key -> (source, World); the
     contenders): every world not finished in ``run``, then the tables, claims and report."""
     import numpy as np
@@ -249,18 +266,20 @@ def _run(run: Run, worlds: dict[str, tuple[str, Any]], n_trials: int | None, see
     seeds_dir = Path(seeds) if seeds else default_seed_dir()
 
     network = NetworkParams()
-    params = envs.default_params()
     config = EpisodeConfig(tau_cap=tau_cap, collision_cap=collision_cap)
     # The first trial of each system runs again recorded (same keys: same run), to be drawn.
     example = EpisodeConfig(tau_cap=tau_cap, collision_cap=collision_cap, record=True)
     results_by_world, contenders_by_world, trajectories, placements, configs = {}, {}, {}, {}, {}
     calibration_by_world = {}
     (out / "trials").mkdir(exist_ok=True)
-    for name, (source, world) in worlds.items():
+    for name, (source, world, scale) in worlds.items():
         labels = list(protocol.systems_for_world(name))
         n = n_trials if n_trials is not None else protocol.trials_for_world(name)
         systems, seed_info = build_systems(labels, seeds_dir, network, loaded)
-        cfg = run_config(world, source, config, network, params, seed_info)
+        params = envs.default_params()
+        if scale != 1:  # the camera's range [ours] grows with the world
+            params = envs.default_params(camera_range=protocol.CAMERA_RANGE * scale)
+        cfg = run_config(world, source, config, network, params, seed_info, scale)
         configs[name] = cfg
         hold1_cfg = {**cfg, "readings": {**cfg["readings"], "hold": 1}}
         files = {label: (label, cfg) for label in labels} | {"SIE_hold1": (CALIBRATED, hold1_cfg)}
@@ -326,10 +345,17 @@ def _run(run: Run, worlds: dict[str, tuple[str, Any]], n_trials: int | None, see
     if contenders_by_world:
         tables["contenders"] = stats.contender_tables(results_by_world, contenders_by_world)
         tables["contenders"]["contenders"] = {c.label: c.source for c in entrants}
+    # c counted per reading (section 4.1) beside the default, from the same records.
+    rules = stats.rule_tables(results_by_world, collision_cap)
+    if rules:
+        tables["by_rule"] = rules
     atomic_write_json(out / "tables.json", tables)
     ledger = claims.claims(results_by_world, cis=cis)
-    timings["statistics_s"] = time.perf_counter() - t
     claims_doc = claims.document(ledger)
+    rule_claims = claims.by_rule(results_by_world, collision_cap)
+    if rule_claims:
+        claims_doc["by_rule"] = rule_claims
+    timings["statistics_s"] = time.perf_counter() - t
     atomic_write_json(out / "claims.json", claims_doc)
     timings["total_s"] = time.perf_counter() - started
     run_doc = {
@@ -344,7 +370,7 @@ def _run(run: Run, worlds: dict[str, tuple[str, Any]], n_trials: int | None, see
     if entrants:
         run_doc["contenders"] = {c.label: c.source for c in entrants}
     atomic_write_json(out / "run.json", run_doc)
-    drawn = {name: world for name, (_, world) in worlds.items()}
+    drawn = {name: world for name, (_, world, _) in worlds.items()}
     report_path = report.write_report(
         out,
         tables,
@@ -359,6 +385,8 @@ def _run(run: Run, worlds: dict[str, tuple[str, Any]], n_trials: int | None, see
         example_placements=placements,
         contenders=tables.get("contenders"),
         contender_results=contenders_by_world,
+        rule_claims={r: doc["claims"] for r, doc in rule_claims.items()},
+        evidence=evidence,
     )
     run.complete()
     return {"tables": tables, "claims": claims_doc, "run": run_doc, "report": report_path}

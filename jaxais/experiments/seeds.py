@@ -345,6 +345,22 @@ def _contender_records(specs: Sequence[str]) -> list[dict[str, str | None]]:
     return [{"spec": spec, "sha256": spec_sha256(spec)} for _, spec in check_specs(list(specs))]
 
 
+def evolve(ltl: Path, s: int, run: Runner, log: Path | None, note, failed) -> None:
+    """The LTL of seed ``s`` in ``ltl`` unless done (``evolve.py --seed s``, resumed from its
+    checkpoint where one is complete: :func:`ltl_state`); ``failed(stage, script, code)`` makes
+    the error of a failed run."""
+    state = ltl_state(ltl)
+    if state == "done":
+        return
+    cmd = [sys.executable, "-m", "jaxais.scripts.evolve", "--out", str(ltl), "--seed", str(s)]
+    note(f"seed {s}: LTL {'resumed' if state == 'resume' else 'started'} ({ltl})")
+    code = run(cmd + ["--resume"] * (state == "resume"), log)
+    if code != 0:
+        raise failed("LTL", "scripts/evolve.py", code)
+    if not (ltl / "seed" / "seed.json").is_file():
+        raise SeedRunError(f"seed {s}: scripts/evolve.py exited 0 but wrote no {ltl}/seed")
+
+
 def _run_seed(folder: Run, s: int, settings: dict, run: Runner, logs: bool, note, stop) -> float:
     """Seed ``s``'s LTL (unless done) and STL. Returns the STL's wall time."""
     ltl, stl = _paths(folder.out, s)
@@ -356,15 +372,7 @@ def _run_seed(folder: Run, s: int, settings: dict, run: Runner, logs: bool, note
         where = f"see {log(stage.lower())}" if logs else "see its messages above"
         return SeedRunError(f"seed {s}: the {stage} ({script}) failed, exit status {code}; {where}")
 
-    state = ltl_state(ltl)
-    if state != "done":
-        cmd = [sys.executable, "-m", "jaxais.scripts.evolve", "--out", str(ltl), "--seed", str(s)]
-        note(f"seed {s}: LTL {'resumed' if state == 'resume' else 'started'} ({ltl})")
-        code = run(cmd + ["--resume"] * (state == "resume"), log("ltl"))
-        if code != 0:
-            raise failed("LTL", "scripts/evolve.py", code)
-        if not (ltl / "seed" / "seed.json").is_file():
-            raise SeedRunError(f"seed {s}: scripts/evolve.py exited 0 but wrote no {ltl}/seed")
+    evolve(ltl, s, run, log("ltl"), note, failed)
     if stop.is_set():
         return -1.0
     resume = (stl / MANIFEST).is_file()  # reproduce.py began: it finishes its own partial run

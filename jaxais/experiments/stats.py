@@ -44,7 +44,10 @@ __all__ = [
     "mann_whitney_u",
     "metric_values",
     "proportion_ci",
+    "has_rule",
     "record_means",
+    "rule_tables",
+    "under_rule",
     "significance_level",
     "student_t",
     "table3",
@@ -108,6 +111,70 @@ def in_order(names: Iterable[str], order: Sequence[str]) -> list[str]:
 def _ordered_systems(results: Results) -> list[str]:
     """Systems with at least one trial, in the paper's order."""
     return in_order([s for s, trials in results.items() if len(trials) > 0], protocol.SYSTEMS)
+
+
+def under_rule(
+    results_by_world: ResultsByWorld, rule: str, cap: int = protocol.COLLISION_CAP
+) -> dict[str, dict[str, list[dict[str, Any]]]]:
+    """The trials as if c were counted by ``rule`` (:data:`protocol.COUNTING_RULES`): each
+    record's ``collisions``, ``collisions_capped`` (at ``cap``), ``fitness``,
+    ``failed_collisions`` (c > cap), ``failed`` and ``failed_by`` from its
+    ``collisions_<rule>``; τ and the time cap's failures unchanged. The default rule gives the
+    records as they are. ValueError naming the first record without that count."""
+    if rule not in protocol.COUNTING_RULES:
+        raise ValueError(f"rule must be one of {', '.join(protocol.COUNTING_RULES)}, got {rule!r}")
+    if rule == protocol.DEFAULT_RULE:
+        return {w: {s: list(t) for s, t in r.items()} for w, r in results_by_world.items()}
+    key = f"collisions_{rule}"
+
+    def view(world: str, system: str, record: Mapping[str, Any]) -> dict[str, Any]:
+        if key not in record:
+            raise ValueError(
+                f"{world} {system}: a trial record without {key!r} (made before c was counted "
+                "by each rule): run its trials again"
+            )
+        c = int(record[key])
+        capped = min(c, cap)
+        by_c, by_t = c > cap, bool(record["failed_time"])
+        return dict(record) | {
+            "collisions": c,
+            "collisions_capped": capped,
+            "fitness": (protocol.RHO * capped + float(record["tau"])) / 2.0,
+            "failed": by_c or by_t,
+            "failed_collisions": by_c,
+            "failed_by": [n for n, on in (("collisions", by_c), ("time", by_t)) if on],
+        }
+
+    return {
+        w: {s: [view(w, s, r) for r in trials] for s, trials in results.items()}
+        for w, results in results_by_world.items()
+    }
+
+
+def has_rule(results_by_world: ResultsByWorld, rule: str) -> bool:
+    """Whether every trial records its c under ``rule``."""
+    key = f"collisions_{rule}"
+    return rule == protocol.DEFAULT_RULE or all(
+        key in r for results in results_by_world.values() for t in results.values() for r in t
+    )
+
+
+def rule_tables(
+    results_by_world: ResultsByWorld,
+    cap: int = protocol.COLLISION_CAP,
+    alpha: float = protocol.ALPHA,
+) -> dict[str, Any]:
+    """Tables 3-5 with intervals and H1-H4 under every rule but the default that the records
+    carry: ``{rule: {"table3", "table3_ci", "table4", "table5", "table5_ci", "hypotheses"}}``."""
+    out = {}
+    for rule in protocol.COUNTING_RULES[1:]:
+        if has_rule(results_by_world, rule):
+            view = under_rule(results_by_world, rule, cap)
+            cis = table3_ci(view)
+            tables = {"table3": table3(view), "table3_ci": cis, "table4": table4(view)}
+            tables |= {"table5": table5(view), "table5_ci": table5_ci(view)}
+            out[rule] = jsonable(tables | {"hypotheses": hypotheses(view, alpha, cis)})
+    return out
 
 
 def metric_values(trials: Sequence[Mapping[str, Any]], metric: str) -> np.ndarray:

@@ -27,7 +27,13 @@ from jaxais import envs
 from jaxais.controllers import System, stl_for
 from jaxais.experiments import protocol
 from jaxais.experiments.one_system import check_types
-from jaxais.experiments.records import FORMATS, build_systems, portable_command, run_config
+from jaxais.experiments.records import (
+    FORMATS,
+    build_systems,
+    portable_command,
+    run_config,
+    scaled_world,
+)
 from jaxais.experiments.stats import CI_LEVEL
 from jaxais.immune.network import BOUNDS, NetworkParams
 from jaxais.immune.readings import readings as make_readings
@@ -406,6 +412,7 @@ def sweep(
     resume: bool = False,
     records: bool = False,
     contender: Any = None,
+    world_scale: float = 1.0,
 ) -> dict[str, Any]:
     """A grid over the STL's parameters (``grid``: :func:`parse_axis` specs) or the reality gap
     (``noise``: scales of the world's noise, or them comma-separated), written into ``out``
@@ -415,6 +422,7 @@ def sweep(
     ``contender`` (instead of ``system``): a grid over a contender's parameters, named by their
     key paths in its params pytree (``speed``, ``network.k1``; :func:`leaf_kinds`), given as a
     spec ``[LABEL=]FILE.py:NAME``, a ``(controller, params)`` tuple or a ``Contender``.
+    ``world_scale`` scales the world and the camera's range (:func:`records.scaled_world`).
 
     Defaults as ``scripts/sweep.py --help`` says. Under ``jax.distributed`` every process computes
     the same numbers and process 0 writes. ValueError (one line) on a bad argument, before any run.
@@ -448,6 +456,7 @@ def sweep(
         world = protocol.REAL_WORLD if noise is not None else protocol.WORLDS[0]
     trials = protocol.trials_for_world(world) if trials is None else trials
     protocol.check_seed(seed)
+    world_scale = protocol.check_world_scale(world_scale, [str(world)])
     tau_cap, collision_cap = protocol.check_caps(tau_cap, collision_cap)
     if trials < 1:
         raise ValueError(f"--trials must be >= 1, got {trials}")
@@ -494,14 +503,13 @@ def sweep(
         raise ValueError(f"--noise-kinds: one or more of {', '.join(NOISE_KINDS)}, each once")
     pool = points if grid is not None else len(names)  # runs per trial index in one pool
     check_memory(trials, pool * RUN_BYTES, "--trials")
-    loaded = envs.load_world(world)
+    loaded, params = scaled_world(world, world_scale)
     config = EpisodeConfig(tau_cap=tau_cap, collision_cap=collision_cap)
     network = NetworkParams()
     if entrant is None:
         systems, seed_info = build_systems(names, seeds, network)
     else:
         systems, seed_info = {entrant.label: entrant.params}, None
-    params = envs.default_params()
     if grid is not None:
         points = grid_points(axes)
         if entrant is None:
@@ -516,6 +524,8 @@ def sweep(
                     tau_cap=tau_cap, collision_cap=collision_cap, slots=slots)  # fmt: skip
     if entrant is not None:  # recorded only when given: earlier runs' manifests stay valid
         settings["contender"] = entrant.source
+    if world_scale != 1:  # so too the world's scale
+        settings["world_scale"] = world_scale
     run = open_run(out, "sweep", settings, resume=resume, write=lead)
     start = time.perf_counter()
     desc = f"{','.join(names)} in {loaded.name}"
@@ -534,7 +544,7 @@ def sweep(
     if grid is not None and entrant is None:
         rate = interpolate(doc, "idiotypic_difference_rate", PAPER_POINT)
         doc["paper_point"] = {"values": PAPER_POINT, "idiotypic_difference_rate": rate}
-    cfg = run_config(loaded, world, config, network, params, seed_info)
+    cfg = run_config(loaded, world, config, network, params, seed_info, world_scale)
     if entrant is not None:
         from jaxais.experiments.contenders import contender_config
 

@@ -172,7 +172,10 @@ def _bound(system: System, name: str) -> tuple[float, float]:
 @functools.cache
 def _problem_class() -> type:
     """evosax's ``Problem`` subclassed (evosax imported on first use: an optional extra)."""
-    from evosax.problems.problem import Problem, State
+    try:
+        from evosax.problems.problem import Problem, State
+    except ImportError:
+        raise ImportError("network_problem needs evosax: pip install 'jaxais[evosax]'") from None
 
     class NetworkProblem(Problem):
         """Network parameters as an evosax problem: a solution is {name: float32}; ``eval``'s

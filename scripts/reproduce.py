@@ -4,12 +4,10 @@
     python scripts/reproduce.py --out results/ --trials 1000          # tight intervals
     python scripts/reproduce.py --out results/ --evolve --contender mine.py:braitenberg
 
-Runs :func:`jaxais.experiments.reproduce` (the paper's protocol, SPEC 9; --evolve: a fresh LTL
-seed first; --contender: your controller beside the paper's systems), sharded over every
-process's devices with the jax.distributed flags (as in scripts/sweep.py; process 0 writes).
-Writes DIR/tables.json, DIR/claims.json, DIR/report.md (figures in DIR/figures/), every trial in
-DIR/trials/ and DIR/run.json (the config, seeds and timings needed to regenerate it all);
-DIR/manifest.json says which worlds are done: --resume finishes an interrupted run.
+Runs :func:`jaxais.experiments.reproduce` (SPEC 9; --evolve: a fresh LTL seed first; --contender:
+your controller beside the paper's systems), over every process's devices (process 0 writes):
+DIR/tables.json, claims.json, report.md, figures/, trials/, run.json (all it takes to regenerate
+them) and manifest.json (the worlds done: --resume finishes an interrupted run).
 """
 
 from __future__ import annotations
@@ -32,8 +30,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                    help=f"trials per system and world (default: the paper's "
                    f"{protocol.SIMULATED_TRIALS}, {protocol.REAL_TRIALS} in {protocol.REAL_WORLD})")
     src = p.add_mutually_exclusive_group()
-    src.add_argument("--seeds", default=None,
-                     help="LTL seed directory (default: the shipped checkpoints/default)")
+    src.add_argument("--seeds", help="LTL seed directory (default: checkpoints/default)")
     src.add_argument("--evolve", action="store_true",
                      help="run the LTL (scripts/evolve.py, defaults, PRNG seed --seed) first and "
                      "use its seed")
@@ -47,14 +44,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                    "worlds: the paper's, or world files PATH.toml (the simulated protocol)")
     protocol.add_cap_arguments(p)
     protocol.add_world_scale_argument(p)
-    p.add_argument("--explain", action="append", metavar="PATH",
-                   help="what the report's 'why' column reads (repeat): a reproduce.py folder of "
-                   "more trials, a seeds.json ledger, a robustness.json map")
+    p.add_argument("--explain", action="append", metavar="PATH", help="what the report's 'why' "
+                   "reads (repeat): a run of more trials, seeds.json, robustness.json")
     distributed.add_arguments(p)
-    p.add_argument("--generations", type=int, default=None,
-                   help="LTL generation cap with --evolve (default: evolve.py's)")
-    # fmt: on
-    return p.parse_args(argv)
+    p.add_argument("--generations", type=int, help="LTL generation cap with --evolve (default: "
+                   "evolve.py's)")
+    return p.parse_args(argv)  # fmt: on
 
 
 @main_wrapper("reproduce.py", extra=(LTLRunError,))

@@ -24,27 +24,26 @@ def parse_args(argv: list[str] | None):
     # fmt: off
     what.add_argument("--grid", action="append", metavar="NAME=START:STOP:COUNT",
                       help="an axis (repeat for more), e.g. k1=0:2:11 or hold=1,10,31")
-    what.add_argument("--noise", metavar="S1,S2,...",
-                      help="scales of the world's noise (1 = its own levels), e.g. 0,0.5,1,2")
+    what.add_argument("--noise", metavar="S1,S2,...", help="scales of the world's noise (1 = its "
+                      "own levels), e.g. 0,0.5,1,2")
     p.add_argument("--noise-kinds", help="which noise --noise scales (default: ir,camera,wheel)")
     p.add_argument("--system", help=f"one (--grid; default SIE) or more (--noise; default "
                    f"SIE,SRL,HDC) of {', '.join(SYSTEMS)}")
     contenders.add_argument(p, repeatable=False)  # instead of --system: --grid over its params
-    p.add_argument("--random-set", choices=tuple(RANDOM_SETS), default=None)
+    p.add_argument("--random-set", choices=tuple(RANDOM_SETS))
     p.add_argument("--world", help="a world's name or .toml path (default: world1 with --grid, "
                    f"{protocol.REAL_WORLD} with --noise)")
     p.add_argument("--trials", type=int, help="trials per point (default: the paper's count)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--seeds", default=None, help="LTL seed directory (default: the shipped one)")
+    p.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
+    p.add_argument("--seeds", help="LTL seed directory (default: the shipped one)")
     protocol.add_cap_arguments(p)
     protocol.add_world_scale_argument(p)
     p.add_argument("--slots", type=int, default=1024, help="runs live at once (default 1024)")
     p.add_argument("--records", action="store_true", help="keep every run's record (--grid)")
     p.add_argument("--out", required=True, help="output directory (missing or empty)")
     p.add_argument("--resume", action="store_true", help="finish the interrupted run in --out")
-    # fmt: on
     distributed.add_arguments(p)
-    return p.parse_args(argv)
+    return p.parse_args(argv)  # fmt: on
 
 
 @main_wrapper("sweep.py")

@@ -385,7 +385,7 @@ def test_bad_input_is_one_line_naming_it_outside_jit(env):
     refused("reset_pool must be a positive integer", envs.make, reset_pool=0)
     refused("reset_pool must be a positive integer, got bool", envs.make, reset_pool=True)
     refused("legacy_step must be True or False", envs.make, legacy_step="yes")
-    refused("refresh_pool must be True or False, got 1", envs.make, refresh_pool=1)
+    refused("refresh_pool must be True or False, got int 1", envs.make, refresh_pool=1)
     key, params = jax.random.key(0), env.default_params
     refused("params must be an EnvParams", env.reset, key, {"max_steps_in_episode": 3})
     refused("EnvParams.finish_streak must be an integer >= 1", env.reset, key,

@@ -140,7 +140,9 @@ for name in modules:
         if err.name != name:  # a missing distribution, not a name that is no module
             raise
 dists = md.packages_distributions()
-loaded = {m.split(".")[0] for m in set(sys.modules) - before} - set(sys.stdlib_module_names)
+# Ours to declare: what the library imports, not what those packages load of their own accord.
+ours = {m.split(".")[0] for m in modules}
+loaded = {m.split(".")[0] for m in set(sys.modules) - before} & ours - set(sys.stdlib_module_names)
 needed = {m: dists[m] for m in loaded if not m.startswith("_") and m in dists and m != "jaxais"}
 
 def norm(name):

@@ -74,7 +74,7 @@ CASES = {
     "trials plot 3": (lambda o: x.trials("SIE", plot=3), "--plot must be True, False or a", 1),
     "trials plot True without out": (
         lambda o: x.trials("SIE", plot=True),
-        "plot=True shows the plot in a notebook (IPython), and none runs here, or draws beside",
+        "plot=True shows the plot in a notebook",
         0,
     ),
     "trials progress 'no'": (lambda o: x.trials("HDC", progress="no"), "--progress must be", 1),

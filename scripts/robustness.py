@@ -18,9 +18,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from jaxais.cli import ArgumentParser, UserError, main_wrapper, run_script
+from jaxais.cli import ArgumentParser, main_wrapper, run_script
 from jaxais.experiments import protocol
-from jaxais.experiments.seeds import MAX_SEED, SeedRunError
+from jaxais.experiments.seeds import SeedRunError, seed_range
 
 
 def _floats(text: str) -> list[float]:
@@ -54,16 +54,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 @main_wrapper("robustness.py", extra=(SeedRunError,))
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
-    if args.seeds < 1:
-        raise UserError(f"--seeds must be >= 1, got {args.seeds}")
-    if not 0 <= args.first <= MAX_SEED - args.seeds + 1:
-        raise UserError(f"--first must be in [0, {MAX_SEED - args.seeds + 1}], got {args.first}")
+    seeds = seed_range(args.seeds, args.first)
     from jaxais.experiments import robustness
     from jaxais.experiments.records import portable_command
 
     words = [w for w in argv or sys.argv[1:] if w != "--resume"]  # the command that remakes it
     doc = robustness.run(
-        args.out, range(args.first, args.first + args.seeds), args.scales,
+        args.out, seeds, args.scales,
         [r for r in args.rules.split(",") if r], args.trials, args.jobs, args.ltl,
         command=portable_command("robustness.py " + " ".join(words)), resume=args.resume,
     )  # fmt: skip

@@ -19,9 +19,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from jaxais.cli import ArgumentParser, UserError, main_wrapper, run_script
+from jaxais.cli import ArgumentParser, main_wrapper, run_script
 from jaxais.experiments import contenders
-from jaxais.experiments.seeds import MAX_SEED, SeedRunError, headline, ltl_ledger
+from jaxais.experiments.seeds import SeedRunError, headline, ltl_ledger, seed_range
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -42,17 +42,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 @main_wrapper("seeds.py", extra=(SeedRunError,))
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
-    # --seeds and --first name the seeds' range, which the ledger takes as a list.
-    if args.seeds < 1:
-        raise UserError(f"--seeds must be >= 1, got {args.seeds}")
-    if not 0 <= args.first <= MAX_SEED - args.seeds + 1:
-        raise UserError(f"--first must be in [0, {MAX_SEED - args.seeds + 1}], got {args.first}")
+    seeds = seed_range(args.seeds, args.first)
     from jaxais.experiments.records import portable_command
 
     words = [w for w in argv or sys.argv[1:] if w != "--resume"]  # the command that remakes it
     summary = ltl_ledger(
         args.out,
-        range(args.first, args.first + args.seeds),
+        seeds,
         trials=args.trials,
         jobs=args.jobs,
         contenders=args.contender or (),

@@ -12,6 +12,7 @@ records the finished ones (``resume``). Nothing here imports JAX: the subprocess
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import shutil
@@ -19,13 +20,12 @@ import sys
 import threading
 import time
 from collections.abc import Iterable, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
 from jaxais import io
 from jaxais.experiments import protocol, seeds
-from jaxais.io import MANIFEST, ON_SIGNAL, atomic_write_json, atomic_write_text, open_run
+from jaxais.io import MANIFEST, atomic_write_json, atomic_write_text, open_run
 
 __all__ = ["FORMAT", "ROBUST", "classify", "markdown", "run", "summarise"]
 
@@ -343,27 +343,9 @@ def run(
             raise
         note(f"{name}: done; {headline(write())}")
 
-    def on_signal() -> None:
-        procs.stop()
-        lock.acquire(timeout=2)
-
     write()
-    pool, errors = ThreadPoolExecutor(max_workers=jobs), []
-    ON_SIGNAL.append(on_signal)
-    try:
-        futures = [pool.submit(unit, s, k) for s in seeds_ for k in scales]
-        for future in as_completed(futures):
-            try:
-                future.result()
-            except Exception as err:
-                errors.append(err)
-    except BaseException:
-        stop.set()
-        procs.stop()
-        raise
-    finally:
-        ON_SIGNAL.remove(on_signal)
-        pool.shutdown(wait=True, cancel_futures=True)
+    calls = [functools.partial(unit, s, k) for s in seeds_ for k in scales]
+    errors = seeds.side_by_side(jobs, calls, procs, lock, stop)
     doc = write()
     # This session's wall and CPU time, kept for the totals of a later --resume.
     session = {"wall_s": before.get("wall_s", 0.0) + time.perf_counter() - started,

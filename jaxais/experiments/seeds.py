@@ -12,6 +12,7 @@ bits). Nothing here imports JAX: the subprocesses have the device.
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import operator
 import os
@@ -36,6 +37,17 @@ __all__ = ["SeedRunError", "headline", "ltl_ledger", "ltl_state", "markdown", "s
 
 FORMAT = "jaxais-seeds/1"
 MAX_SEED = 2**31 - 1  # evolve.py's largest --seed
+
+
+def seed_range(count: int, first: int) -> range:
+    """The scripts' ``--seeds COUNT --first FIRST`` as the seeds they name (one-line errors)."""
+    if count < 1:
+        raise ValueError(f"--seeds must be >= 1, got {count}")
+    if not 0 <= first <= MAX_SEED - count + 1:
+        raise ValueError(f"--first must be in [0, {MAX_SEED - count + 1}], got {first}")
+    return range(first, first + count)
+
+
 SYSTEMS = ("SIE", "SRL")  # the seeded systems whose failures and lock-ups the ledger shows
 # reproduce.py flags the ledger sets itself (not allowed in ``extra_args``).
 RESERVED = ("--out", "--seeds", "--seed", "--no-baseline", "--baseline", "--evolve", "--trials",
@@ -481,19 +493,33 @@ def ltl_ledger(
             raise
         note(f"seed {s}: done; {headline(write())}")
 
-    def on_signal() -> None:  # what a signal that ends the script at once must still do
-        procs.stop()
-        lock.acquire(timeout=2)  # a worker's write in flight ends (its temporary files go)
-
     write()
+    errors = side_by_side(jobs, [functools.partial(pipeline, s) for s in seeds], procs, lock, stop)
+    if errors:
+        raise errors[0]
+    summary = write()
+    folder.complete()
+    return summary
+
+
+def side_by_side(jobs: int, calls: Sequence[Callable[[], None]], procs: Any,
+                 lock: threading.Lock, stop: threading.Event) -> list[Exception]:  # fmt: skip
+    """Run ``calls`` ``jobs`` at a time (threads, each waiting on its children ``procs``) and
+    return the errors of those that failed: the ones already running finish, no new one starts
+    (each call sets ``stop`` as it fails). A signal that ends the script stops the children
+    and lets a write in flight (under ``lock``) end."""
+
+    def on_signal() -> None:
+        procs.stop()
+        lock.acquire(timeout=2)
+
     pool, errors = ThreadPoolExecutor(max_workers=jobs), []
     ON_SIGNAL.append(on_signal)
     try:
-        futures = [pool.submit(pipeline, s) for s in seeds]
-        for future in as_completed(futures):
+        for future in as_completed([pool.submit(call) for call in calls]):
             try:
                 future.result()
-            except Exception as err:  # the seeds already running finish; no new one starts
+            except Exception as err:
                 errors.append(err)
     except BaseException:
         stop.set()
@@ -502,8 +528,4 @@ def ltl_ledger(
     finally:
         ON_SIGNAL.remove(on_signal)
         pool.shutdown(wait=True, cancel_futures=True)
-    if errors:
-        raise errors[0]
-    summary = write()
-    folder.complete()
-    return summary
+    return errors

@@ -202,8 +202,8 @@ def _kernel_can_emit(jaxpr) -> bool:
 
 @jax.tree_util.register_static
 class _Constant:
-    """A world compiled in as constants, which XLA folds (the GA's maze runs several times faster,
-    and its numbers are this form's): static, equal by value, so one compile per world."""
+    """A world compiled in as constants (the GA's form; the segment's kernel, :func:`one_kernel`,
+    takes them as its arguments): static, equal by value, so one compile per world."""
 
     def __init__(self, world: envs.World):
         self.world = world

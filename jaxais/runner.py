@@ -159,7 +159,8 @@ def one_kernel(f: Callable) -> Callable:
     inner = jax.jit(lambda *args: (f(*args), _read_all(args)))
 
     def tagged(*args):
-        if not _kernel_can_emit(jax.make_jaxpr(f)(*args).jaxpr):
+        # One trace serves the check and the call (jit caches it by the arguments' shapes).
+        if not _kernel_can_emit(inner.trace(*args).jaxpr.jaxpr):
             return f(*args)
         out = set_xla_metadata(inner(*args), xla_cpu_small_call="true", inlineable="false")
         return jax.lax.optimization_barrier(out)[0]

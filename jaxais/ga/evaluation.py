@@ -29,7 +29,7 @@ from jaxais.ga.config import GAConfig
 from jaxais.ga.core import Evaluation
 from jaxais.immune.antibodies import Antibodies
 from jaxais.immune.antigens import N_ANTIGENS
-from jaxais.io import ArgumentTypeError
+from jaxais.io import ArgumentTypeError, check_int
 from jaxais.loop import FINISHED, RUNNING, EpisodeConfig, fitness
 from jaxais.runner import _Constant, advance, start_batch
 
@@ -216,14 +216,13 @@ def make_evaluator(
     sim_params = envs.default_params() if sim_params is None else sim_params
     config = GAConfig() if config is None else config
     starts = config.starts if starts is None else starts
-    if isinstance(starts, bool) or not isinstance(starts, int | np.integer) or starts < 1:
-        raise ValueError(f"starts must be an integer >= 1, got {starts!r}")
+    starts = check_int(starts, "starts", low=1)  # its type, then its range
     grid, episode, dt = _check_grid(grid), config.episode_config(), float(sim_params.dt)
 
     def evaluate_sets(key: jax.Array, sets: Antibodies) -> tuple[Evaluation, Descriptors]:
         if sets.shape[-1:] != (N_ANTIGENS,):
             raise ValueError(f"sets must have shape [..., {N_ANTIGENS}], got {sets.shape}")
-        raw = raw_runs(start_keys(key, int(starts)), sets, world, sim_params, episode, grid)
+        raw = raw_runs(start_keys(key, starts), sets, world, sim_params, episode, grid)
         return summarise(raw, episode, dt)
 
     return evaluate_sets

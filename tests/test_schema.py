@@ -110,3 +110,77 @@ def test_trials_schema_takes_the_writers_documents_and_refuses_others():
     bad = copy.deepcopy(doc)
     del bad["trials"][1]["tau"]
     assert not validator.is_valid(bad)
+
+
+SHIPPED_RESULTS = {
+    "sweep": [ROOT / "docs" / "sweep" / "sweep.json"],
+    "reality_gap": [ROOT / "docs" / "sweep" / "reality_gap.json"],
+    "robustness": sorted((ROOT / "docs").glob("robustness/robustness.json")),
+}
+
+
+@pytest.mark.parametrize("name", sorted(SHIPPED_RESULTS))
+def test_every_shipped_results_file_fits_its_schema(name):
+    validator = jsonschema.Draft202012Validator(
+        json.loads((SHIPPED / schema.SCHEMAS[name]).read_text())
+    )
+    for path in SHIPPED_RESULTS[name]:
+        errors = [
+            f"{list(e.path)}: {e.message}"
+            for e in validator.iter_errors(json.loads(path.read_text()))
+        ]
+        assert not errors, (path, errors[:3])
+
+
+def _points_of(doc: dict) -> dict:
+    return doc["points"][0]
+
+
+@pytest.mark.parametrize(
+    ("name", "spoil"),
+    [
+        ("sweep", lambda d: d.update(format="jaxais-sweep/2")),
+        ("sweep", lambda d: _points_of(d).pop("f")),
+        ("sweep", lambda d: _points_of(d)["values"].update(k1="big")),  # a value is a number
+        ("sweep", lambda d: d["base_values"].update(k2=None)),
+        ("reality_gap", lambda d: _points_of(d)["systems"]["SIE"].pop("n")),
+        ("reality_gap", lambda d: _points_of(d)["systems"].update(HDC={"n": "3"})),
+        ("robustness", lambda d: d["cells"][0]["claims"].update(H1="yes")),
+        ("robustness", lambda d: d["cells"][0].pop("rule")),
+        ("robustness", lambda d: d["claims"]["H3"]["marginals"]["scale"].update({"2": "all"})),
+    ],
+)
+def test_results_schemas_take_the_writers_documents_and_refuse_others(name, spoil):
+    make = {"sweep": schema.sweep_schema, "reality_gap": schema.reality_gap_schema,
+            "robustness": schema.robustness_schema}[name]  # fmt: skip
+    validator = jsonschema.Draft202012Validator(make())
+    doc = _written(name)
+    assert validator.is_valid(doc)
+    bad = copy.deepcopy(doc)
+    spoil(bad)
+    assert not validator.is_valid(bad)
+
+
+def _written(name: str) -> dict:
+    """A document as the writer produces it, other than the schema's own examples."""
+    import numpy as np
+
+    from jaxais.experiments import robustness, sweeps
+
+    point = sweeps.summarise_point(schema._example_outcomes(4, stats=True))
+    if name == "sweep":
+        axes = [("k1", np.array([0.2])), ("k2", np.array([0.7]))]
+        points = [{"values": {"k1": 0.2, "k2": 0.7}, **point}]
+        doc = sweeps.sweep_document(axes, {"k1": 0.85, "k2": 1.1}, points, 4, 400, 2.0)
+    elif name == "reality_gap":
+        levels = {n: 0.0 for names in sweeps.NOISE_KINDS.values() for n in names}
+        doc = sweeps.noise_document(["ir"], [2.0], [{"scale": 2.0, "levels": levels,
+                                                     "systems": {"SIE": point}}], 2.0)  # fmt: skip
+    else:
+        cells = [{"ltl_seed": 4, "trial_seed": 4, "scale": 1.0, "rule": "episode",
+                  "claims": {"H3": True}}]  # fmt: skip
+        axes = {"ltl_seed": [4], "scale": [1.0], "rule": ["episode"]}
+        return json.loads(json.dumps(robustness.summarise(cells, axes) | {"command": "x"}))
+    facts = dict(names=["SIE"], world="world2", seed=1, trials=4, wall_total=2.0)
+    doc = sweeps.finish_document(doc, **facts, config={"world": {}}, paper_point=False)
+    return json.loads(json.dumps(doc))

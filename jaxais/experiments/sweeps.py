@@ -270,11 +270,24 @@ def run_sweep(
     else:
         leaves = _leaves(base)
         base_values = {name: leaves[name][1] for name in names}
+    return sweep_document(axes, base_values, out_points, runs, iterations, wall)
+
+
+def sweep_document(
+    axes: Sequence[tuple[str, np.ndarray]],
+    base_values: dict[str, Any],
+    points: list[dict[str, Any]],
+    runs: int,
+    iterations: int,
+    wall: float,
+) -> dict[str, Any]:
+    """:func:`run_sweep`'s document (``jaxais-sweep/1``, docs/formats.md) of its ``points``
+    (:func:`summarise_point`'s, each with its ``values``); :func:`sweep` adds the run's facts."""
     return {
-        "format": FORMATS["sweep"],  # docs/formats.md
-        "axes": {name: values.tolist() for name, values in axes},
+        "format": FORMATS["sweep"],
+        "axes": {name: np.asarray(values).tolist() for name, values in axes},
         "base_values": {k: np.asarray(v).item() for k, v in base_values.items()},
-        "points": out_points,
+        "points": points,
         "runs": runs,
         "robot_iterations": iterations,
         "wall_s": wall,
@@ -370,13 +383,44 @@ def run_noise_sweep(
                 run.finish(f"scale {i}", points[-1])
         if progress is not None:
             progress(1)
+    return noise_document(kinds, scales, points, time.perf_counter() - start)
+
+
+def noise_document(
+    kinds: Sequence[str], scales: Sequence[float], points: list[dict[str, Any]], wall: float
+) -> dict[str, Any]:
+    """:func:`run_noise_sweep`'s document (``jaxais-reality-gap/1``) of its ``points`` (each
+    ``{"scale", "levels", "systems": {label: summarise_point's}}``)."""
     return {
         "format": FORMATS["reality_gap"],
         "kinds": list(kinds),
         "scales": [float(s) for s in scales],
         "points": points,
-        "wall_s": time.perf_counter() - start,
+        "wall_s": wall,
     }
+
+
+def finish_document(
+    doc: dict[str, Any],
+    *,
+    names: Sequence[str],
+    world: str,
+    seed: int,
+    trials: int,
+    wall_total: float,
+    config: dict[str, Any],
+    paper_point: bool,
+) -> dict[str, Any]:
+    """``doc`` (:func:`sweep_document`'s or :func:`noise_document`'s) with what :func:`sweep`
+    knows of the run: its systems, world, seed, trials, total wall time, ``config`` (a trials
+    file's, with the command, processes and devices) and, for a grid over a paper system's k1
+    and k2 (``paper_point``), the idiotypic difference rate interpolated at the paper's point."""
+    doc = doc | {"wall_s_total": wall_total, "system": ",".join(names), "world": world,
+                 "seed": seed, "trials": trials}  # fmt: skip
+    if paper_point:
+        rate = interpolate(doc, "idiotypic_difference_rate", PAPER_POINT)
+        doc["paper_point"] = {"values": PAPER_POINT, "idiotypic_difference_rate": rate}
+    return doc | {"config": config}
 
 
 def _contender(contender: Any, grid: Any, system: Any, random_set: Any, seeds: Any) -> Any:
@@ -539,21 +583,20 @@ def sweep(
             doc = run_noise_sweep(
                 loaded, systems, noise, trials, seed, config, params, kinds, bar.update, run
             )
-    doc["wall_s_total"] = time.perf_counter() - start
-    doc |= {"system": ",".join(names), "world": loaded.name, "seed": seed, "trials": trials}
-    if grid is not None and entrant is None:
-        rate = interpolate(doc, "idiotypic_difference_rate", PAPER_POINT)
-        doc["paper_point"] = {"values": PAPER_POINT, "idiotypic_difference_rate": rate}
+    wall_total = time.perf_counter() - start
     cfg = run_config(loaded, world, config, network, params, seed_info, world_scale)
     if entrant is not None:
         from jaxais.experiments.contenders import contender_config
 
         cfg = contender_config(cfg, entrant.source)
-    doc["config"] = cfg | {
+    cfg |= {
         "command": None if command is None else portable_command(command),
         "processes": jax.process_count(),
         "devices": jax.device_count(),
     }
+    doc = finish_document(doc, names=names, world=loaded.name, seed=seed, trials=trials,
+                          wall_total=wall_total, config=cfg,
+                          paper_point=grid is not None and entrant is None)  # fmt: skip
     if lead:
         name = "sweep" if grid is not None else "reality_gap"
         atomic_write_json(run.out / f"{name}.json", doc)

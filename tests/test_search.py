@@ -205,7 +205,7 @@ def test_evosax_cma_es_and_simple_ga_search_the_network_through_network_problem(
 
 
 @pytest.mark.slow
-def test_map_elites_example_exports_a_seed_that_reproduce_runs(tmp_path):
+def test_map_elites_example_exports_a_seed_in_the_usual_format(tmp_path):
     env = script_env()
     me = subprocess.run(
         [sys.executable, "examples/qdax_map_elites.py", "--tiny", "--out", str(tmp_path / "me")],
@@ -221,14 +221,14 @@ def test_map_elites_example_exports_a_seed_that_reproduce_runs(tmp_path):
     seed, meta = load_seed(tmp_path / "me" / "seed")
     assert seed.antibodies.shape == (5, 8) and np.all(within_limits(seed.antibodies))
     assert meta["made_by"] == "examples/qdax_map_elites.py"
-    out = tmp_path / "reproduce"
-    args = ["--trials", "2", "--tau-cap", "10", "--worlds", "world1", "--no-baseline"]
-    rep = subprocess.run(
-        [sys.executable, "scripts/reproduce.py", *args, "--seeds", str(tmp_path / "me" / "seed"),
-         "--out", str(out)],
-        cwd=ROOT, capture_output=True, text=True, env=env, timeout=600,
-    )  # fmt: skip
-    assert rep.returncode == 0, rep.stderr[-3000:]
-    run = json.loads((out / "run.json").read_text())
-    assert run["ltl_seed"]["made_by"]["command"].startswith("qdax_map_elites.py")
-    assert "of the paper's claims reproduced" in (out / "report.md").read_text()
+    assert meta["command"].startswith("qdax_map_elites.py --tiny")
+    # The usual format: the seed seeds SIE as any LTL seed does, through the loader reproduce.py's
+    # --seeds uses (tests/test_scripts_stl.py runs reproduce.py on a seed folder; the full seed's
+    # reproduction is docs/map_elites/reproduction), in the trials program compiled above.
+    from _stl_fixtures import sie_trials
+
+    from jaxais.systems import make_system
+
+    res = sie_trials(2)(jax.random.key(0), make_system("SIE", tmp_path / "me" / "seed"))
+    assert res["fitness"].shape == (2,) and np.all(np.isfinite(res["fitness"]))
+    assert np.all(res["iterations"] > 0)

@@ -196,7 +196,7 @@ def test_bench_quick_json(tmp_path):
     assert r["machine"]["device_count"] == 2  # --devices took effect before JAX was imported
     assert set(r["jax_steps_per_s_sharded"]) == {"2"}
     assert set(r["controller_iterations_per_s"]) == {"3"} and not r["controller_compile_s_sharded"]
-    assert set(r["env_steps_per_s"]) == {"step", "step_env"}
+    assert set(r["env_steps_per_s"]) == {"step", "step_env", "step_refresh"}
     assert r["flops_per_step"] > 0 and 0 < r["fraction_of_peak"] < 1
     assert {"platform", "cpu_count", "jax", "backend", "device_kinds", "date"} <= set(r["machine"])
     assert "wrote" in proc.stdout

@@ -295,33 +295,37 @@ def bench_jax(b: Bench) -> None:
 
 def bench_env(b: Bench) -> None:
     """``env_steps_per_s``: ``envs.make``'s env, 64 under ``vmap``, random actions, 50-step
-    episodes: ``step_env`` (no reset) and ``step`` (auto-reset)."""
+    episodes: ``step_env`` (no reset), ``step`` (auto-reset from the pool) and ``step_refresh``
+    (``refresh_pool=True``: each auto-reset redraws the start it took)."""
     import jax
 
     from jaxais import envs
 
-    env, n, key = envs.make(b.config.world, max_steps_in_episode=50), 64, jax.random.key(0)
-    p = env.default_params
-    _, state = jax.jit(jax.vmap(env.reset, in_axes=(0, None)))(jax.random.split(key, n), p)
+    n, key = 64, jax.random.key(0)
 
-    @functools.partial(jax.jit, static_argnums=0)
-    def run(name, s, p):
+    def rate(name: str, refresh: bool) -> float:
+        env = envs.make(b.config.world, max_steps_in_episode=50, refresh_pool=refresh)
+        p = env.default_params
+        _, state = jax.jit(jax.vmap(env.reset, in_axes=(0, None)))(jax.random.split(key, n), p)
         v_step = jax.vmap(getattr(env, name), in_axes=(0, 0, 0, None))
 
-        def body(s, k):
-            actions = jax.random.uniform(k, (n, 2), minval=-1.0, maxval=1.0)
-            return v_step(jax.random.split(k, n), s, actions, p)[1], None
+        @jax.jit
+        def run(s, p):
+            def body(s, k):
+                actions = jax.random.uniform(k, (n, 2), minval=-1.0, maxval=1.0)
+                return v_step(jax.random.split(k, n), s, actions, p)[1], None
 
-        return jax.lax.scan(body, s, jax.random.split(key, b.config.steps))[0]
+            return jax.lax.scan(body, s, jax.random.split(key, b.config.steps))[0]
 
-    rates = {}
-    for name in ("step_env", "step"):
-        best = _timed(lambda name=name: run(name, state, p), b.config.repeats)["best_s"]
-        rates[name] = n * b.config.steps / best
+        return n * b.config.steps / _timed(lambda: run(state, p), b.config.repeats)["best_s"]
+
+    rates = {"step_env": rate("step_env", False), "step": rate("step", False)}
+    rates["step_refresh"] = rate("step", True)
     b.results["env_steps_per_s"] = rates
     b.notes.append(
         f"gymnax env, {n} envs: step (auto-reset) {rates['step']:,.0f} env-steps/s, step_env "
-        f"{rates['step_env']:,.0f} (x{rates['step_env'] / rates['step']:.2f})"
+        f"{rates['step_env']:,.0f} (x{rates['step_env'] / rates['step']:.2f}), step with "
+        f"refresh_pool {rates['step_refresh']:,.0f} (x{rates['step_refresh'] / rates['step']:.2f})"
     )
 
 

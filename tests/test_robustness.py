@@ -148,7 +148,8 @@ def test_why_takes_the_first_that_applies(tmp_path):
     rob = tmp_path / "robustness.json"
     rob.write_text(json.dumps({"format": "jaxais-robustness/1", "cells": [
         cell(1.0, "episode", {"C": True}), cell(2.0, "reading", {"C": True}),
-        cell(1.0, "reading", {"C": True})]}))  # fmt: skip
+        cell(1.0, "reading", {"C": True}), cell(2.0, "episode", {"real/X": True, "world1/X": True}),
+    ]}))  # fmt: skip
     ev = explanations.load([run, ledger, rob])
     why = lambda cid: explanations.why({"id": cid, "held": False}, ev)
     assert why("A") == "sample size: holds at n = 1000"
@@ -156,6 +157,10 @@ def test_why_takes_the_first_that_applies(tmp_path):
     assert why("C") == ("depends on an unstated choice: how a collision is counted (holds at LTL "
                         "seed 4, world scale 1, c per reading)")  # fmt: skip
     assert why("world2/SIE-lowest-c").startswith("not reproduced: our RL-only SRL collides less")
+    assert why("world1/X") == ("depends on an unstated choice: the world scale (holds at LTL seed "
+                               "4, world scale 2, c per contact episode)")  # fmt: skip
+    # The real pen keeps its size at every scale: a cell at scale 2 is its world at ours.
+    assert why("real/X") == "not reproduced (no mechanism measured)"
     assert why("Z") == "not reproduced (no mechanism measured)"
     assert explanations.why({"id": "B", "held": True}, ev) == ""
     assert explanations.why({"id": "B", "held": None}, ev) == ""

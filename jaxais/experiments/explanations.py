@@ -139,18 +139,23 @@ def _cell(cell: Mapping[str, Any]) -> str:
 
 
 def _choice(cells: Sequence[Mapping[str, Any]], claim_id: str) -> str | None:
-    """The unstated choice under which ``claim_id`` holds, with the first such cell."""
-    default = lambda c: c["scale"] == 1 and c["rule"] == protocol.DEFAULT_RULE
-    held = [c for c in cells if c["claims"].get(claim_id) is True and not default(c)]
+    """The unstated choice under which ``claim_id`` holds, with the first such cell. A claim of a
+    world the scale leaves alone (the real pen, :data:`protocol.UNSCALED_WORLDS`) does not depend
+    on the scale: its cells at another scale are its own world's at ours."""
+    world = claim_id.split("/", 1)[0] if "/" in claim_id else None
+    scaled = world not in protocol.UNSCALED_WORLDS
+
+    def choices(cell: Mapping[str, Any]) -> list[str]:
+        what = ["the world scale"] * (scaled and cell["scale"] != 1)
+        return what + ["how a collision is counted"] * (cell["rule"] != protocol.DEFAULT_RULE)
+
+    held = [c for c in cells if c["claims"].get(claim_id) is True and choices(c)]
     if not held:
         return None
     first = min(held, key=lambda c: (c["scale"] != 1, c["scale"], c["rule"], c["ltl_seed"]))
-    what = []
-    if first["scale"] != 1:
-        what.append("the world scale")
-    if first["rule"] != protocol.DEFAULT_RULE:
-        what.append("how a collision is counted")
-    return f"depends on an unstated choice: {' and '.join(what)} (holds at {_cell(first)})"
+    return (
+        f"depends on an unstated choice: {' and '.join(choices(first))} (holds at {_cell(first)})"
+    )
 
 
 def why(claim: Mapping[str, Any], evidence: Evidence) -> str:

@@ -133,6 +133,14 @@ def markdown(doc: Mapping[str, Any]) -> str:
         f"{', '.join(f'{k:g}' for k in axes['scale'])} x collision counting "
         f"{', '.join(axes['rule'])} (per contact episode, ours; per reading of Vm >= 2400).",
         "",
+    ]
+    if any(k != 1 for k in axes["scale"]):
+        lines += [
+            "The world scale applies to worlds 1 and 2; the real pen keeps its size (the paper "
+            "gives it), so a real/ claim's cells at another scale repeat its cells at ours.",
+            "",
+        ]
+    lines += [
         f"**{headline(doc)}** (robust: holds in >= {100 * doc['robust_at']:.0f} % of the cells; "
         "never: in none).",
         "",

@@ -231,7 +231,7 @@ def sweep_schema() -> dict[str, Any]:
             wall_total=1.0,
             config={},
             paper_point=name == "SIE",
-        )  # fmt: skip
+        )
         for doc, name in ((paper, "SIE"), (own, "MINE"))
     ]
     maps = frozenset({"axes", "base_values", "points[].values"})

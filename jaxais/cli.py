@@ -46,6 +46,29 @@ _STATUS = {
 }
 
 
+def remake_command(prog: str, argv: list[str] | None = None) -> str:
+    """The command line a run records (its ``run.json``, its config): ``prog`` and its arguments
+    (``argv``, default the process's) without ``--resume``, so a resumed run records the command
+    that makes it whole."""
+    words = sys.argv[1:] if argv is None else argv
+    return f"{prog} " + " ".join(w for w in words if w != "--resume")
+
+
+def add_ledger_arguments(p: argparse.ArgumentParser, jobs: str) -> None:
+    """The flags of the scripts that run the protocol over LTL seeds (seeds.py, robustness.py):
+    --out, --resume, --seeds, --first, --trials and --jobs (``jobs``: what runs side by side)."""
+    # fmt: off
+    p.add_argument("--out", required=True, help="output directory (missing or empty)")
+    p.add_argument("--resume", action="store_true", help="finish the interrupted run in --out")
+    p.add_argument("--seeds", type=int, default=10, help="how many LTL seeds (default 10)")
+    p.add_argument("--first", type=int, default=0, help="the first seed (default 0)")
+    p.add_argument("--trials", type=int, default=None,
+                   help="trials per system and world (default: the paper's)")
+    p.add_argument("--jobs", type=int, default=None,
+                   help=f"{jobs} side by side (default: one per core)")
+    # fmt: on
+
+
 def _one_line(text: str) -> str:
     """``text`` with its lines joined: the error contract is one line on stderr."""
     return " ".join(part.strip() for part in str(text).splitlines() if part.strip())

@@ -13,10 +13,9 @@ them) and manifest.json (the worlds done: --resume finishes an interrupted run).
 from __future__ import annotations
 
 import argparse
-import sys
 
 from jaxais import distributed
-from jaxais.cli import ArgumentParser, UserError, main_wrapper, run_script
+from jaxais.cli import ArgumentParser, UserError, main_wrapper, remake_command, run_script
 from jaxais.experiments import contenders, protocol
 from jaxais.experiments.reproduction import LTLRunError, check_reproduce, headline, reproduce
 
@@ -69,7 +68,7 @@ def main(argv: list[str] | None = None) -> None:
     distributed.initialize(args)  # before JAX computes anything
     result = reproduce(
         args.out, baseline=not args.no_baseline if args.baseline is None else args.baseline,
-        command="reproduce.py " + " ".join(w for w in argv or sys.argv[1:] if w != "--resume"),
+        command=remake_command("reproduce.py", argv),
         resume=args.resume, **kw,
     )  # fmt: skip
     if result is not None:  # the writing process

@@ -15,10 +15,15 @@ after every run; --resume goes on after an interruption with the same results.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
-from jaxais.cli import ArgumentParser, main_wrapper, run_script
+from jaxais.cli import (
+    ArgumentParser,
+    add_ledger_arguments,
+    main_wrapper,
+    remake_command,
+    run_script,
+)
 from jaxais.experiments import protocol
 from jaxais.experiments.seeds import SeedRunError, seed_range
 
@@ -33,20 +38,13 @@ def _floats(text: str) -> list[float]:
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = ArgumentParser(prog="robustness.py", description=__doc__.split("\n\n")[0])
     # fmt: off
-    p.add_argument("--out", required=True, help="output directory (missing or empty)")
-    p.add_argument("--resume", action="store_true", help="finish the interrupted run in --out")
-    p.add_argument("--seeds", type=int, default=10, help="how many LTL seeds (default 10)")
-    p.add_argument("--first", type=int, default=0, help="the first seed (default 0)")
+    add_ledger_arguments(p, jobs="runs")
     p.add_argument("--scales", type=_floats, default=[1.0, 2.0],
                    help="world scales, comma-separated (default 1,2)")
     p.add_argument("--rules", default=",".join(protocol.COUNTING_RULES),
                    help=f"collision counting rules (default {','.join(protocol.COUNTING_RULES)})")
-    p.add_argument("--trials", type=int, default=None,
-                   help="trials per system and world (default: the paper's)")
     p.add_argument("--ltl", default=None,
                    help="the seeds ledger's LTL folder (its seed_s; default DIR/ltl)")
-    p.add_argument("--jobs", type=int, default=None, help="runs side by side (default: one per "
-                   "core)")
     # fmt: on
     return p.parse_args(argv)
 
@@ -58,11 +56,10 @@ def main(argv: list[str] | None = None) -> None:
     from jaxais.experiments import robustness
     from jaxais.experiments.records import portable_command
 
-    words = [w for w in argv or sys.argv[1:] if w != "--resume"]  # the command that remakes it
     doc = robustness.run(
         args.out, seeds, args.scales,
         [r for r in args.rules.split(",") if r], args.trials, args.jobs, args.ltl,
-        command=portable_command("robustness.py " + " ".join(words)), resume=args.resume,
+        command=portable_command(remake_command("robustness.py", argv)), resume=args.resume,
     )  # fmt: skip
     print(f"{robustness.headline(doc)}; wrote {Path(args.out) / 'robustness.md'}")
 

@@ -16,25 +16,22 @@ are kept, an interrupted LTL or STL resumes exactly (jaxais.experiments.seeds sa
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
-from jaxais.cli import ArgumentParser, main_wrapper, run_script
+from jaxais.cli import (
+    ArgumentParser,
+    add_ledger_arguments,
+    main_wrapper,
+    remake_command,
+    run_script,
+)
 from jaxais.experiments import contenders
 from jaxais.experiments.seeds import SeedRunError, headline, ltl_ledger, seed_range
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = ArgumentParser(prog="seeds.py", description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", required=True, help="output directory (missing or empty)")
-    p.add_argument("--resume", action="store_true", help="finish the interrupted run in --out")
-    p.add_argument("--seeds", type=int, default=10, help="how many LTL seeds (default 10)")
-    p.add_argument("--first", type=int, default=0, help="the first seed (default 0)")
-    p.add_argument(
-        "--trials", type=int, default=None, help="trials per system and world (default: paper's)"
-    )
-    p.add_argument("--jobs", type=int, default=None,
-                   help="seeds run side by side (default: one per core)")  # fmt: skip
+    add_ledger_arguments(p, jobs="seeds run")
     contenders.add_argument(p)  # run beside the paper's systems on every seed
     return p.parse_args(argv)
 
@@ -45,14 +42,13 @@ def main(argv: list[str] | None = None) -> None:
     seeds = seed_range(args.seeds, args.first)
     from jaxais.experiments.records import portable_command
 
-    words = [w for w in argv or sys.argv[1:] if w != "--resume"]  # the command that remakes it
     summary = ltl_ledger(
         args.out,
         seeds,
         trials=args.trials,
         jobs=args.jobs,
         contenders=args.contender or (),
-        command=portable_command("seeds.py " + " ".join(words)),
+        command=portable_command(remake_command("seeds.py", argv)),
         resume=args.resume,
     )
     print(f"{headline(summary)}; wrote {Path(args.out) / 'seeds.md'}")

@@ -10,10 +10,8 @@ Writes DIR/sweep.json and sweep.png or DIR/reality_gap.json and .png (docs/forma
 
 from __future__ import annotations
 
-import sys
-
 from jaxais import distributed
-from jaxais.cli import ArgumentParser, main_wrapper, run_script
+from jaxais.cli import ArgumentParser, main_wrapper, remake_command, run_script
 from jaxais.experiments import contenders, protocol
 from jaxais.labels import RANDOM_SETS, SYSTEMS
 
@@ -58,7 +56,7 @@ def main(argv: list[str] | None = None) -> None:
 
     from jaxais.experiments.sweeps import sweep
 
-    command = "sweep.py " + " ".join(w for w in argv or sys.argv[1:] if w != "--resume")
+    command = remake_command("sweep.py", argv)
     doc = sweep(
         args.out, grid=args.grid, noise=args.noise, noise_kinds=args.noise_kinds,
         system=args.system, random_set=args.random_set, world=args.world, trials=args.trials,

@@ -14,13 +14,12 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import sys
 from dataclasses import fields
 from pathlib import Path
 
 from jaxais import _speed
 from jaxais.baselines.config import TrainConfig
-from jaxais.cli import ArgumentParser, UserError, main_wrapper, run_script
+from jaxais.cli import ArgumentParser, UserError, main_wrapper, remake_command, run_script
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -60,12 +59,11 @@ def main(argv: list[str] | None = None) -> None:
     if args.eval_only and args.no_eval or args.weights and not args.eval_only:
         raise UserError("--weights goes with --eval-only, which excludes --no-eval")
     out = args.out or datetime.datetime.now().strftime("runs/baseline-%Y%m%d-%H%M%S")
-    words = [w for w in (sys.argv[1:] if argv is None else argv) if w != "--resume"]
     _speed.setup()  # after the flags are checked: a bad flag answers without loading JAX
     info, _ = driver.baseline(
         out, config, train=not args.eval_only, evaluate=not args.no_eval, seed=args.seed,
         eval_seed=args.eval_seed, weights=args.weights, seeds=args.seeds,
-        log_every=args.log_every, command="train_baseline.py " + " ".join(words),
+        log_every=args.log_every, command=remake_command("train_baseline.py", argv),
         into_checkpoints=args.into_checkpoints, resume=args.resume,
     )  # fmt: skip
     if info is not None:

@@ -129,8 +129,6 @@ UNSCALED_WORLDS: dict[str, str] = {
     "ga_maze": "the LTL's maze is the GA's, not a test world",
 }
 """Worlds ``--world-scale`` never scales, and why."""
-CAMERA_RANGE = 2.0
-"""The camera's range at world scale 1, m [ours] (``envs.SimParams.camera_range``)."""
 
 
 def check_world_scale(scale: object, worlds: Sequence[str] = (), flag: str = "--world-scale"):

@@ -16,7 +16,6 @@ import numpy as np
 import jaxais
 from jaxais import envs
 from jaxais.controllers import System
-from jaxais.experiments import protocol
 from jaxais.immune.network import NetworkParams
 from jaxais.immune.readings import DEFAULT
 from jaxais.io import UserError, check_type, read_json_object
@@ -96,8 +95,16 @@ def scaled_world(name: str | Path, scale: float = 1.0) -> tuple[envs.World, envs
     they are. Scale 1: ``envs.load_world(name)`` and ``envs.default_params()``."""
     if scale == 1:
         return envs.load_world(name), envs.default_params()
-    world = envs.load_world(name, scale=scale)
-    return world, envs.default_params(camera_range=protocol.CAMERA_RANGE * scale)
+    return envs.load_world(name, scale=scale), scaled_params(scale)
+
+
+def scaled_params(scale: float = 1.0) -> envs.SimParams:
+    """The simulator's parameters at world ``scale``: the camera's range [ours, 2 m:
+    ``envs.SimParams.camera_range``] grows with the world."""
+    params = envs.default_params()
+    if scale == 1:
+        return params
+    return envs.default_params(camera_range=float(params.camera_range) * scale)
 
 
 def run_config(

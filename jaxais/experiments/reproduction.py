@@ -247,7 +247,6 @@ def _run(run: Run, worlds: dict[str, tuple[str, Any]], n_trials: int | None, see
     import numpy as np
     from tqdm.auto import tqdm
 
-    from jaxais import envs
     from jaxais.experiments import claims, report, stats
     from jaxais.experiments.plotting import draw_world
     from jaxais.experiments.records import (
@@ -255,6 +254,7 @@ def _run(run: Run, worlds: dict[str, tuple[str, Any]], n_trials: int | None, see
         portable_command,
         results_document,
         run_config,
+        scaled_params,
         versions,
     )
     from jaxais.immune.network import NetworkParams
@@ -276,9 +276,7 @@ def _run(run: Run, worlds: dict[str, tuple[str, Any]], n_trials: int | None, see
         labels = list(protocol.systems_for_world(name))
         n = n_trials if n_trials is not None else protocol.trials_for_world(name)
         systems, seed_info = build_systems(labels, seeds_dir, network, loaded)
-        params = envs.default_params()
-        if scale != 1:  # the camera's range [ours] grows with the world
-            params = envs.default_params(camera_range=protocol.CAMERA_RANGE * scale)
+        params = scaled_params(scale)  # the camera's range [ours] grows with the world
         cfg = run_config(world, source, config, network, params, seed_info, scale)
         configs[name] = cfg
         hold1_cfg = {**cfg, "readings": {**cfg["readings"], "hold": 1}}

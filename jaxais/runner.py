@@ -5,7 +5,8 @@ over the groups: :func:`advance`) in segments, between which the host reads ever
 On a CPU a segment is one kernel per device (:func:`one_kernel`, each device's runs apart:
 ``jax.shard_map``), so an iteration costs its work, not its operations' dispatch.
 :func:`rollout` runs one batch to its end (the GA, recorded trials); :func:`run_pool` refills
-the slots of ended runs from a queue (trials, sweeps).
+the slots of ended runs from a queue (trials, sweeps) and, each segment, puts each device's
+running runs side by side (:func:`packed`), so that its groups pair running runs.
 
 Iteration t of a run draws from ``fold_in(run.key, t)`` alone, and slots refill at ticks that are
 multiples of the segment, so a run's numbers depend neither on chunk or segment sizes nor on its
@@ -282,34 +283,61 @@ def _advance(batch, idx, world, sim_params, params, controller, config, sharding
     read |= {"boxes": runs.sim.boxes, "goal": runs.sim.goal}  # where the run's world put them
     if controller.stats is not None:
         read |= jax.vmap(controller.stats)(runs.ctrl, p)
-    if sharding is not None:  # every host reads every run's counts
+    if sharding is not None and jax.process_count() > 1:  # every host reads every run's counts
         read = jax.lax.with_sharding_constraint(read, distributed.replicated(sharding))
     return batch, read
 
 
 @functools.partial(jax.jit, static_argnames=_STATIC)
 def _pool_segment(
-    batch, fresh, idx, reset_keys, run_keys, world, sim_params, params, controller, config, sharding
-):
-    """The pool's one program: the slots ``fresh`` [b] (re)started with their runs ``idx`` [b]
-    (the first call starts every slot), then one segment of every slot, and what the host reads
-    of them. Starting inside the segment's program keeps a pool to one compile per slot count."""
+    batch, order, tick, fresh, idx, reset_keys, run_keys, world, sim_params, params, controller,
+    config, sharding,
+):  # fmt: skip
+    """The pool's one program: each device's slots put in ``order`` [b] (:func:`packed`) and
+    on chunk ``tick``, the slots ``fresh`` [b] (re)started with their runs ``idx`` [b] (the
+    first call starts every slot), then one segment of every slot, and what the host reads of
+    them. Starting inside the segment's program keeps a pool to one compile per slot count."""
+    batch = _local(_reordered, sharding)(_spread(batch, sharding), order)
+    batch = _per_device(batch.replace(chunks=tick), sharding)
 
     def restart(batch: Batch) -> Batch:
-        p = jax.tree.map(lambda a: a[idx], params)
-        new = start_batch(reset_keys[idx], run_keys[idx], world, sim_params, controller, p, config)
+        # _start itself, so that its trace for _blank's shapes serves here too.
+        new = _start(reset_keys, run_keys, idx, world, sim_params, params, controller, config,
+                     sharding)  # fmt: skip
         runs = jax.tree.map(
             lambda a, b: jnp.where(fresh.reshape(-1, *[1] * (b.ndim - 1)), a, b),
             new.runs,
             batch.runs,
         )
-        # A segment that stopped early (every live run ended) leaves the tick short of a multiple
-        # of the segment: the new runs start on one, so a run's ticks never depend on its start.
-        chunks = config.segment // config.chunk
-        return batch.replace(runs=runs, chunks=-(-batch.chunks // chunks) * chunks)
+        return batch.replace(runs=runs)
 
-    batch = jax.lax.cond(jnp.any(fresh), restart, lambda b: b, _spread(batch, sharding))
+    batch = jax.lax.cond(jnp.any(fresh), restart, lambda b: b, batch)
     return _advance(batch, idx, world, sim_params, params, controller, config, sharding)
+
+
+def _reordered(batch: Batch, order: jax.Array) -> Batch:
+    """A device's slots [s] in ``order`` (indices into the whole batch [b], within the device's
+    share: taken modulo s). A copy: no run's numbers change."""
+    take = lambda a: a[order % a.shape[0]]
+    return batch.replace(runs=jax.tree.map(take, batch.runs), poses=take(batch.poses))
+
+
+def _local(f: Callable, sharding) -> Callable:
+    """``f`` on each device's share of its arguments (batch-sharded alike), with no collective;
+    ``f`` itself on one device."""
+    if sharding is None:
+        return f
+    return jax.shard_map(f, mesh=sharding.mesh, in_specs=sharding.spec, out_specs=sharding.spec)
+
+
+def packed(running: np.ndarray, devices: int = 1) -> np.ndarray:
+    """A pool's slot order [b] for its next segment: each device's ``running`` slots [b] first
+    in its share of them, so that lockstep groups (:data:`GROUP`) pair running runs and
+    ended slots cost nothing (without it a group steps on while one of its two runs has long
+    ended). Slots stay on their device: moving them would take a collective every segment."""
+    share = running.size // devices
+    local = np.argsort(~running.reshape(devices, share), axis=1, kind="stable")
+    return (local + share * np.arange(devices)[:, None]).reshape(-1).astype(np.int32)
 
 
 def _blank(
@@ -439,8 +467,18 @@ def run_pool(
     fresh = live.copy()  # the slots the next segment (re)starts
     batch = _blank(b, *keys, world, sim_params, params, **static)
     got: dict[str, np.ndarray] = {}
+    # Each segment starts on a multiple of its chunks: a segment that ended early (every run
+    # ended) leaves the tick short of one, and new runs start on one, so that a run's ticks
+    # never depend on its start.
+    per, segments = config.segment // config.chunk, 0
     while live.any():
-        batch, read = _pool_segment(batch, fresh, idx, *keys, world, sim_params, params, **static)
+        order = packed(live, d)
+        idx, live, fresh = idx[order], live[order], fresh[order]
+        tick = np.int32(segments * per)
+        batch, read = _pool_segment(
+            batch, order, tick, fresh, idx, *keys, world, sim_params, params, **static
+        )
+        segments += 1
         read = jax.device_get(read)
         fresh = np.zeros(b, bool)
         ended = live & (read["status"] != RUNNING)

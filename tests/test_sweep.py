@@ -99,6 +99,23 @@ def test_pool_slot_counts_are_powers_of_two_per_device():
     assert pool_slots(300, 1024, devices=4) == 512
 
 
+def test_packed_puts_each_devices_running_slots_first_and_keeps_them_on_it():
+    from jaxais.runner import packed
+
+    running = np.array([0, 1, 0, 1, 1, 0, 0, 1], bool)
+    assert packed(running).tolist() == [1, 3, 4, 7, 0, 2, 5, 6]  # in slot order, then the rest
+    assert packed(running, devices=2).tolist() == [1, 3, 0, 2, 4, 7, 5, 6]  # each in its half
+    rng = np.random.default_rng(0)
+    for b, d in [(1, 1), (2, 2), (8, 1), (8, 2), (64, 4)]:
+        running = rng.random(b) < 0.5
+        order = packed(running, d)
+        assert sorted(order.tolist()) == list(range(b))
+        for share in np.split(np.arange(b), d):  # no slot leaves its device's share
+            assert set(order[share].tolist()) == set(share.tolist())
+            moved = running[order[share]]
+            assert moved.tolist() == sorted(moved.tolist(), reverse=True)
+
+
 def test_segment_length_is_a_common_multiple_of_about_600():
     assert segment_length(25) == 600
     assert segment_length(25, 120) == 600  # the paper's idiotope period: 5 redraws a segment

@@ -90,31 +90,37 @@ def advance(
     controller: Controller,
     ctrl_params: Any,
     config: EpisodeConfig,
+    length: jax.Array | None = None,
 ) -> Batch:
-    """Every run on by up to ``config.segment`` iterations, in lockstep groups of
-    :data:`GROUP` (one group unless n is a larger multiple), each stopping once its runs
-    have ended; iteration t draws from ``fold_in(run.key, t)``. One kernel on a CPU
-    (:func:`one_kernel`)."""
+    """Every run on by up to ``config.segment`` iterations (``length`` chunks when given: a
+    traced int32), in lockstep groups of :data:`GROUP` (one group unless n is a larger
+    multiple), each stopping once its runs have ended; iteration t draws from
+    ``fold_in(run.key, t)``. One kernel on a CPU (:func:`one_kernel`)."""
     n = batch.runs.t.shape[0]
     g = GROUP if n > GROUP and n % GROUP == 0 else n
     groups = (batch.runs, batch.poses, ctrl_params)
 
-    def each(groups, chunks, world, sim_params):
+    def each(groups, chunks, world, sim_params, length):
         split = lambda a: a.reshape(n // g, g, *a.shape[1:])
         runs, poses, chunks = jax.lax.map(
-            lambda a: _segment(*a, chunks, world, sim_params, controller, config),
+            lambda a: _segment(*a, chunks, length, world, sim_params, controller, config),
             jax.tree.map(split, groups),
         )
         merge = lambda a: a.reshape(n, *a.shape[2:])
         return jax.tree.map(merge, (runs, poses)), jnp.max(chunks)
 
-    (runs, poses), chunks = one_kernel(each)(groups, batch.chunks, world, sim_params)
+    args = (groups, batch.chunks, world, sim_params)
+    if length is None:  # the segment's length compiled in (the GA's programs)
+        fixed = max(1, config.segment // config.chunk)
+        (runs, poses), chunks = one_kernel(lambda *a: each(*a, fixed))(*args)
+    else:
+        (runs, poses), chunks = one_kernel(each)(*args, length)
     return Batch(runs=runs, poses=poses, chunks=chunks)
 
 
-def _segment(runs, poses, ctrl_params, chunks, world, sim_params, controller, config):
-    """One lockstep group's segment: whole chunks until ``config.segment`` or every run of the
-    group has ended. Returns its runs, poses and chunk count."""
+def _segment(runs, poses, ctrl_params, chunks, length, world, sim_params, controller, config):
+    """One lockstep group's segment: ``length`` whole chunks or until every run of the group
+    has ended. Returns its runs, poses and chunk count."""
     step_all = jax.vmap(iterate, in_axes=(0, 0, None, None, None, None, 0, None))
     n = runs.t.shape[0]
 
@@ -141,7 +147,7 @@ def _segment(runs, poses, ctrl_params, chunks, world, sim_params, controller, co
             poses = jax.lax.dynamic_update_slice_in_dim(poses, runs.sim.pose[:, None], idx, 1)
         return runs, poses, chunks + 1
 
-    end = chunks + max(1, config.segment // config.chunk)
+    end = chunks + length
     cond = lambda c: (c[2] < end) & jnp.any(c[0].status == RUNNING)
     return jax.lax.while_loop(cond, chunk, (runs, poses, chunks))
 
@@ -248,34 +254,37 @@ def _start(reset_keys, run_keys, idx, world, sim_params, params, controller, con
     return _per_device(batch, sharding)
 
 
-def _advance_local(batch, world, sim_params, p, controller, config, sharding) -> Batch:
+def _advance_local(batch, world, sim_params, p, controller, config, sharding, length) -> Batch:
     """:func:`advance` on each device's slots alone (``jax.shard_map``): no collective inside
     the loop, so that it compiles to one kernel (:func:`one_kernel`) on every device."""
     if sharding is None:
-        return advance(batch, world, sim_params, controller, p, config)
+        return advance(batch, world, sim_params, controller, p, config, length)
     spec, whole = sharding.spec, jax.sharding.PartitionSpec()
     constant = not any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(world))
 
-    def local(batch, world, sim_params, p):
+    def local(batch, world, sim_params, p, *length):
         batch = advance(batch.replace(chunks=batch.chunks[0]), world, sim_params, controller, p,
-                        config)  # fmt: skip
+                        config, *length)  # fmt: skip
         return batch.replace(chunks=batch.chunks[None])
 
     if constant:  # a world compiled in stays constants (_Constant)
-        fn = lambda batch, sim_params, p: local(batch, world, sim_params, p)
+        fn = lambda batch, sim_params, p, *length: local(batch, world, sim_params, p, *length)
         args, specs = (batch, sim_params, p), (spec, whole, spec)
     else:
         fn, args, specs = local, (batch, world, sim_params, p), (spec, whole, whole, spec)
+    if length is not None:
+        args, specs = (*args, length), (*specs, whole)
     return jax.shard_map(fn, mesh=sharding.mesh, in_specs=specs, out_specs=spec)(*args)
 
 
 @functools.partial(jax.jit, static_argnames=_STATIC)
-def _advance(batch, idx, world, sim_params, params, controller, config, sharding):
-    """One segment of the slots' runs ``idx`` [b], and what the host reads of them."""
+def _advance(batch, idx, world, sim_params, params, controller, config, sharding, length=None):
+    """One segment (``length`` chunks when given) of the slots' runs ``idx`` [b], and what the
+    host reads of them."""
     world = world.world if isinstance(world, _Constant) else world
     p = jax.tree.map(lambda a: a[idx], params)
     batch = _advance_local(_spread(batch, sharding), world, sim_params, p, controller, config,
-                           sharding)  # fmt: skip
+                           sharding, length)  # fmt: skip
     runs = batch.runs
     read = {"t": runs.t, "status": runs.status, "collisions": runs.collisions}
     read |= {"trapped": runs.trapped, "locked": runs.locked}
@@ -290,13 +299,14 @@ def _advance(batch, idx, world, sim_params, params, controller, config, sharding
 
 @functools.partial(jax.jit, static_argnames=_STATIC)
 def _pool_segment(
-    batch, order, tick, fresh, idx, reset_keys, run_keys, world, sim_params, params, controller,
-    config, sharding,
+    batch, order, tick, length, fresh, idx, reset_keys, run_keys, world, sim_params, params,
+    controller, config, sharding,
 ):  # fmt: skip
     """The pool's one program: each device's slots put in ``order`` [b] (:func:`packed`) and
     on chunk ``tick``, the slots ``fresh`` [b] (re)started with their runs ``idx`` [b] (the
-    first call starts every slot), then one segment of every slot, and what the host reads of
-    them. Starting inside the segment's program keeps a pool to one compile per slot count."""
+    first call starts every slot), then a segment of ``length`` chunks of every slot, and what
+    the host reads of them. Starting inside the segment's program keeps a pool to one compile
+    per slot count."""
     batch = _local(_reordered, sharding)(_spread(batch, sharding), order)
     batch = _per_device(batch.replace(chunks=tick), sharding)
 
@@ -312,7 +322,7 @@ def _pool_segment(
         return batch.replace(runs=runs)
 
     batch = jax.lax.cond(jnp.any(fresh), restart, lambda b: b, batch)
-    return _advance(batch, idx, world, sim_params, params, controller, config, sharding)
+    return _advance(batch, idx, world, sim_params, params, controller, config, sharding, length)
 
 
 def _reordered(batch: Batch, order: jax.Array) -> Batch:
@@ -406,6 +416,14 @@ def rollout(
     return batch.replace(runs=jax.tree.map(lambda x: x[:n], batch.runs), poses=batch.poses[:n])
 
 
+TAIL = 4
+"""A pool's segments once its queue is empty, in aligns (``run_pool``'s ``align``). Each
+segment ends with the host reading every slot (milliseconds: a lone run's 600 iterations cost
+about as much), and with no run waiting to start, a longer one costs only the groups whose runs
+end inside it stepping on with an ended run. 4 of 1, 4 and 8 measured best at 300 and 1,000 SIE
+trials; 8 at 30 (docs/performance.md)."""
+
+
 def segment_length(chunk: int, period: int = 1, about: int = 600) -> int:
     """A pool's ``align``: the least multiple of ``chunk`` and ``period`` (the idiotope's) at or
     above ``about``."""
@@ -467,18 +485,20 @@ def run_pool(
     fresh = live.copy()  # the slots the next segment (re)starts
     batch = _blank(b, *keys, world, sim_params, params, **static)
     got: dict[str, np.ndarray] = {}
-    # Each segment starts on a multiple of its chunks: a segment that ended early (every run
-    # ended) leaves the tick short of one, and new runs start on one, so that a run's ticks
-    # never depend on its start.
-    per, segments = config.segment // config.chunk, 0
+    # Each segment starts on a multiple of the align's chunks: a segment that ended early (every
+    # run ended) leaves the tick short of one, and new runs start on one, so that a run's ticks
+    # never depend on its start. Once the queue is empty no slot waits for a refill, and the
+    # tail's segments are TAIL times as long: fewer stops for the host.
+    per, tick = config.segment // config.chunk, 0
     while live.any():
         order = packed(live, d)
         idx, live, fresh = idx[order], live[order], fresh[order]
-        tick = np.int32(segments * per)
+        length = per if queued < n else per * TAIL
         batch, read = _pool_segment(
-            batch, order, tick, fresh, idx, *keys, world, sim_params, params, **static
-        )
-        segments += 1
+            batch, order, np.int32(tick), np.int32(length), fresh, idx, *keys, world, sim_params,
+            params, **static,
+        )  # fmt: skip
+        tick += length
         read = jax.device_get(read)
         fresh = np.zeros(b, bool)
         ended = live & (read["status"] != RUNNING)

@@ -59,8 +59,10 @@ class Percept:
     Attributes:
         m, m_prev, v, v_prev: antigen and Vm now and before (m_prev = 0 at t = 0).
         blue_pixels, centroid: blue pixels and their mean column (7 when none).
-        t: iterations of the run. tick: iterations of the batch, one for all its runs, so a
-            periodic step is a ``lax.cond`` that stays a branch under ``vmap``.
+        t: iterations of the run. tick: the batch's clock, one for all its runs, so a
+            periodic step is a ``lax.cond`` that stays a branch under ``vmap``; in a pool
+            (:func:`jaxais.runner.run_pool`) it may jump between segments, and a run starts on
+            a multiple of the pool's align, so ``tick - t`` stays that multiple throughout a run.
     """
 
     m: jnp.ndarray

@@ -485,10 +485,10 @@ def run_pool(
     fresh = live.copy()  # the slots the next segment (re)starts
     batch = _blank(b, *keys, world, sim_params, params, **static)
     got: dict[str, np.ndarray] = {}
-    # Each segment starts on a multiple of the align's chunks: a segment that ended early (every
-    # run ended) leaves the tick short of one, and new runs start on one, so that a run's ticks
-    # never depend on its start. Once the queue is empty no slot waits for a refill, and the
-    # tail's segments are TAIL times as long: fewer stops for the host.
+    # The host keeps the pool's tick: each segment starts `length` chunks after the last began,
+    # even one whose runs all ended early, so every segment and every new run starts on a
+    # multiple of the align and a run's ticks never depend on its start. Once the queue is empty
+    # no slot waits for a refill, and the tail's segments are TAIL times as long: fewer stops.
     per, tick = config.segment // config.chunk, 0
     while live.any():
         order = packed(live, d)

@@ -280,10 +280,8 @@ def robustness_schema() -> dict[str, Any]:
 
 
 def schemas() -> dict[str, dict[str, Any]]:
-    """Every schema by its file name (:data:`SCHEMAS`)."""
-    made = {"world": world_schema, "trials": trials_schema, "sweep": sweep_schema,
-            "reality_gap": reality_gap_schema, "robustness": robustness_schema}  # fmt: skip
-    return {SCHEMAS[name]: make() for name, make in made.items()}
+    """Every schema by its file name (:data:`SCHEMAS`; NAME's is made by ``NAME_schema``)."""
+    return {file: globals()[f"{name}_schema"]() for name, file in SCHEMAS.items()}
 
 
 def text(schema: dict[str, Any]) -> str:

@@ -313,9 +313,10 @@ def _pool_segment(
     batch = _per_device(batch.replace(chunks=tick), sharding)
 
     def restart(batch: Batch) -> Batch:
-        # _start itself, so that its trace for _blank's shapes serves here too.
-        new = _start(reset_keys, run_keys, idx, world, sim_params, params, controller, config,
-                     sharding)  # fmt: skip
+        # _start called as _blank calls it (the statics by keyword: jit's trace cache keys on
+        # the call's form), so that the trace _blank made serves here.
+        new = _start(reset_keys, run_keys, idx, world, sim_params, params, controller=controller,
+                     config=config, sharding=sharding)  # fmt: skip
         runs = jax.tree.map(
             lambda a, b: jnp.where(fresh.reshape(-1, *[1] * (b.ndim - 1)), a, b),
             new.runs,

@@ -67,7 +67,8 @@ def test_one_slot_refilled_gives_make_trials_runs_bit_for_bit():
 def test_a_pool_gives_make_trials_runs_bit_for_bit_whatever_its_groups(monkeypatch):
     """Eight runs in a pool of eight slots (lockstep groups of two, each ending its segments
     alone) and in make_trials' one batch with groups of two and of eight: every run's numbers
-    are the same (a Braitenberg vehicle, whose runs end apart within a minute)."""
+    are the same (a Braitenberg vehicle, whose runs end apart within a minute). The pool traces
+    its start once: the trace its blank batch's shapes made serves its program."""
     from jaxais import runner
     from jaxais.controllers import BRAITENBERG, braitenberg_params
     from jaxais.loop import EpisodeConfig
@@ -79,8 +80,12 @@ def test_a_pool_gives_make_trials_runs_bit_for_bit_whatever_its_groups(monkeypat
     monkeypatch.setattr(runner, "GROUP", n)  # one lockstep group of all eight (a fresh trace)
     whole = make_trials(trials)(jax.random.key(0), params)
     reset_keys, run_keys = batch_keys(0, (("BV", n),))
+    traces = []
+    start_batch = runner.start_batch
+    monkeypatch.setattr(runner, "start_batch", lambda *a: traces.append(1) or start_batch(*a))
     got = run_pool(reset_keys, run_keys, repeated(params, n), F.world(), F.sim_params(),
                    BRAITENBERG, config, slots=n, align=100)  # fmt: skip
+    assert len(traces) <= 1  # one (none if this worker traced this pool's start before)
     assert len(set(np.asarray(want["iterations"]).tolist())) > 1  # the runs end apart
     for k in ("iterations", "collisions", "status"):
         np.testing.assert_array_equal(got[k], want[k], err_msg=k)
